@@ -1,0 +1,101 @@
+#include "app/cli.h"
+
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstdlib>
+
+namespace collido::app {
+
+std::string ParsedArgs::get(const std::string& name, const std::string& fallback) const {
+  auto it = values_.find(name);
+  return it == values_.end() ? fallback : it->second;
+}
+
+double ParsedArgs::get_double(const std::string& name, double fallback, std::string* error) const {
+  auto it = values_.find(name);
+  if (it == values_.end()) return fallback;
+  const char* s = it->second.c_str();
+  char* end = nullptr;
+  errno = 0;
+  double v = std::strtod(s, &end);
+  if (end == s || *end != '\0' || errno == ERANGE) {
+    if (error) *error = "--" + name + " expects a number, got '" + it->second + "'";
+    return fallback;
+  }
+  return v;
+}
+
+int64_t ParsedArgs::get_int(const std::string& name, int64_t fallback, std::string* error) const {
+  auto it = values_.find(name);
+  if (it == values_.end()) return fallback;
+  const char* s = it->second.c_str();
+  char* end = nullptr;
+  errno = 0;
+  long long v = std::strtoll(s, &end, 10);
+  if (end == s || *end != '\0' || errno == ERANGE) {
+    // Accept 1e6-style integers, which people type for particle counts.
+    double d = std::strtod(s, &end);
+    if (end != s && *end == '\0' && d == static_cast<double>(static_cast<int64_t>(d)))
+      return static_cast<int64_t>(d);
+    if (error) *error = "--" + name + " expects an integer, got '" + it->second + "'";
+    return fallback;
+  }
+  return v;
+}
+
+std::optional<ParsedArgs> parse_args(const std::vector<std::string>& args,
+                                     const std::vector<FlagSpec>& specs, std::string* error) {
+  ParsedArgs out;
+  for (size_t i = 0; i < args.size(); ++i) {
+    const std::string& a = args[i];
+    if (a.size() > 2 && a.compare(0, 2, "--") == 0) {
+      std::string name = a.substr(2), value;
+      bool inline_value = false;
+      if (auto eq = name.find('='); eq != std::string::npos) {
+        value = name.substr(eq + 1);
+        name = name.substr(0, eq);
+        inline_value = true;
+      }
+      const FlagSpec* spec = nullptr;
+      for (const auto& s : specs)
+        if (s.name == name) spec = &s;
+      if (!spec) {
+        *error = "unknown option --" + name + " (see --help)";
+        return std::nullopt;
+      }
+      if (spec->takes_value && !inline_value) {
+        if (i + 1 >= args.size()) {
+          *error = "--" + name + " needs a value";
+          return std::nullopt;
+        }
+        value = args[++i];
+      } else if (!spec->takes_value && inline_value) {
+        *error = "--" + name + " takes no value";
+        return std::nullopt;
+      }
+      out.values_[name] = value;
+    } else {
+      out.positional_.push_back(a);
+    }
+  }
+  return out;
+}
+
+void print_help(const std::string& usage, const std::vector<FlagSpec>& specs) {
+  std::printf("%s\n\noptions:\n", usage.c_str());
+  for (const auto& s : specs) {
+    std::string left = "  --" + s.name + (s.takes_value ? " VALUE" : "");
+    std::printf("%-28s %s\n", left.c_str(), s.help.c_str());
+  }
+}
+
+int usage_error(const std::string& command, const std::string& message) {
+  std::fprintf(stderr, "collidoscope %s: %s\n", command.c_str(), message.c_str());
+  return kExitUsage;
+}
+
+bool stderr_is_terminal() { return isatty(fileno(stderr)) != 0; }
+
+}  // namespace collido::app

@@ -1,0 +1,54 @@
+// Small command-line helpers shared by every `collidoscope` subcommand.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace collido::app {
+
+// Exit codes of the command line: 0 success, 1 the work failed, 2 bad arguments.
+inline constexpr int kExitOk = 0;
+inline constexpr int kExitFailure = 1;
+inline constexpr int kExitUsage = 2;
+
+struct FlagSpec {
+  std::string name;  // without the leading "--"
+  bool takes_value;
+  std::string help;  // one line for --help
+};
+
+// Parsed `--name value` / `--name` flags and positional arguments of one command.
+class ParsedArgs {
+ public:
+  bool has(const std::string& name) const { return values_.count(name) != 0; }
+  std::string get(const std::string& name, const std::string& fallback = "") const;
+  const std::vector<std::string>& positional() const { return positional_; }
+
+  // Typed accessors; on a malformed value they set *error and return the fallback.
+  double get_double(const std::string& name, double fallback, std::string* error) const;
+  int64_t get_int(const std::string& name, int64_t fallback, std::string* error) const;
+
+ private:
+  friend std::optional<ParsedArgs> parse_args(const std::vector<std::string>&,
+                                              const std::vector<FlagSpec>&, std::string*);
+  std::map<std::string, std::string> values_;
+  std::vector<std::string> positional_;
+};
+
+// Parses args against specs; unknown flags and missing values give nullopt and *error.
+std::optional<ParsedArgs> parse_args(const std::vector<std::string>& args,
+                                     const std::vector<FlagSpec>& specs, std::string* error);
+
+// Prints "usage" followed by one line per flag.
+void print_help(const std::string& usage, const std::vector<FlagSpec>& specs);
+
+// Prints "collidoscope <command>: <message>" to stderr and returns kExitUsage.
+int usage_error(const std::string& command, const std::string& message);
+
+// True when stdout/stderr is a terminal (progress bars) rather than a pipe or file.
+bool stderr_is_terminal();
+
+}  // namespace collido::app

@@ -1,0 +1,27 @@
+// The `collidoscope` subcommands. Each takes the arguments after its name and
+// returns the process exit code (0 ok, 1 failure, 2 bad arguments).
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace collido::app {
+
+using Args = std::vector<std::string>;
+
+int cmd_detect(const Args& args);        // app/cmd_detect.cpp
+int cmd_bench(const Args& args);         // app/cmd_bench.cpp (dispatches bench targets)
+int bench_detect(const Args& args);      // app/bench_detect.cpp
+
+#ifdef COLLIDO_HAVE_RENDER
+int cmd_render(const Args& args);        // app/cmd_render.cpp
+int bench_render(const Args& args);      // app/cmd_render.cpp
+#endif
+
+#ifdef COLLIDO_HAVE_GVM
+int cmd_gvm(const Args& args);           // app/cmd_gvm.cpp: `gvm train`
+int cmd_predict(const Args& args);       // app/cmd_gvm.cpp
+int cmd_calibrate(const Args& args);     // app/cmd_calibrate.cpp
+#endif
+
+}  // namespace collido::app

@@ -1,0 +1,55 @@
+// collidoscope: the command line of the engine, renderer, predictor and service.
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "app/cli.h"
+#include "app/commands.h"
+
+namespace {
+
+struct Command {
+  const char* name;
+  int (*run)(const collido::app::Args&);
+  const char* summary;
+};
+
+const std::vector<Command>& commands() {
+  using namespace collido::app;
+  static const std::vector<Command> table = {
+      {"detect", cmd_detect, "particle-wall collision detection on one frame"},
+      {"bench", cmd_bench, "benchmarks: bench detect | bench render"},
+#ifdef COLLIDO_HAVE_RENDER
+      {"render", cmd_render, "render snapshots into PNG frames and video"},
+#endif
+#ifdef COLLIDO_HAVE_GVM
+      {"gvm", cmd_gvm, "train the time/memory predictor: gvm train"},
+      {"predict", cmd_predict, "predict time and memory of a configuration"},
+      {"calibrate", cmd_calibrate, "run a sweep of real configurations into a log"},
+#endif
+  };
+  return table;
+}
+
+void print_usage() {
+  std::printf("usage: collidoscope COMMAND [options]   (COMMAND --help for its options)\n\n");
+  for (const auto& c : commands()) std::printf("  %-10s %s\n", c.name, c.summary);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2 || !std::strcmp(argv[1], "--help") || !std::strcmp(argv[1], "-h") ||
+      !std::strcmp(argv[1], "help")) {
+    print_usage();
+    return argc < 2 ? collido::app::kExitUsage : collido::app::kExitOk;
+  }
+  const std::string name = argv[1];
+  collido::app::Args rest(argv + 2, argv + argc);
+  for (const auto& c : commands())
+    if (name == c.name) return c.run(rest);
+  std::fprintf(stderr, "collidoscope: unknown command '%s' (see collidoscope --help)\n",
+               name.c_str());
+  return collido::app::kExitUsage;
+}

@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Installs every Debian 12 package the build, the tests and `make run` need.
+# Idempotent: packages already present are skipped, and apt-get update runs only
+# when something is missing. The CUDA toolkit is not a Debian 12 package at the
+# version we need (13); the build uses nvcc when it finds one (COLLIDO_CUDA=AUTO).
+set -euo pipefail
+
+packages=(
+  build-essential cmake pkg-config git
+  libgtest-dev libgmock-dev            # tests
+  libeigen3-dev                        # optional linear algebra (gvm baselines)
+  nlohmann-json3-dev                   # JSON config, logs, model files
+  libassimp-dev                        # OBJ/PLY/... import (mesh_import target only)
+  libosmesa6-dev                       # offscreen OpenGL (render)
+  libavcodec-dev libavformat-dev libavutil-dev libswscale-dev   # video (render)
+  libfreetype-dev fonts-dejavu-core    # text overlay font (render)
+  libpng-dev                           # PNG frames (render)
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+
+if ((${#missing[@]})); then
+  echo "install-deps: installing ${missing[*]}"
+  SUDO=""
+  [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+else
+  echo "install-deps: all ${#packages[@]} packages present"
+fi

@@ -1,0 +1,62 @@
+// Host/device annotations and small vector math shared by the CPU and CUDA backends.
+// Per-element math is written once, marked COLLIDO_HD, and compiled for both.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+
+#if defined(__CUDACC__)
+#define COLLIDO_HD __host__ __device__
+#define COLLIDO_FORCEINLINE __forceinline__
+#else
+#define COLLIDO_HD
+#define COLLIDO_FORCEINLINE inline __attribute__((always_inline))
+#endif
+
+namespace collido::sim {
+
+template <class T>
+struct Vec3T {
+  T x, y, z;
+};
+using Vec3f = Vec3T<float>;
+using Vec3d = Vec3T<double>;
+
+template <class T>
+COLLIDO_HD COLLIDO_FORCEINLINE Vec3T<T> operator+(Vec3T<T> a, Vec3T<T> b) {
+  return {a.x + b.x, a.y + b.y, a.z + b.z};
+}
+template <class T>
+COLLIDO_HD COLLIDO_FORCEINLINE Vec3T<T> operator-(Vec3T<T> a, Vec3T<T> b) {
+  return {a.x - b.x, a.y - b.y, a.z - b.z};
+}
+template <class T>
+COLLIDO_HD COLLIDO_FORCEINLINE Vec3T<T> operator*(Vec3T<T> a, T s) {
+  return {a.x * s, a.y * s, a.z * s};
+}
+template <class T>
+COLLIDO_HD COLLIDO_FORCEINLINE Vec3T<T> operator*(T s, Vec3T<T> a) {
+  return {a.x * s, a.y * s, a.z * s};
+}
+template <class T>
+COLLIDO_HD COLLIDO_FORCEINLINE T dot(Vec3T<T> a, Vec3T<T> b) {
+  return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+template <class T>
+COLLIDO_HD COLLIDO_FORCEINLINE Vec3T<T> cross(Vec3T<T> a, Vec3T<T> b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+template <class T>
+COLLIDO_HD COLLIDO_FORCEINLINE T norm2(Vec3T<T> a) {
+  return dot(a, a);
+}
+template <class T>
+COLLIDO_HD COLLIDO_FORCEINLINE T length(Vec3T<T> a) {
+  return sqrt(dot(a, a));
+}
+template <class To, class From>
+COLLIDO_HD COLLIDO_FORCEINLINE Vec3T<To> cast3(Vec3T<From> a) {
+  return {static_cast<To>(a.x), static_cast<To>(a.y), static_cast<To>(a.z)};
+}
+
+}  // namespace collido::sim

@@ -1,0 +1,74 @@
+// Triangle meshes: the walls particles collide with. Loaded from STL, built from
+// parametric shapes (sim/shapes.h), welded, cleaned, exported.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "sim/hd.h"
+#include "sim/status.h"
+
+namespace collido::sim {
+
+// An indexed triangle mesh in double precision (world units, e.g. mm).
+struct TriangleMesh {
+  std::vector<Vec3d> vertices;
+  std::vector<std::array<uint32_t, 3>> triangles;
+  // For every triangle, its 0-based index in the file it came from (or its
+  // creation index for generated meshes). Contacts are reported with these ids.
+  std::vector<uint32_t> source_ids;
+
+  size_t triangle_count() const { return triangles.size(); }
+  Vec3d corner(size_t tri, int k) const { return vertices[triangles[tri][k]]; }
+};
+
+struct Bounds3d {
+  Vec3d lo{0, 0, 0}, hi{0, 0, 0};
+  bool empty = true;
+  void grow(Vec3d p);
+  Vec3d center() const { return (lo + hi) * 0.5; }
+  Vec3d extent() const { return hi - lo; }
+};
+
+// What loading and cleaning did to a mesh; printed by the CLI, stored by the service.
+struct MeshReport {
+  std::string format;               // "stl-ascii", "stl-binary", "generated", ...
+  size_t triangles_in = 0;          // triangles read from the source
+  size_t dropped_zero_area = 0;     // degenerate triangles removed
+  size_t vertices_before_weld = 0;  // 3 x triangles_in for STL
+  size_t vertices_after_weld = 0;
+};
+
+// Area of one triangle, in squared world units, computed in double.
+double triangle_area(Vec3d a, Vec3d b, Vec3d c);
+// Total area of a mesh, squared world units.
+double mesh_area(const TriangleMesh& mesh);
+Bounds3d mesh_bounds(const TriangleMesh& mesh);
+
+// Builds an indexed mesh from a triangle soup (3 corners per triangle), merging
+// vertices closer than weld_tolerance (world units) and dropping triangles whose
+// area is <= area_epsilon (relative to the squared bounding-box diagonal).
+TriangleMesh weld_soup(const std::vector<std::array<Vec3d, 3>>& soup,
+                       const std::vector<uint32_t>& source_ids, double weld_tolerance,
+                       MeshReport* report);
+
+// Loads an STL file (ASCII or binary, told apart by the 84 + 50 N size rule).
+// Errors name the file and, for bad data, the triangle.
+Expected<TriangleMesh> load_stl(const std::string& path, MeshReport* report = nullptr);
+// Parses STL bytes already in memory; `name` is used in error messages.
+Expected<TriangleMesh> parse_stl(const std::string& bytes, const std::string& name,
+                                 MeshReport* report = nullptr);
+// Writes a binary STL with per-face normals.
+Status save_stl(const TriangleMesh& mesh, const std::string& path);
+
+// Appends b's triangles to a (a union of shapes as one wall; no boolean CSG).
+void append_mesh(TriangleMesh& a, const TriangleMesh& b);
+
+// True when every edge is shared by exactly two triangles with opposite orientation.
+bool is_closed_manifold(const TriangleMesh& mesh);
+// Signed volume (positive when normals point outward), cubic world units.
+double signed_volume(const TriangleMesh& mesh);
+
+}  // namespace collido::sim
