@@ -21,6 +21,9 @@ int bench_render(const Args& args);      // app/cmd_render.cpp
 #ifdef COLLIDO_HAVE_GVM
 int cmd_gvm(const Args& args);           // app/cmd_gvm.cpp: `gvm train`
 int cmd_predict(const Args& args);       // app/cmd_gvm.cpp
+#endif
+
+#ifdef COLLIDO_HAVE_CALIBRATE
 int cmd_calibrate(const Args& args);     // app/cmd_calibrate.cpp
 #endif
 

@@ -26,6 +26,8 @@ const std::vector<Command>& commands() {
 #ifdef COLLIDO_HAVE_GVM
       {"gvm", cmd_gvm, "train the time/memory predictor: gvm train"},
       {"predict", cmd_predict, "predict time and memory of a configuration"},
+#endif
+#ifdef COLLIDO_HAVE_CALIBRATE
       {"calibrate", cmd_calibrate, "run a sweep of real configurations into a log"},
 #endif
   };
