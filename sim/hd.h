@@ -50,9 +50,19 @@ template <class T>
 COLLIDO_HD COLLIDO_FORCEINLINE T norm2(Vec3T<T> a) {
   return dot(a, a);
 }
+// Scalar helpers that pick the float or double routine on both host and device.
+COLLIDO_HD COLLIDO_FORCEINLINE float hd_sqrt(float v) { return sqrtf(v); }
+COLLIDO_HD COLLIDO_FORCEINLINE double hd_sqrt(double v) { return sqrt(v); }
+template <class T>
+COLLIDO_HD COLLIDO_FORCEINLINE T hd_min(T a, T b) { return b < a ? b : a; }
+template <class T>
+COLLIDO_HD COLLIDO_FORCEINLINE T hd_max(T a, T b) { return a < b ? b : a; }
+template <class T>
+COLLIDO_HD COLLIDO_FORCEINLINE T hd_abs(T a) { return a < T(0) ? -a : a; }
+
 template <class T>
 COLLIDO_HD COLLIDO_FORCEINLINE T length(Vec3T<T> a) {
-  return sqrt(dot(a, a));
+  return hd_sqrt(dot(a, a));
 }
 template <class To, class From>
 COLLIDO_HD COLLIDO_FORCEINLINE Vec3T<To> cast3(Vec3T<From> a) {

@@ -1,0 +1,113 @@
+// CPU backend of the detection pipeline: host memory, the thread pool's
+// parallel_for, and serial scan/sort where those are cheap next to the traversal.
+#pragma once
+
+#include <algorithm>
+#include <cstring>
+#include <numeric>
+#include <vector>
+
+#include "sim/parallel.h"
+
+namespace collido::sim {
+
+class CpuBackend {
+ public:
+  template <class T>
+  using Buffer = std::vector<T>;
+
+  template <class T>
+  void resize(std::vector<T>& b, size_t n) {
+    bytes_ += (int64_t(n) - int64_t(b.size())) * int64_t(sizeof(T));
+    b.resize(n);
+  }
+  uint64_t bytes_held() const { return static_cast<uint64_t>(std::max<int64_t>(bytes_, 0)); }
+
+  template <class F>
+  void parallel_for(size_t n, F f) {
+    cpu_parallel_for(n, f);
+  }
+  template <class T>
+  void fill(T* p, size_t n, T v) {
+    std::fill(p, p + n, v);
+  }
+  void copy(void* dst, const void* src, size_t bytes) { std::memcpy(dst, src, bytes); }
+  void to_device(void* dst, const void* src, size_t bytes) { std::memcpy(dst, src, bytes); }
+  void to_host(void* dst, const void* src, size_t bytes) { std::memcpy(dst, src, bytes); }
+  void sync() {}
+
+  // In-place exclusive prefix sum; returns the total.
+  uint64_t exclusive_scan(uint32_t* d, size_t n) {
+    uint64_t sum = 0;
+    for (size_t i = 0; i < n; ++i) {
+      const uint32_t v = d[i];
+      d[i] = static_cast<uint32_t>(sum);
+      sum += v;
+    }
+    return sum;
+  }
+
+  // Stable LSD radix sort of (key, value) pairs into kout/vout, 8 bits a pass;
+  // passes whose byte is the same for every key are skipped.
+  void sort_pairs(const uint32_t* kin, const uint32_t* vin, uint32_t* kout, uint32_t* vout, size_t n) {
+    tk_.resize(n);
+    tv_.resize(n);
+    std::memcpy(kout, kin, n * sizeof(uint32_t));
+    std::memcpy(vout, vin, n * sizeof(uint32_t));
+    uint32_t *ks = kout, *vs = vout, *kd = tk_.data(), *vd = tv_.data();
+    for (int shift = 0; shift < 32; shift += 8) {
+      size_t hist[257] = {0};
+      for (size_t i = 0; i < n; ++i) ++hist[((ks[i] >> shift) & 0xFF) + 1];
+      if (n && hist[((ks[0] >> shift) & 0xFF) + 1] == n) continue;
+      for (int b = 0; b < 256; ++b) hist[b + 1] += hist[b];
+      for (size_t i = 0; i < n; ++i) {
+        const size_t slot = hist[(ks[i] >> shift) & 0xFF]++;
+        kd[slot] = ks[i];
+        vd[slot] = vs[i];
+      }
+      std::swap(ks, kd);
+      std::swap(vs, vd);
+    }
+    if (ks != kout) {
+      std::memcpy(kout, ks, n * sizeof(uint32_t));
+      std::memcpy(vout, vs, n * sizeof(uint32_t));
+    }
+  }
+
+  // Sorts (key, distance) pairs by key and keeps one pair per key with the
+  // smallest distance, written to kout/dout; returns how many remain.
+  uint32_t dedup_min(const uint64_t* key, const float* dist, size_t n, uint64_t* kout, float* dout) {
+    order_.resize(n);
+    std::iota(order_.begin(), order_.end(), 0u);
+    std::sort(order_.begin(), order_.end(), [&](uint32_t a, uint32_t b) {
+      return key[a] != key[b] ? key[a] < key[b] : dist[a] < dist[b];
+    });
+    uint32_t m = 0;
+    for (size_t i = 0; i < n; ++i) {
+      const uint32_t s = order_[i];
+      if (m && kout[m - 1] == key[s]) continue;  // sorted by distance within a key: first is smallest
+      kout[m] = key[s];
+      dout[m] = dist[s];
+      ++m;
+    }
+    return m;
+  }
+
+  // Sorts each bucket's (triangle, cell) entries by triangle so runs repeat exactly.
+  void sort_segments(uint32_t* tri, uint64_t* cell, const uint32_t* start, uint32_t buckets, uint64_t) {
+    cpu_parallel_for(buckets, [&](uint32_t b) {
+      const uint32_t s = start[b], e = start[b + 1];
+      if (e - s < 2) return;
+      std::vector<std::pair<uint32_t, uint64_t>> v(e - s);
+      for (uint32_t k = s; k < e; ++k) v[k - s] = {tri[k], cell[k]};
+      std::sort(v.begin(), v.end());
+      for (uint32_t k = s; k < e; ++k) tri[k] = v[k - s].first, cell[k] = v[k - s].second;
+    }, 1024);
+  }
+
+ private:
+  int64_t bytes_ = 0;
+  std::vector<uint32_t> tk_, tv_, order_;
+};
+
+}  // namespace collido::sim

@@ -1,0 +1,109 @@
+// Particle-wall collision detection: the engine's public entry point.
+// A Detector prepares a wall once (division, grid, bins) and then answers
+// frames: which particles touch which original triangles, and how far away.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "sim/mesh.h"
+#include "sim/status.h"
+
+namespace collido::sim {
+
+enum class Method {
+  kGravity,       // paper: division by longest-edge bisection, centroid spheres
+  kCircumcircle,  // paper: division with obtuse split, circumspheres
+  kMidpoint4,     // paper: four-way midpoint division
+  kBin,           // no division: original triangles binned into every cell they reach
+  kReference,     // exact brute force in double precision (the test oracle)
+};
+enum class Traversal { kParticle, kWall };
+enum class Backend { kCpu, kCuda };
+
+const char* to_string(Method m);
+const char* to_string(Traversal t);
+const char* to_string(Backend b);
+bool parse_method(const std::string& s, Method* out);
+bool parse_traversal(const std::string& s, Traversal* out);
+bool parse_backend(const std::string& s, Backend* out);
+
+// Particles in world coordinates (as given by the user), structure of arrays.
+struct Particles {
+  std::vector<double> x, y, z, r;
+  size_t size() const { return x.size(); }
+  void resize(size_t n) { x.resize(n), y.resize(n), z.resize(n), r.resize(n); }
+};
+
+struct DetectConfig {
+  Method method = Method::kBin;
+  Traversal traversal = Traversal::kParticle;  // the paper's two traversals; bin reads its own cell
+  Backend backend = Backend::kCpu;
+  double r_max = 0;          // largest particle radius of the run, world units (> 0)
+  double grid_length = 0;    // cell edge, world units; 0 = method default (2 r_max)
+  bool collect_contacts = true;  // false: only counts per particle (benchmarks)
+  bool time_stages = true;       // synchronise between stages to time each one
+  // Dense cell arrays above this many cells switch to a hashed table whose
+  // size follows the element counts, so sparse or huge domains stay bounded.
+  uint64_t max_dense_cells = 1ull << 24;
+};
+
+// One contact: particle index, the triangle's id in the input file, centre distance.
+struct Contact {
+  uint32_t particle;
+  uint32_t triangle;
+  double distance;
+};
+
+// Milliseconds spent in each stage of one frame.
+struct StageTimes {
+  double upload_ms = 0, hash_ms = 0, sort_ms = 0, cells_ms = 0, traverse_ms = 0,
+         finalize_ms = 0, download_ms = 0, frame_ms = 0;
+};
+
+struct DetectResult {
+  std::vector<Contact> contacts;     // sorted by particle, then triangle (collect_contacts)
+  std::vector<uint32_t> counts;      // contacts per particle
+  uint64_t contact_count = 0;
+  uint64_t colliding_particles = 0;
+  StageTimes times;
+};
+
+// What preparing the wall produced; printed by the CLI and the benchmark.
+struct PrepareInfo {
+  size_t triangles_original = 0;
+  size_t triangles_used = 0;  // after division (= original for bin and reference)
+  double max_sphere_radius = 0;
+  double area_error = 0;      // division's relative area error (Eq. 6), double
+  double grid_length = 0;
+  int reach = 0;              // neighbour cells searched in each direction
+  uint64_t cells = 0;         // cells of the domain box
+  uint32_t buckets = 0;       // table entries actually stored
+  bool hashed = false;
+  uint64_t bin_entries = 0;   // bin: (cell, triangle) pairs stored
+  double prepare_ms = 0;
+  uint64_t device_bytes = 0;  // scratch and prepared data held by the backend
+};
+
+class Detector {
+ public:
+  virtual ~Detector() = default;
+  // Prepares `mesh` for particles of radius <= config.r_max, up to max_particles per frame.
+  static Expected<std::unique_ptr<Detector>> create(const TriangleMesh& mesh,
+                                                    const DetectConfig& config,
+                                                    size_t max_particles);
+  // Loads a frame's particles (converted to the engine's float local frame; on
+  // the GPU, copied to the device). Not part of a detection frame's time.
+  virtual Status set_particles(const Particles& particles) = 0;
+  // Runs one detection frame over the particles last set.
+  virtual Status detect(DetectResult* out) = 0;
+  virtual const PrepareInfo& info() const = 0;
+  virtual const DetectConfig& config() const = 0;
+};
+
+// True when a CUDA device is usable; otherwise *why says what failed.
+bool cuda_available(std::string* why = nullptr);
+
+}  // namespace collido::sim

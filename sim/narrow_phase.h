@@ -1,0 +1,143 @@
+// Exact per-element geometry shared by every backend: closest point on a
+// triangle (Ericson, Real-Time Collision Detection, 5.1.5) made robust for
+// slivers and zero-length edges, and the triangle/box overlap test
+// (Akenine-Moller's separating axes) used by the `bin` method.
+#pragma once
+
+#include "sim/hd.h"
+
+namespace collido::sim {
+
+// Closest point to p on segment [a, b]; a zero-length segment gives a.
+template <class T>
+COLLIDO_HD COLLIDO_FORCEINLINE Vec3T<T> closest_on_segment(Vec3T<T> p, Vec3T<T> a, Vec3T<T> b) {
+  Vec3T<T> ab = b - a;
+  T len2 = dot(ab, ab);
+  if (!(len2 > T(0))) return a;
+  T t = dot(p - a, ab) / len2;
+  t = t < T(0) ? T(0) : (t > T(1) ? T(1) : t);
+  return a + ab * t;
+}
+
+// Squared distance from p to triangle (a, b, c). Works in coordinates relative
+// to a so float keeps its precision for small triangles far from the origin.
+// Degenerate triangles (zero area, repeated corners) fall back to their edges.
+template <class T>
+COLLIDO_HD COLLIDO_FORCEINLINE T point_triangle_dist2(Vec3T<T> p, Vec3T<T> a, Vec3T<T> b,
+                                                      Vec3T<T> c) {
+  const Vec3T<T> ab = b - a, ac = c - a, ap = p - a;
+  const T d1 = dot(ab, ap), d2 = dot(ac, ap);
+  if (d1 <= T(0) && d2 <= T(0)) return dot(ap, ap);  // vertex region A
+  const Vec3T<T> bp = ap - ab;
+  const T d3 = dot(ab, bp), d4 = dot(ac, bp);
+  if (d3 >= T(0) && d4 <= d3) return dot(bp, bp);  // vertex region B
+  const Vec3T<T> cp = ap - ac;
+  const T d5 = dot(ab, cp), d6 = dot(ac, cp);
+  if (d6 >= T(0) && d5 <= d6) return dot(cp, cp);  // vertex region C
+
+  const T vc = d1 * d4 - d3 * d2;
+  const T vb = d5 * d2 - d1 * d6;
+  const T va = d3 * d6 - d5 * d4;
+  const Vec3T<T> n = cross(ab, ac);
+  const T n2 = dot(n, n);
+  // A triangle whose area is lost in rounding has no interior worth the name:
+  // the minimum over its three edges is exact and never divides by zero.
+  const T emax = hd_max(hd_max(dot(ab, ab), dot(ac, ac)), dot(ac - ab, ac - ab));
+  const T eps = sizeof(T) == 4 ? T(1e-10) : T(1e-24);
+  if (!(n2 > eps * emax * emax)) {
+    Vec3T<T> q0 = closest_on_segment(p, a, b) - p;
+    Vec3T<T> q1 = closest_on_segment(p, b, c) - p;
+    Vec3T<T> q2 = closest_on_segment(p, c, a) - p;
+    return hd_min(hd_min(dot(q0, q0), dot(q1, q1)), dot(q2, q2));
+  }
+  if (vc <= T(0) && d1 >= T(0) && d3 <= T(0)) {  // edge region AB
+    const T v = d1 / (d1 - d3);
+    const Vec3T<T> q = ap - ab * v;
+    return dot(q, q);
+  }
+  if (vb <= T(0) && d2 >= T(0) && d6 <= T(0)) {  // edge region AC
+    const T w = d2 / (d2 - d6);
+    const Vec3T<T> q = ap - ac * w;
+    return dot(q, q);
+  }
+  if (va <= T(0) && (d4 - d3) >= T(0) && (d5 - d6) >= T(0)) {  // edge region BC
+    const T w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    const Vec3T<T> q = bp - (ac - ab) * w;
+    return dot(q, q);
+  }
+  // Face region: the distance to the plane, which is better conditioned than
+  // reconstructing the point from barycentric coordinates.
+  const T h = dot(ap, n);
+  return h * h / n2;
+}
+
+// Closest point on triangle (a, b, c) to p, for callers that need the point
+// itself (contact normals). Same regions and fallbacks as the distance above.
+template <class T>
+COLLIDO_HD inline Vec3T<T> closest_point_on_triangle(Vec3T<T> p, Vec3T<T> a, Vec3T<T> b,
+                                                     Vec3T<T> c) {
+  const Vec3T<T> ab = b - a, ac = c - a, ap = p - a;
+  const T d1 = dot(ab, ap), d2 = dot(ac, ap);
+  if (d1 <= T(0) && d2 <= T(0)) return a;
+  const Vec3T<T> bp = ap - ab;
+  const T d3 = dot(ab, bp), d4 = dot(ac, bp);
+  if (d3 >= T(0) && d4 <= d3) return b;
+  const Vec3T<T> cp = ap - ac;
+  const T d5 = dot(ab, cp), d6 = dot(ac, cp);
+  if (d6 >= T(0) && d5 <= d6) return c;
+  const T vc = d1 * d4 - d3 * d2, vb = d5 * d2 - d1 * d6, va = d3 * d6 - d5 * d4;
+  const Vec3T<T> n = cross(ab, ac);
+  const T n2 = dot(n, n);
+  const T emax = hd_max(hd_max(dot(ab, ab), dot(ac, ac)), dot(ac - ab, ac - ab));
+  const T eps = sizeof(T) == 4 ? T(1e-10) : T(1e-24);
+  if (!(n2 > eps * emax * emax)) {
+    Vec3T<T> q0 = closest_on_segment(p, a, b), q1 = closest_on_segment(p, b, c),
+             q2 = closest_on_segment(p, c, a);
+    T e0 = norm2(q0 - p), e1 = norm2(q1 - p), e2 = norm2(q2 - p);
+    return e0 <= e1 && e0 <= e2 ? q0 : (e1 <= e2 ? q1 : q2);
+  }
+  if (vc <= T(0) && d1 >= T(0) && d3 <= T(0)) return a + ab * (d1 / (d1 - d3));
+  if (vb <= T(0) && d2 >= T(0) && d6 <= T(0)) return a + ac * (d2 / (d2 - d6));
+  if (va <= T(0) && (d4 - d3) >= T(0) && (d5 - d6) >= T(0))
+    return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+  return p - n * (dot(ap, n) / n2);
+}
+
+namespace detail {
+template <class T>
+COLLIDO_HD COLLIDO_FORCEINLINE bool axis_separates(Vec3T<T> axis, Vec3T<T> v0, Vec3T<T> v1,
+                                                   Vec3T<T> v2, Vec3T<T> h) {
+  const T p0 = dot(axis, v0), p1 = dot(axis, v1), p2 = dot(axis, v2);
+  const T r = h.x * hd_abs(axis.x) + h.y * hd_abs(axis.y) + h.z * hd_abs(axis.z);
+  const T lo = hd_min(p0, hd_min(p1, p2)), hi = hd_max(p0, hd_max(p1, p2));
+  return lo > r || hi < -r;
+}
+}  // namespace detail
+
+// True when triangle (a, b, c) intersects the axis-aligned box with the given
+// centre and half-extents (closed sets: touching counts). Thirteen axes: the
+// box normals, the triangle normal and the nine edge cross products.
+template <class T>
+COLLIDO_HD inline bool triangle_box_overlap(Vec3T<T> a, Vec3T<T> b, Vec3T<T> c, Vec3T<T> centre,
+                                            Vec3T<T> half) {
+  const Vec3T<T> v0 = a - centre, v1 = b - centre, v2 = c - centre;
+  // Box face normals: compare the triangle's extent with the box's.
+  if (hd_min(v0.x, hd_min(v1.x, v2.x)) > half.x || hd_max(v0.x, hd_max(v1.x, v2.x)) < -half.x) return false;
+  if (hd_min(v0.y, hd_min(v1.y, v2.y)) > half.y || hd_max(v0.y, hd_max(v1.y, v2.y)) < -half.y) return false;
+  if (hd_min(v0.z, hd_min(v1.z, v2.z)) > half.z || hd_max(v0.z, hd_max(v1.z, v2.z)) < -half.z) return false;
+  const Vec3T<T> e0 = v1 - v0, e1 = v2 - v1, e2 = v0 - v2;
+  // Triangle plane.
+  const Vec3T<T> n = cross(e0, e1);
+  if (detail::axis_separates(n, v0, v1, v2, half)) return false;
+  // Edge x box-axis cross products.
+  const Vec3T<T> ex{1, 0, 0}, ey{0, 1, 0}, ez{0, 0, 1};
+  const Vec3T<T> edges[3] = {e0, e1, e2};
+  for (int i = 0; i < 3; ++i) {
+    if (detail::axis_separates(cross(ex, edges[i]), v0, v1, v2, half)) return false;
+    if (detail::axis_separates(cross(ey, edges[i]), v0, v1, v2, half)) return false;
+    if (detail::axis_separates(cross(ez, edges[i]), v0, v1, v2, half)) return false;
+  }
+  return true;
+}
+
+}  // namespace collido::sim
