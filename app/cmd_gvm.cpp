@@ -1,0 +1,384 @@
+// `collidoscope gvm ...` (train the resource predictor, make a synthetic log) and
+// `collidoscope predict` (the predicted cost of one configuration).
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "app/cli.h"
+#include "app/commands.h"
+#include "gvm/gvm.h"
+
+namespace collido::app {
+
+namespace {
+
+namespace g = collido::gvm;
+
+bool read_text(const std::string& path, std::string* out) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return false;
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  *out = ss.str();
+  return true;
+}
+
+std::string human_bytes(double b) {
+  const char* units[] = {"B", "KiB", "MiB", "GiB", "TiB"};
+  int u = 0;
+  while (b >= 1024.0 && u < 4) {
+    b /= 1024.0;
+    ++u;
+  }
+  char buf[32];
+  std::snprintf(buf, sizeof buf, u ? "%.1f %s" : "%.0f %s", b, units[u]);
+  return buf;
+}
+
+std::string human_seconds(double s) {
+  char buf[32];
+  if (s < 1e-3)
+    std::snprintf(buf, sizeof buf, "%.3g us", s * 1e6);
+  else if (s < 1.0)
+    std::snprintf(buf, sizeof buf, "%.3g ms", s * 1e3);
+  else
+    std::snprintf(buf, sizeof buf, "%.4g s", s);
+  return buf;
+}
+
+std::string percent(const g::OutputError& e) {
+  if (e.rows == 0) return "n/a";
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.1f", e.mape_percent);
+  return buf;
+}
+
+// Mean wall-clock microseconds of one call of f, over enough calls for ~0.2 s.
+template <class F>
+double time_per_call_us(F&& f) {
+  using clock = std::chrono::steady_clock;
+  size_t calls = 0;
+  const auto t0 = clock::now();
+  double elapsed = 0.0;
+  do {
+    for (int i = 0; i < 1000; ++i) f(calls++);
+    elapsed = std::chrono::duration<double>(clock::now() - t0).count();
+  } while (elapsed < 0.2);
+  return elapsed / static_cast<double>(calls) * 1e6;
+}
+
+// Keeps the optimiser from dropping benchmarked calls.
+volatile double g_sink = 0.0;
+
+// ---- gvm train -------------------------------------------------------------------------
+
+const std::vector<FlagSpec>& train_flags() {
+  static const std::vector<FlagSpec> specs = {
+      {"logs", true, "run log CSV to train on (required; see docs/gvm.md)"},
+      {"out", true, "where to write the model JSON (required)"},
+      {"hidden", true, "hidden neurons (default 16)"},
+      {"epochs", true, "epochs; one epoch = one proposal per parameter (default 500)"},
+      {"seed", true, "seed of the machine's signs, start and proposals (default 1)"},
+      {"delta", true, "largest Monte Carlo step, fraction of a parameter's range (default 0.1)"},
+      {"fixed-delta", false, "keep the step at --delta instead of adapting it per epoch"},
+      {"beta-max", true, "gain range [-B, B] of each hidden neuron (default 1)"},
+      {"activation", true, "tanh or sigmoid (default tanh)"},
+      {"split-seed", true, "seed of the 70/30 train/validation split (default 1)"},
+      {"curve", true, "write every epoch's train/validation loss to this CSV"},
+      {"mlp-epochs", true, "epochs of the back-propagation baseline (default 3000)"},
+      {"help", false, "show this help"},
+  };
+  return specs;
+}
+
+int gvm_train(const Args& args) {
+  const char* cmd = "gvm train";
+  std::string error;
+  auto parsed = parse_args(args, train_flags(), &error);
+  if (!parsed) return usage_error(cmd, error);
+  if (parsed->has("help")) {
+    print_help(
+        "usage: collidoscope gvm train --logs RUNS.csv --out MODEL.json [options]\n\n"
+        "Trains the general vector machine on 70% of the logged runs, scores it and three\n"
+        "baselines (the paper's linear fit in triangles, least squares on log features,\n"
+        "a back-propagation MLP) on the other 30%, and writes the model.",
+        train_flags());
+    return kExitOk;
+  }
+  if (!parsed->positional().empty())
+    return usage_error(cmd, "unexpected argument '" + parsed->positional()[0] + "'");
+  if (!parsed->has("logs")) return usage_error(cmd, "--logs RUNS.csv is required");
+  if (!parsed->has("out")) return usage_error(cmd, "--out MODEL.json is required");
+
+  g::CompareOptions opt;
+  opt.gvm.hidden = static_cast<int>(parsed->get_int("hidden", opt.gvm.hidden, &error));
+  opt.gvm.epochs = static_cast<int>(parsed->get_int("epochs", opt.gvm.epochs, &error));
+  opt.gvm.seed = static_cast<uint64_t>(parsed->get_int("seed", 1, &error));
+  opt.gvm.delta = parsed->get_double("delta", opt.gvm.delta, &error);
+  opt.gvm.beta_max = parsed->get_double("beta-max", opt.gvm.beta_max, &error);
+  opt.split_seed = static_cast<uint64_t>(parsed->get_int("split-seed", 1, &error));
+  opt.mlp.epochs = static_cast<int>(parsed->get_int("mlp-epochs", opt.mlp.epochs, &error));
+  if (!error.empty()) return usage_error(cmd, error);
+  opt.gvm.adaptive_delta = !parsed->has("fixed-delta");
+  if (parsed->has("activation")) {
+    auto a = g::parse_activation(parsed->get("activation"));
+    if (!a) return usage_error(cmd, "--activation must be tanh or sigmoid");
+    opt.gvm.activation = *a;
+  }
+  if (opt.gvm.hidden < 1 || opt.gvm.hidden > 4096)
+    return usage_error(cmd, "--hidden must be in 1..4096");
+  if (opt.gvm.epochs < 1 || opt.gvm.epochs > 1000000)
+    return usage_error(cmd, "--epochs must be in 1..1000000");
+  if (!(opt.gvm.delta > 0.0 && opt.gvm.delta <= 1.0))
+    return usage_error(cmd, "--delta must be in (0, 1]");
+  if (!(opt.gvm.beta_max > 0.0 && opt.gvm.beta_max <= 1000.0))
+    return usage_error(cmd, "--beta-max must be in (0, 1000]");
+  if (opt.mlp.epochs < 0) return usage_error(cmd, "--mlp-epochs must be >= 0");
+
+  const std::string log_path = parsed->get("logs");
+  auto rows = g::read_run_log(log_path);
+  if (!rows) {
+    std::fprintf(stderr, "collidoscope %s: %s\n", cmd, rows.status().message().c_str());
+    return kExitFailure;
+  }
+  auto cmp = g::train_and_compare(*rows, opt);
+  if (!cmp) {
+    std::fprintf(stderr, "collidoscope %s: %s\n", cmd, cmp.status().message().c_str());
+    return kExitFailure;
+  }
+  const auto& rep = cmp->gvm_report;
+  const auto& mp = cmp->gvm.machine().params();
+  size_t varying = 0;
+  for (size_t i = 0; i < mp.inputs; ++i) varying += mp.in_max[i] > mp.in_min[i];
+  std::printf("%zu runs from %s: %zu train, %zu validation (split seed %llu)\n", rows->size(),
+              log_path.c_str(), cmp->split.train.size(), cmp->split.validation.size(),
+              static_cast<unsigned long long>(opt.split_seed));
+  std::printf(
+      "GVM: %d hidden %s neurons, beta in [-%g, %g], %zu inputs (%zu vary), %zu outputs; "
+      "%d epochs, delta %g, seed %llu\n",
+      opt.gvm.hidden, g::activation_name(opt.gvm.activation), opt.gvm.beta_max, opt.gvm.beta_max,
+      mp.inputs, varying, mp.outputs, opt.gvm.epochs, opt.gvm.delta,
+      static_cast<unsigned long long>(opt.gvm.seed));
+
+  // Loss on stdout at about ten epochs (first, last, evenly between); all of them with --curve.
+  std::printf("%7s  %12s  %15s  %8s\n", "epoch", "train loss", "validation loss", "accepted");
+  const size_t n = rep.curve.size();
+  const size_t stride = std::max<size_t>(1, n / 10);
+  for (size_t e = 0; e < n; ++e) {
+    if (e != 0 && e + 1 != n && (e + 1) % stride != 0) continue;
+    const auto& c = rep.curve[e];
+    std::printf("%7d  %12.4e  %15.4e  %7.1f%%\n", c.epoch, c.train_loss, c.validation_loss,
+                100.0 * c.acceptance);
+  }
+  std::printf(
+      "trained in %s (%lld proposals, %.1f%% kept); loss = mean squared error of the "
+      "targets scaled to [0,1]\n",
+      human_seconds(rep.seconds).c_str(), static_cast<long long>(rep.proposals),
+      rep.proposals ? 100.0 * rep.accepted / rep.proposals : 0.0);
+
+  if (parsed->has("curve")) {
+    const std::string path = parsed->get("curve");
+    std::ofstream out(path, std::ios::trunc);
+    out << "epoch,train_loss,validation_loss,acceptance\n";
+    char line[128];
+    for (const auto& c : rep.curve) {
+      std::snprintf(line, sizeof line, "%d,%.9g,%.9g,%.6f\n", c.epoch, c.train_loss,
+                    c.validation_loss, c.acceptance);
+      out << line;
+    }
+    if (!out.flush()) {
+      std::fprintf(stderr, "collidoscope %s: cannot write %s\n", cmd, path.c_str());
+      return kExitFailure;
+    }
+    std::printf("loss curve: %s (%zu epochs)\n", path.c_str(), n);
+  }
+
+  const auto& names = g::measure_names();
+  auto table = [&](const char* title, bool validation) {
+    std::printf("\n%s MAPE %% (rows with a nonzero value)\n%-15s", title, "model");
+    for (const auto& nm : names) std::printf(" %17s", nm.c_str());
+    std::printf(" %9s\n", "fit time");
+    for (const auto& s : cmp->scores) {
+      std::printf("%-15s", s.name.c_str());
+      const auto& e = validation ? s.validation : s.train;
+      for (size_t k = 0; k < names.size(); ++k) std::printf(" %17s", percent(e[k]).c_str());
+      std::printf(" %9s\n", human_seconds(s.fit_seconds).c_str());
+    }
+  };
+  table("validation", true);
+  // A percentage of a small load is large for a small miss; say the miss in load too.
+  std::printf("validation GPU load mean absolute error:");
+  for (const auto& s : cmp->scores)
+    std::printf("  %s %.3f", s.name.c_str(), s.validation[g::kOutputCount - 1].mean_abs);
+  std::printf("\n");
+  table("training", false);
+
+  // The figure that matters for the service: one prediction, costs only and with checks.
+  const auto& va = cmp->split.validation;
+  const double us_fast = time_per_call_us([&](size_t i) {
+    g_sink = g_sink + cmp->gvm.predict_measure(va[i % va.size()].config).time_per_frame_s;
+  });
+  const double us_full = time_per_call_us([&](size_t i) {
+    auto p = cmp->gvm.predict(va[i % va.size()].config);
+    g_sink = g_sink + p->measure.time_per_frame_s;
+  });
+  std::printf("\nprediction time: %.2f us per configuration (%.2f us with range checks)\n", us_fast,
+              us_full);
+
+  const std::string out_path = parsed->get("out");
+  if (auto s = cmp->gvm.save(out_path); !s) {
+    std::fprintf(stderr, "collidoscope %s: %s\n", cmd, s.message().c_str());
+    return kExitFailure;
+  }
+  std::printf("model: %s\n", out_path.c_str());
+  return kExitOk;
+}
+
+// ---- gvm synth -------------------------------------------------------------------------
+
+const std::vector<FlagSpec>& synth_flags() {
+  static const std::vector<FlagSpec> specs = {
+      {"out", true, "where to write the run log CSV (required)"},
+      {"rows", true, "number of runs (default 100)"},
+      {"seed", true, "seed (default 1)"},
+      {"help", false, "show this help"},
+  };
+  return specs;
+}
+
+int gvm_synth(const Args& args) {
+  const char* cmd = "gvm synth";
+  std::string error;
+  auto parsed = parse_args(args, synth_flags(), &error);
+  if (!parsed) return usage_error(cmd, error);
+  if (parsed->has("help")) {
+    print_help(
+        "usage: collidoscope gvm synth --out RUNS.csv [--rows N] [--seed S]\n\n"
+        "Writes a run log from a made-up cost model, to try `gvm train` before real runs\n"
+        "exist. Its numbers are not measurements of the engine.",
+        synth_flags());
+    return kExitOk;
+  }
+  if (!parsed->positional().empty())
+    return usage_error(cmd, "unexpected argument '" + parsed->positional()[0] + "'");
+  if (!parsed->has("out")) return usage_error(cmd, "--out RUNS.csv is required");
+  const int64_t n = parsed->get_int("rows", 100, &error);
+  const int64_t seed = parsed->get_int("seed", 1, &error);
+  if (!error.empty()) return usage_error(cmd, error);
+  if (n < 1 || n > 10000000) return usage_error(cmd, "--rows must be in 1..10000000");
+  auto rows = g::synthetic_run_log(static_cast<size_t>(n), static_cast<uint64_t>(seed));
+  if (auto s = g::write_run_log(parsed->get("out"), rows); !s) {
+    std::fprintf(stderr, "collidoscope %s: %s\n", cmd, s.message().c_str());
+    return kExitFailure;
+  }
+  std::printf("%lld synthetic runs (made-up cost model, not measurements): %s\n",
+              static_cast<long long>(n), parsed->get("out").c_str());
+  return kExitOk;
+}
+
+void print_gvm_usage() {
+  std::printf(
+      "usage: collidoscope gvm SUBCOMMAND [options]   (SUBCOMMAND --help for its options)\n\n"
+      "  train   train the resource predictor on a run log and compare it with baselines\n"
+      "  synth   write a synthetic run log (made-up costs) to try train with\n");
+}
+
+// ---- predict ---------------------------------------------------------------------------
+
+const std::vector<FlagSpec>& predict_flags() {
+  static const std::vector<FlagSpec> specs = {
+      {"model", true, "model JSON written by `gvm train` (required)"},
+      {"json", false, "print the prediction as JSON"},
+      {"bench", false, "also time one prediction (mean over many)"},
+      {"help", false, "show this help"},
+  };
+  return specs;
+}
+
+}  // namespace
+
+int cmd_gvm(const Args& args) {
+  if (args.empty()) {
+    print_gvm_usage();
+    return kExitUsage;
+  }
+  const std::string& sub = args[0];
+  if (sub == "--help" || sub == "-h" || sub == "help") {
+    print_gvm_usage();
+    return kExitOk;
+  }
+  const Args rest(args.begin() + 1, args.end());
+  if (sub == "train") return gvm_train(rest);
+  if (sub == "synth") return gvm_synth(rest);
+  return usage_error("gvm", "unknown subcommand '" + sub + "' (train, synth)");
+}
+
+int cmd_predict(const Args& args) {
+  const char* cmd = "predict";
+  std::string error;
+  auto parsed = parse_args(args, predict_flags(), &error);
+  if (!parsed) return usage_error(cmd, error);
+  if (parsed->has("help")) {
+    print_help(
+        "usage: collidoscope predict CONFIG.json --model MODEL.json [--json] [--bench]\n\n"
+        "CONFIG.json: {\"particles\": 1e6, \"triangles\": 99612, \"method\": \"circumcircle\",\n"
+        "  \"traversal\": \"particle\", \"frames\": 100, \"backend\": \"cuda\"}; optional\n"
+        "  \"triangles_original\", \"device\", \"threads\" (default: the model's usual host).\n"
+        "Prints predicted time per frame, total time, peak memory and GPU load, and a\n"
+        "warning for every input outside the range the model was trained on.\n"
+        "Exit codes: 0 predicted (even with warnings), 1 a file could not be read,\n"
+        "2 bad arguments or configuration values.",
+        predict_flags());
+    return kExitOk;
+  }
+  if (parsed->positional().size() != 1)
+    return usage_error(cmd, "expects exactly one CONFIG.json (see --help)");
+  if (!parsed->has("model")) return usage_error(cmd, "--model MODEL.json is required");
+
+  auto model = g::ResourcePredictor::load(parsed->get("model"));
+  if (!model) {
+    std::fprintf(stderr, "collidoscope %s: %s\n", cmd, model.status().message().c_str());
+    return kExitFailure;
+  }
+  const std::string config_path = parsed->positional()[0];
+  std::string text;
+  if (!read_text(config_path, &text)) {
+    std::fprintf(stderr, "collidoscope %s: cannot open %s\n", cmd, config_path.c_str());
+    return kExitFailure;
+  }
+  auto config = g::run_config_from_json(text, &*model);
+  if (!config) return usage_error(cmd, config_path + ": " + config.status().message());
+  auto pred = model->predict(*config);
+  if (!pred) return usage_error(cmd, pred.status().message());
+
+  if (parsed->has("json")) {
+    std::printf("%s\n", g::prediction_to_json(*config, *pred).c_str());
+  } else {
+    const g::RunConfig& c = *config;
+    const g::RunMeasure& m = pred->measure;
+    std::printf("%lld particles, %lld triangles (%s, %s traversal), %lld frames, %s",
+                static_cast<long long>(c.particles), static_cast<long long>(c.triangles),
+                g::method_name(c.method), g::traversal_name(c.traversal),
+                static_cast<long long>(c.frames), g::backend_name(c.backend));
+    if (!c.device.empty()) std::printf(" on %s", c.device.c_str());
+    std::printf("\n  time per frame      %s\n", human_seconds(m.time_per_frame_s).c_str());
+    std::printf("  total time          %s\n", human_seconds(m.total_time_s).c_str());
+    std::printf("  peak host memory    %s\n", human_bytes(m.peak_host_bytes).c_str());
+    std::printf("  peak device memory  %s\n", human_bytes(m.peak_device_bytes).c_str());
+    std::printf("  GPU load            %.2f\n", m.gpu_load);
+    for (const auto& w : pred->warnings)
+      std::printf("warning: %s; the prediction is an extrapolation\n", w.c_str());
+  }
+  if (parsed->has("bench")) {
+    const double us = time_per_call_us(
+        [&](size_t) { g_sink = g_sink + model->predict_measure(*config).time_per_frame_s; });
+    std::fprintf(parsed->has("json") ? stderr : stdout, "prediction time: %.2f us\n", us);
+  }
+  return kExitOk;
+}
+
+}  // namespace collido::app

@@ -1,0 +1,76 @@
+// The models the GVM is measured against, on the same split: the paper's linear fits of
+// time in triangle count (Yong et al. 2018, Eqs. 9-10), ordinary least squares on the
+// GVM's log features, and a small multilayer perceptron trained by back-propagation.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "gvm/features.h"
+#include "gvm/matrix.h"
+#include "gvm/run_log.h"
+#include "gvm/status.h"
+
+namespace collido::gvm {
+
+// The paper's model: for a fixed particle count (and a fixed machine and method, as its
+// experiments were), every cost is linear in the divided triangle count, t = a*ntri + b.
+// One fit per group of equal (particles, method, traversal, backend, device, threads);
+// total time = frames * predicted time per frame (the paper models no set-up time).
+// A configuration whose group was not trained uses the group of the same kind with the
+// nearest log10 particle count, then the nearest group of any kind.
+class PaperLinearFit {
+ public:
+  PaperLinearFit() = default;
+  static Expected<PaperLinearFit> fit(const std::vector<RunRecord>& rows);
+  RunMeasure predict(const RunConfig& c) const;
+  size_t groups() const { return groups_.size(); }
+
+ private:
+  struct Group {
+    RunConfig key;      // triangles, frames ignored
+    double a[4], b[4];  // time per frame, host bytes, device bytes, gpu load
+  };
+  std::vector<Group> groups_;
+};
+
+// Ordinary least squares from the GVM's input features (log10 counts, one-hot
+// categories, scaled to [0,1], plus an intercept) to its transformed targets, i.e. a
+// power law in every count. A tiny ridge term keeps one-hot collinearity solvable.
+class LeastSquaresFit {
+ public:
+  LeastSquaresFit() = default;
+  static Expected<LeastSquaresFit> fit(const std::vector<RunRecord>& rows,
+                                       const FeatureSpace& features);
+  RunMeasure predict(const RunConfig& c) const;
+
+ private:
+  FeatureSpace features_;
+  std::vector<double> lo_, hi_;  // input scaling
+  Matrix coef_;                  // (inputs + 1) x kOutputCount, intercept last
+};
+
+struct MlpOptions {
+  int hidden = 16;    // tanh neurons in the one hidden layer
+  int epochs = 3000;  // full-batch Adam steps
+  double learning_rate = 0.01;
+  uint64_t seed = 1;
+};
+
+// A one-hidden-layer tanh perceptron with a linear output layer, trained by full-batch
+// back-propagation (Adam) on the same scaled inputs and targets as the GVM.
+class MlpFit {
+ public:
+  MlpFit() = default;
+  static Expected<MlpFit> fit(const std::vector<RunRecord>& rows, const FeatureSpace& features,
+                              const MlpOptions& options);
+  RunMeasure predict(const RunConfig& c) const;
+
+ private:
+  FeatureSpace features_;
+  std::vector<double> in_lo_, in_hi_, out_lo_, out_hi_;
+  size_t hidden_ = 0;
+  std::vector<double> w1_, b1_, w2_, b2_;  // hidden x inputs, hidden, outputs x hidden, outputs
+};
+
+}  // namespace collido::gvm

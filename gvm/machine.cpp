@@ -1,0 +1,458 @@
+#include "gvm/machine.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <utility>
+
+#include "gvm/json_io.h"
+#include "gvm/rng.h"
+
+namespace collido::gvm {
+
+const char* activation_name(Activation a) {
+  return a == Activation::kTanh ? "tanh" : "sigmoid";
+}
+
+std::optional<Activation> parse_activation(const std::string& name) {
+  if (name == "tanh") return Activation::kTanh;
+  if (name == "sigmoid") return Activation::kSigmoid;
+  return std::nullopt;
+}
+
+namespace {
+
+inline double activate(Activation a, double z) {
+  return a == Activation::kTanh ? std::tanh(z) : 1.0 / (1.0 + std::exp(-z));
+}
+
+// Inputs equal on every training row carry no information; they are scaled to 0 and
+// their weights are never proposed, so they cannot drift and add noise to predictions.
+inline double scale_input(const MachineParams& p, size_t i, double x) {
+  const double range = p.in_max[i] - p.in_min[i];
+  return range > 0.0 ? (x - p.in_min[i]) / range : 0.0;
+}
+
+bool all_finite(const Matrix& m) {
+  for (size_t r = 0; r < m.rows(); ++r)
+    for (size_t c = 0; c < m.cols(); ++c)
+      if (!std::isfinite(m(r, c))) return false;
+  return true;
+}
+
+// Targets may be NaN (missing) but never infinite.
+bool no_infinity(const Matrix& m) {
+  for (size_t r = 0; r < m.rows(); ++r)
+    for (size_t c = 0; c < m.cols(); ++c)
+      if (std::isinf(m(r, c))) return false;
+  return true;
+}
+
+// The Monte Carlo trainer. It keeps, for the training rows, every hidden neuron's
+// pre-activation z_j(n) = w_j . x_n + b_j and output o_j(n), and every output sum
+// s_k(n), so that one proposal costs O(rows * outputs) instead of a full forward pass.
+class Trainer {
+ public:
+  Trainer(MachineParams& p, const Matrix& x, const Matrix& y, const GvmOptions& opt)
+      : p_(p), opt_(opt), n_(x.rows()), rng_(opt.seed), delta_(opt.delta) {
+    // Column-major scaled inputs: a w move reads one input column.
+    xs_.assign(p.inputs * n_, 0.0);
+    for (size_t i = 0; i < p.inputs; ++i)
+      for (size_t n = 0; n < n_; ++n) xs_[i * n_ + n] = scale_input(p, i, x(n, i));
+    for (size_t i = 0; i < p.inputs; ++i)
+      if (p.in_max[i] > p.in_min[i]) active_.push_back(i);
+    // Centred scaled targets: the affine fit then needs only sum(s), sum(s^2), sum(s*t).
+    // A NaN target means "no value for this output in this row" (a CPU run has no
+    // device memory); such entries get weight 0 everywhere.
+    tc_.assign(p.outputs * n_, 0.0);
+    mask_.assign(p.outputs * n_, 0.0);
+    count_.assign(p.outputs, 0.0);
+    vtt_.assign(p.outputs, 0.0);
+    tmean_.assign(p.outputs, 0.0);
+    for (size_t k = 0; k < p.outputs; ++k) {
+      const double range = p.out_max[k] - p.out_min[k];
+      double sum = 0.0;
+      std::vector<double> t(n_, 0.0);
+      for (size_t n = 0; n < n_; ++n) {
+        if (std::isnan(y(n, k))) continue;
+        mask_[k * n_ + n] = 1.0;
+        count_[k] += 1.0;
+        t[n] = range > 0.0 ? (y(n, k) - p.out_min[k]) / range : 0.0;
+        sum += t[n];
+      }
+      tmean_[k] = sum / count_[k];
+      for (size_t n = 0; n < n_; ++n) {
+        if (mask_[k * n_ + n] == 0.0) continue;
+        tc_[k * n_ + n] = t[n] - tmean_[k];
+        vtt_[k] += tc_[k * n_ + n] * tc_[k * n_ + n];
+      }
+    }
+  }
+
+  // Near a minimum most full-size steps overshoot and are refused; shrinking the step
+  // when few are kept (and growing it back when many are) keeps the search moving.
+  void end_epoch(double acceptance) {
+    if (!opt_.adaptive_delta) return;
+    if (acceptance < 0.1)
+      delta_ = std::max(delta_ * 0.8, opt_.delta * 0.01);
+    else if (acceptance > 0.2)
+      delta_ = std::min(delta_ * 1.25, opt_.delta);
+  }
+
+  size_t parameter_count() const { return p_.hidden * (active_.size() + 2); }
+
+  // Random start inside the ranges. Signs v: per output, a seeded random half of the
+  // neurons get +1 and the other half -1 (see docs/gvm.md for why).
+  void initialize() {
+    const size_t H = p_.hidden;
+    p_.v.assign(p_.outputs * H, 1);
+    for (size_t k = 0; k < p_.outputs; ++k) {
+      std::vector<int> signs(H);
+      for (size_t j = 0; j < H; ++j) signs[j] = j < H / 2 ? 1 : -1;
+      if (H % 2 == 1) signs[H - 1] = rng_.below(2) ? 1 : -1;
+      rng_.shuffle(signs);
+      std::copy(signs.begin(), signs.end(), p_.v.begin() + k * H);
+    }
+    p_.w.assign(H * p_.inputs, 0.0);
+    p_.b.assign(H, 0.0);
+    p_.beta.assign(H, 0.0);
+    for (size_t j = 0; j < H; ++j) {
+      // Weights start at w_max / sqrt(inputs) so that w.x varies about as much with 13
+      // inputs as with 1: a neuron does not start as a sharp step along a random
+      // direction, which Monte Carlo acceptance would then keep (measured: held-out
+      // loss 20-40% lower on synthetic run logs than starting at full range).
+      const double w0 =
+          p_.w_max / std::sqrt(static_cast<double>(std::max<size_t>(active_.size(), 1)));
+      // The neuron's surface w.x + b = 0 starts through a random point of the unit cube,
+      // so no neuron starts saturated over all the data.
+      double wx = 0.0;
+      for (size_t i : active_) {
+        p_.w[j * p_.inputs + i] = rng_.uniform(-w0, w0);
+        wx += p_.w[j * p_.inputs + i] * rng_.uniform01();
+      }
+      p_.b[j] = std::clamp(-wx, -p_.b_max, p_.b_max);
+      p_.beta[j] = rng_.uniform(-p_.beta_max, p_.beta_max);
+    }
+    recompute_all();
+  }
+
+  // Rebuilds every cache from the parameters. Called once per epoch too, which wipes
+  // the rounding drift of many incremental updates.
+  void recompute_all() {
+    const size_t H = p_.hidden;
+    z_.assign(H * n_, 0.0);
+    o_.assign(H * n_, 0.0);
+    s_.assign(p_.outputs * n_, 0.0);
+    for (size_t j = 0; j < H; ++j) {
+      for (size_t n = 0; n < n_; ++n) {
+        double z = p_.b[j];
+        for (size_t i : active_) z += p_.w[j * p_.inputs + i] * xs_[i * n_ + n];
+        z_[j * n_ + n] = z;
+        o_[j * n_ + n] = activate(p_.activation, p_.beta[j] * z);
+      }
+      for (size_t k = 0; k < p_.outputs; ++k) {
+        const double vk = p_.v[k * H + j];
+        for (size_t n = 0; n < n_; ++n) s_[k * n_ + n] += vk * o_[j * n_ + n];
+      }
+    }
+    shift_.assign(p_.outputs, 0.0);
+    for (size_t k = 0; k < p_.outputs; ++k) {
+      double sum = 0.0;
+      for (size_t n = 0; n < n_; ++n) sum += mask_[k * n_ + n] * s_[k * n_ + n];
+      shift_[k] = sum / count_[k];
+    }
+    loss_ = evaluate(nullptr, 0, nullptr);
+  }
+
+  // Training loss with neuron j's outputs replaced by o_new (or the current state when
+  // o_new is null), each output mapped by its own least-squares affine map: the mean
+  // over outputs of each output's mean squared error. Fills ac (a, c per output) if given.
+  double evaluate(const double* o_new, size_t j, std::vector<std::pair<double, double>>* ac) {
+    const size_t H = p_.hidden;
+    double loss = 0.0;
+    for (size_t k = 0; k < p_.outputs; ++k) {
+      const double* s = &s_[k * n_];
+      const double* tc = &tc_[k * n_];
+      const double* mk = &mask_[k * n_];
+      const double vk = p_.v[k * H + j];
+      const double* o_old = &o_[j * n_];
+      const double shift = shift_[k];
+      double su = 0.0, suu = 0.0, sst = 0.0;
+      for (size_t n = 0; n < n_; ++n) {
+        const double sn = o_new ? s[n] + vk * (o_new[n] - o_old[n]) : s[n];
+        const double u = mk[n] * (sn - shift);  // shifted by the last mean: no cancellation
+        su += u;
+        suu += u * u;
+        sst += sn * tc[n];  // tc is 0 where the target is missing
+      }
+      const double nk = count_[k];
+      const double vss = suu - su * su / nk;
+      double c = 0.0, sse = vtt_[k];
+      if (vss > 1e-14 * nk) {
+        c = sst / vss;
+        sse = std::max(0.0, vtt_[k] - c * sst);
+      }
+      if (ac) (*ac)[k] = {tmean_[k] - c * (shift + su / nk), c};
+      loss += sse / nk;
+    }
+    return loss / static_cast<double>(p_.outputs);
+  }
+
+  // One Monte Carlo proposal; returns true when it was kept.
+  bool step() {
+    const size_t H = p_.hidden, na = active_.size();
+    const size_t idx = rng_.below(H * (na + 2));
+    const size_t j = idx / (na + 2), r = idx % (na + 2);
+    const double u = rng_.uniform(-1.0, 1.0);
+    double* z = &z_[j * n_];
+    z_new_.resize(n_);
+    o_new_.resize(n_);
+    double* target;
+    double old_value, new_value;
+    if (r < na) {  // a weight w_ji
+      const size_t i = active_[r];
+      target = &p_.w[j * p_.inputs + i];
+      old_value = *target;
+      new_value = std::clamp(old_value + delta_ * p_.w_max * u, -p_.w_max, p_.w_max);
+      const double dw = new_value - old_value;
+      const double* xi = &xs_[i * n_];
+      for (size_t n = 0; n < n_; ++n) z_new_[n] = z[n] + dw * xi[n];
+    } else if (r == na) {  // the bias b_j
+      target = &p_.b[j];
+      old_value = *target;
+      new_value = std::clamp(old_value + delta_ * p_.w_max * u, -p_.b_max, p_.b_max);
+      const double db = new_value - old_value;
+      for (size_t n = 0; n < n_; ++n) z_new_[n] = z[n] + db;
+    } else {  // the gain beta_j
+      target = &p_.beta[j];
+      old_value = *target;
+      new_value = std::clamp(old_value + delta_ * p_.beta_max * u, -p_.beta_max, p_.beta_max);
+      std::copy(z, z + n_, z_new_.begin());
+    }
+    const double beta = r == na + 1 ? new_value : p_.beta[j];
+    for (size_t n = 0; n < n_; ++n) o_new_[n] = activate(p_.activation, beta * z_new_[n]);
+    const double new_loss = evaluate(o_new_.data(), j, nullptr);
+    if (!(new_loss <= loss_)) return false;  // undo: nothing was written yet
+    *target = new_value;
+    for (size_t k = 0; k < p_.outputs; ++k) {
+      const double vk = p_.v[k * H + j];
+      double* s = &s_[k * n_];
+      for (size_t n = 0; n < n_; ++n) s[n] += vk * (o_new_[n] - o_[j * n_ + n]);
+    }
+    std::copy(z_new_.begin(), z_new_.end(), z);
+    std::copy(o_new_.begin(), o_new_.end(), o_.begin() + j * n_);
+    loss_ = new_loss;
+    return true;
+  }
+
+  // Writes the least-squares affine output map of the current state into the params.
+  void store_output_map() {
+    std::vector<std::pair<double, double>> ac(p_.outputs);
+    evaluate(nullptr, 0, &ac);
+    p_.out_a.resize(p_.outputs);
+    p_.out_c.resize(p_.outputs);
+    for (size_t k = 0; k < p_.outputs; ++k) {
+      p_.out_a[k] = ac[k].first;
+      p_.out_c[k] = ac[k].second;
+    }
+  }
+
+  double loss() const { return loss_; }
+
+ private:
+  MachineParams& p_;
+  const GvmOptions& opt_;
+  size_t n_;
+  Rng rng_;
+  std::vector<size_t> active_;
+  std::vector<double> xs_, tc_, mask_, count_, vtt_, tmean_, shift_;
+  std::vector<double> z_, o_, s_, z_new_, o_new_;
+  double loss_ = 0.0;
+  double delta_;  // current step, opt_.delta / 100 .. opt_.delta
+};
+
+}  // namespace
+
+Expected<Machine> Machine::train(const Matrix& x, const Matrix& y, const Matrix& val_x,
+                                 const Matrix& val_y, const GvmOptions& opt, TrainReport* report,
+                                 std::vector<std::string> input_names,
+                                 std::vector<std::string> output_names) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (x.rows() < 2) return invalid_argument("GVM training needs at least 2 rows");
+  if (y.rows() != x.rows()) return invalid_argument("GVM inputs and targets differ in rows");
+  if (x.cols() == 0 || y.cols() == 0) return invalid_argument("GVM needs inputs and outputs");
+  if (val_x.rows() != val_y.rows() ||
+      (val_x.rows() > 0 && (val_x.cols() != x.cols() || val_y.cols() != y.cols())))
+    return invalid_argument("GVM validation rows do not match the training shape");
+  if (!all_finite(x) || !all_finite(val_x))
+    return invalid_argument("GVM inputs contain NaN or infinity");
+  if (!no_infinity(y) || !no_infinity(val_y))
+    return invalid_argument("GVM targets contain infinity");
+  if (opt.hidden < 1 || opt.hidden > 4096) return invalid_argument("hidden must be in 1..4096");
+  if (opt.epochs < 0) return invalid_argument("epochs must be >= 0");
+  if (!(opt.delta > 0.0 && opt.delta <= 1.0)) return invalid_argument("delta must be in (0, 1]");
+  if (!(opt.w_max > 0.0) || !(opt.beta_max > 0.0))
+    return invalid_argument("w_max and beta_max must be > 0");
+  if (!input_names.empty() && input_names.size() != x.cols())
+    return invalid_argument("one input name per column expected");
+  if (!output_names.empty() && output_names.size() != y.cols())
+    return invalid_argument("one output name per column expected");
+
+  MachineParams p;
+  p.activation = opt.activation;
+  p.inputs = x.cols();
+  p.outputs = y.cols();
+  p.hidden = static_cast<size_t>(opt.hidden);
+  for (size_t i = 0; i < p.inputs; ++i)
+    p.input_names.push_back(input_names.empty() ? "x" + std::to_string(i) : input_names[i]);
+  for (size_t k = 0; k < p.outputs; ++k)
+    p.output_names.push_back(output_names.empty() ? "y" + std::to_string(k) : output_names[k]);
+  p.in_min.assign(p.inputs, std::numeric_limits<double>::infinity());
+  p.in_max.assign(p.inputs, -std::numeric_limits<double>::infinity());
+  p.out_min.assign(p.outputs, std::numeric_limits<double>::infinity());
+  p.out_max.assign(p.outputs, -std::numeric_limits<double>::infinity());
+  for (size_t n = 0; n < x.rows(); ++n) {
+    for (size_t i = 0; i < p.inputs; ++i) {
+      p.in_min[i] = std::min(p.in_min[i], x(n, i));
+      p.in_max[i] = std::max(p.in_max[i], x(n, i));
+    }
+    for (size_t k = 0; k < p.outputs; ++k) {
+      if (std::isnan(y(n, k))) continue;
+      p.out_min[k] = std::min(p.out_min[k], y(n, k));
+      p.out_max[k] = std::max(p.out_max[k], y(n, k));
+    }
+  }
+  for (size_t k = 0; k < p.outputs; ++k)
+    if (!(p.out_min[k] <= p.out_max[k]))
+      return invalid_argument("GVM output " + std::to_string(k) + " has no value in any row");
+  size_t active = 0;
+  for (size_t i = 0; i < p.inputs; ++i) active += p.in_max[i] > p.in_min[i];
+  p.w_max = opt.w_max;
+  p.beta_max = opt.beta_max;
+  // w.x ranges over [-w_max * active, w_max * active] on the unit cube; b must be able to
+  // move a neuron's surface anywhere in it.
+  p.b_max = opt.w_max * static_cast<double>(std::max<size_t>(active, 1));
+
+  Trainer trainer(p, x, y, opt);
+  trainer.initialize();
+  TrainReport local;
+  TrainReport& rep = report ? *report : local;
+  rep = TrainReport{};
+  const int64_t per_epoch = static_cast<int64_t>(trainer.parameter_count());
+  for (int e = 1; e <= opt.epochs; ++e) {
+    int64_t kept = 0;
+    for (int64_t q = 0; q < per_epoch; ++q) kept += trainer.step();
+    trainer.recompute_all();
+    trainer.end_epoch(per_epoch ? static_cast<double>(kept) / per_epoch : 0.0);
+    rep.proposals += per_epoch;
+    rep.accepted += kept;
+    trainer.store_output_map();
+    Machine m(p);
+    const double val =
+        val_x.rows() > 0 ? m.loss(val_x, val_y) : std::numeric_limits<double>::quiet_NaN();
+    rep.curve.push_back(
+        {e, trainer.loss(), val, per_epoch ? static_cast<double>(kept) / per_epoch : 0.0});
+  }
+  trainer.store_output_map();
+  rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return Machine(std::move(p));
+}
+
+Expected<Machine> Machine::from_params(MachineParams p) {
+  const size_t I = p.inputs, K = p.outputs, H = p.hidden;
+  if (I == 0 || K == 0 || H == 0) return invalid_argument("GVM with no inputs, outputs or neurons");
+  if (p.input_names.size() != I || p.in_min.size() != I || p.in_max.size() != I ||
+      p.output_names.size() != K || p.out_min.size() != K || p.out_max.size() != K ||
+      p.out_a.size() != K || p.out_c.size() != K || p.w.size() != H * I || p.b.size() != H ||
+      p.beta.size() != H || p.v.size() != K * H)
+    return invalid_argument("GVM parameter arrays have the wrong sizes");
+  for (int s : p.v)
+    if (s != 1 && s != -1) return invalid_argument("GVM output weights must be -1 or +1");
+  auto finite = [](const std::vector<double>& a) {
+    return std::all_of(a.begin(), a.end(), [](double d) { return std::isfinite(d); });
+  };
+  if (!finite(p.in_min) || !finite(p.in_max) || !finite(p.out_min) || !finite(p.out_max) ||
+      !finite(p.out_a) || !finite(p.out_c) || !finite(p.w) || !finite(p.b) || !finite(p.beta))
+    return invalid_argument("GVM parameters contain NaN or infinity");
+  for (double w : p.w)
+    if (std::abs(w) > p.w_max) return invalid_argument("GVM weight outside [-w_max, w_max]");
+  for (double b : p.b)
+    if (std::abs(b) > p.b_max) return invalid_argument("GVM bias outside [-b_max, b_max]");
+  for (double be : p.beta)
+    if (std::abs(be) > p.beta_max)
+      return invalid_argument("GVM gain outside [-beta_max, beta_max]");
+  for (size_t i = 0; i < I; ++i)
+    if (p.in_min[i] > p.in_max[i]) return invalid_argument("GVM input range min > max");
+  for (size_t k = 0; k < K; ++k)
+    if (p.out_min[k] > p.out_max[k]) return invalid_argument("GVM output range min > max");
+  return Machine(std::move(p));
+}
+
+void Machine::predict(const double* x, double* y) const {
+  const size_t I = p_.inputs, K = p_.outputs, H = p_.hidden;
+  for (size_t k = 0; k < K; ++k) y[k] = 0.0;
+  for (size_t j = 0; j < H; ++j) {
+    double z = p_.b[j];
+    const double* w = &p_.w[j * I];
+    for (size_t i = 0; i < I; ++i)
+      if (p_.in_max[i] > p_.in_min[i]) z += w[i] * scale_input(p_, i, x[i]);
+    const double o = activate(p_.activation, p_.beta[j] * z);
+    for (size_t k = 0; k < K; ++k) y[k] += p_.v[k * H + j] * o;
+  }
+  for (size_t k = 0; k < K; ++k) {
+    const double scaled = p_.out_a[k] + p_.out_c[k] * y[k];
+    y[k] = p_.out_min[k] + scaled * (p_.out_max[k] - p_.out_min[k]);
+  }
+}
+
+std::vector<double> Machine::predict(const std::vector<double>& x) const {
+  std::vector<double> y(p_.outputs);
+  predict(x.data(), y.data());
+  return y;
+}
+
+double Machine::loss(const Matrix& x, const Matrix& y) const {
+  std::vector<double> out(p_.outputs), sum(p_.outputs, 0.0), count(p_.outputs, 0.0);
+  for (size_t n = 0; n < x.rows(); ++n) {
+    predict(x.row(n), out.data());
+    for (size_t k = 0; k < p_.outputs; ++k) {
+      if (std::isnan(y(n, k))) continue;
+      const double range = p_.out_max[k] - p_.out_min[k];
+      // Constant outputs are scaled by 1 so their errors still count.
+      const double e = (out[k] - y(n, k)) / (range > 0.0 ? range : 1.0);
+      sum[k] += e * e;
+      count[k] += 1.0;
+    }
+  }
+  double total = 0.0;
+  size_t used = 0;
+  for (size_t k = 0; k < p_.outputs; ++k)
+    if (count[k] > 0.0) {
+      total += sum[k] / count[k];
+      ++used;
+    }
+  return used ? total / static_cast<double>(used) : std::numeric_limits<double>::quiet_NaN();
+}
+
+std::vector<RangeIssue> Machine::check_range(const double* x) const {
+  std::vector<RangeIssue> issues;
+  for (size_t i = 0; i < p_.inputs; ++i)
+    if (!(x[i] >= p_.in_min[i] && x[i] <= p_.in_max[i]))
+      issues.push_back({i, p_.input_names[i], x[i], p_.in_min[i], p_.in_max[i]});
+  return issues;
+}
+
+std::string Machine::to_json() const {
+  return machine_to_json(p_).dump(1);
+}
+
+Expected<Machine> Machine::from_json(const std::string& text) {
+  nlohmann::json j = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
+  if (j.is_discarded()) return parse_error("GVM model is not valid JSON");
+  auto params = machine_from_json(j);
+  if (!params) return params.status();
+  return from_params(std::move(*params));
+}
+
+}  // namespace collido::gvm

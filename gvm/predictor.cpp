@@ -1,0 +1,330 @@
+#include "gvm/predictor.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "gvm/json_io.h"
+
+namespace collido::gvm {
+
+namespace {
+
+void encode_table(const std::vector<RunRecord>& rows, const FeatureSpace& f, Matrix* x, Matrix* y) {
+  *x = Matrix(rows.size(), f.input_count());
+  *y = Matrix(rows.size(), kOutputCount);
+  for (size_t r = 0; r < rows.size(); ++r) {
+    f.encode_inputs(rows[r].config, x->row(r));
+    encode_outputs(rows[r].measure, rows[r].config.backend, y->row(r));
+  }
+}
+
+std::string count_text(double log10_value) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.0f", std::pow(10.0, log10_value));
+  return buf;
+}
+
+}  // namespace
+
+Expected<ResourcePredictor> ResourcePredictor::train(const std::vector<RunRecord>& train,
+                                                     const std::vector<RunRecord>& validation,
+                                                     const GvmOptions& options,
+                                                     TrainReport* report) {
+  for (const auto* set : {&train, &validation})
+    for (size_t r = 0; r < set->size(); ++r) {
+      Status s = validate((*set)[r].config);
+      if (s) s = validate((*set)[r].measure);
+      if (!s) return invalid_argument("row " + std::to_string(r + 1) + ": " + s.message());
+    }
+  ResourcePredictor p;
+  p.features_ = FeatureSpace::from_rows(train);
+  Matrix x, y, vx, vy;
+  encode_table(train, p.features_, &x, &y);
+  encode_table(validation, p.features_, &vx, &vy);
+  TrainReport local;
+  TrainReport* rep = report ? report : &local;
+  auto m =
+      Machine::train(x, y, vx, vy, options, rep, p.features_.input_names(), output_feature_names());
+  if (!m) return m.status();
+  p.machine_ = std::move(*m);
+  p.training_rows_ = train.size();
+  p.options_ = options;
+  if (!rep->curve.empty()) {
+    p.train_loss_ = rep->curve.back().train_loss;
+    p.validation_loss_ = rep->curve.back().validation_loss;
+  }
+  // Per backend, the most common device, then that device's most common thread count.
+  for (Backend b : {Backend::kCpu, Backend::kCuda}) {
+    std::map<std::string, int> devices;
+    for (const auto& r : train)
+      if (r.config.backend == b) ++devices[r.config.device];
+    if (devices.empty()) continue;
+    auto dev = std::max_element(devices.begin(), devices.end(),
+                                [](auto& a, auto& c) { return a.second < c.second; });
+    std::map<int64_t, int> threads;
+    for (const auto& r : train)
+      if (r.config.backend == b && r.config.device == dev->first) ++threads[r.config.threads];
+    auto th = std::max_element(threads.begin(), threads.end(),
+                               [](auto& a, auto& c) { return a.second < c.second; });
+    p.usual_.push_back({b, dev->first, th->first});
+  }
+  return p;
+}
+
+RunMeasure ResourcePredictor::predict_measure(const RunConfig& c) const {
+  double x[64];
+  std::vector<double> big;
+  double* xp = x;
+  if (features_.input_count() > 64) {
+    big.resize(features_.input_count());
+    xp = big.data();
+  }
+  features_.encode_inputs(c, xp);
+  double y[kOutputCount];
+  machine_.predict(xp, y);
+  return decode_outputs(y, c.backend);
+}
+
+Expected<Prediction> ResourcePredictor::predict(const RunConfig& c) const {
+  if (Status s = validate(c); !s) return s;
+  if (machine_.inputs() == 0) return invalid_argument("the predictor has not been trained");
+  Prediction out;
+  out.measure = predict_measure(c);
+  const std::vector<double> x = features_.encode_inputs(c);
+  const char* count_names[] = {"particles", "triangles", "triangles_original", "frames", "threads"};
+  const int64_t counts[] = {c.particles, c.triangles, c.triangles_original, c.frames,
+                            std::max<int64_t>(c.threads, 1)};
+  for (const RangeIssue& issue : machine_.check_range(x.data())) {
+    const size_t i = issue.input;
+    std::string msg;
+    if (i <= FeatureSpace::kLogThreads) {
+      msg = std::string(count_names[i]) + " = " + std::to_string(counts[i]) + " is " +
+            (issue.value < issue.min ? "below" : "above") + " the trained range [" +
+            count_text(issue.min) + ", " + count_text(issue.max) + "]";
+    } else if (i >= FeatureSpace::kMethodFirst && i < FeatureSpace::kTraversal) {
+      if (issue.value == 1.0)
+        msg = std::string("method '") + method_name(c.method) + "' is not in the training data";
+    } else if (i == FeatureSpace::kTraversal) {
+      msg = std::string("traversal '") + traversal_name(c.traversal) +
+            "' is not in the training data";
+    } else if (i == FeatureSpace::kBackend) {
+      msg = std::string("backend '") + backend_name(c.backend) + "' is not in the training data";
+    }
+    if (!msg.empty()) out.warnings.push_back(msg);
+  }
+  if (!features_.knows_device(c.device)) {
+    std::string known;
+    for (const auto& d : features_.devices()) known += (known.empty() ? "'" : ", '") + d + "'";
+    out.warnings.push_back("device '" + c.device + "' is not in the training data (trained on " +
+                           known + ")");
+  }
+  return out;
+}
+
+std::optional<RunConfig> ResourcePredictor::usual_host(Backend b) const {
+  for (const auto& u : usual_)
+    if (u.backend == b) {
+      RunConfig c;
+      c.backend = b;
+      c.device = u.device;
+      c.threads = u.threads;
+      return c;
+    }
+  return std::nullopt;
+}
+
+std::string ResourcePredictor::to_json() const {
+  nlohmann::json j;
+  j["kind"] = "collidoscope-resource-predictor";
+  j["version"] = 1;
+  j["devices"] = features_.devices();
+  j["usual"] = nlohmann::json::array();
+  for (const auto& u : usual_)
+    j["usual"].push_back(
+        {{"backend", backend_name(u.backend)}, {"device", u.device}, {"threads", u.threads}});
+  j["training"] = {{"rows", training_rows_},
+                   {"hidden", options_.hidden},
+                   {"epochs", options_.epochs},
+                   {"seed", options_.seed},
+                   {"delta", options_.delta},
+                   {"adaptive_delta", options_.adaptive_delta},
+                   {"activation", activation_name(options_.activation)},
+                   {"beta_max", options_.beta_max},
+                   {"train_loss", train_loss_}};
+  // NaN (no validation rows) has no JSON spelling; leave the field out instead.
+  if (std::isfinite(validation_loss_)) j["training"]["validation_loss"] = validation_loss_;
+  j["machine"] = machine_to_json(machine_.params());
+  return j.dump(1);
+}
+
+Expected<ResourcePredictor> ResourcePredictor::from_json(const std::string& text) {
+  nlohmann::json j = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
+  if (j.is_discarded()) return parse_error("model file is not valid JSON");
+  ResourcePredictor p;
+  try {
+    if (!j.is_object() || j.value("kind", "") != "collidoscope-resource-predictor")
+      return parse_error("not a collidoscope resource-predictor model");
+    if (j.at("version").get<int>() != 1)
+      return parse_error("unsupported model version " + j.at("version").dump());
+    p.features_ = FeatureSpace::with_devices(j.at("devices").get<std::vector<std::string>>());
+    for (const auto& u : j.at("usual")) {
+      auto b = parse_backend(u.at("backend").get<std::string>());
+      if (!b) return parse_error("unknown backend in model: " + u.at("backend").dump());
+      p.usual_.push_back({*b, u.at("device").get<std::string>(), u.at("threads").get<int64_t>()});
+    }
+    const auto& t = j.at("training");
+    p.training_rows_ = t.at("rows").get<size_t>();
+    p.options_.hidden = t.at("hidden").get<int>();
+    p.options_.epochs = t.at("epochs").get<int>();
+    p.options_.seed = t.at("seed").get<uint64_t>();
+    p.options_.delta = t.at("delta").get<double>();
+    p.options_.adaptive_delta = t.value("adaptive_delta", true);
+    auto act = parse_activation(t.at("activation").get<std::string>());
+    if (act) p.options_.activation = *act;
+    p.options_.beta_max = t.at("beta_max").get<double>();
+    p.train_loss_ = t.at("train_loss").get<double>();
+    p.validation_loss_ = t.value("validation_loss", std::nan(""));
+  } catch (const nlohmann::json::exception& e) {
+    return parse_error(std::string("model JSON: ") + e.what());
+  }
+  if (!j.contains("machine")) return parse_error("model JSON has no 'machine'");
+  auto params = machine_from_json(j["machine"]);
+  if (!params) return params.status();
+  auto m = Machine::from_params(std::move(*params));
+  if (!m) return m.status();
+  if (m->outputs() != kOutputCount || m->params().input_names != p.features_.input_names())
+    return parse_error("model machine does not match its feature list");
+  p.machine_ = std::move(*m);
+  return p;
+}
+
+Status ResourcePredictor::save(const std::string& path) const {
+  // Write then rename, so a reader never sees half a model.
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) return io_error("cannot write model '" + tmp + "'");
+    out << to_json() << "\n";
+    if (!out.flush()) return io_error("error writing model '" + tmp + "'");
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0)
+    return io_error("cannot rename '" + tmp + "' to '" + path + "'");
+  return Status::ok();
+}
+
+Expected<ResourcePredictor> ResourcePredictor::load(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return io_error("cannot open model '" + path + "'");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  auto p = from_json(ss.str());
+  if (!p) return Status(p.status().code(), path + ": " + p.status().message());
+  return p;
+}
+
+}  // namespace collido::gvm
+
+namespace collido::gvm {
+
+namespace {
+
+// A JSON number that is a whole count (1e6 is fine, 1.5 is not).
+bool json_count(const nlohmann::json& v, int64_t* out) {
+  if (v.is_number_integer()) {
+    *out = v.get<int64_t>();
+    return true;
+  }
+  if (v.is_number_float()) {
+    const double d = v.get<double>();
+    if (std::isfinite(d) && d == std::floor(d) && std::abs(d) < 9.0e18) {
+      *out = static_cast<int64_t>(d);
+      return true;
+    }
+  }
+  return false;
+}
+
+}  // namespace
+
+Expected<RunConfig> run_config_from_json(const std::string& text, const ResourcePredictor* model) {
+  nlohmann::json j = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
+  if (j.is_discarded()) return parse_error("configuration is not valid JSON");
+  if (!j.is_object()) return parse_error("configuration must be a JSON object");
+  RunConfig c;
+  auto count = [&](const char* key, int64_t* out, bool required) -> Status {
+    if (!j.contains(key))
+      return required ? invalid_argument(std::string("configuration lacks \"") + key + "\"")
+                      : Status::ok();
+    if (!json_count(j[key], out))
+      return invalid_argument(std::string("\"") + key + "\" must be a whole number, got " +
+                              j[key].dump());
+    return Status::ok();
+  };
+  auto word = [&](const char* key, std::string* out) -> Status {
+    if (!j.contains(key))
+      return invalid_argument(std::string("configuration lacks \"") + key + "\"");
+    if (!j[key].is_string())
+      return invalid_argument(std::string("\"") + key + "\" must be a string, got " +
+                              j[key].dump());
+    *out = j[key].get<std::string>();
+    return Status::ok();
+  };
+  std::string method, traversal, backend;
+  for (Status s : {count("particles", &c.particles, true), count("triangles", &c.triangles, true),
+                   count("frames", &c.frames, true), word("method", &method),
+                   word("traversal", &traversal), word("backend", &backend)})
+    if (!s) return s;
+  auto m = parse_method(method);
+  if (!m)
+    return invalid_argument(
+        "\"method\" must be gravity|circumcircle|midpoint4|bin|reference, got \"" + method + "\"");
+  auto t = parse_traversal(traversal);
+  if (!t) return invalid_argument("\"traversal\" must be wall|particle, got \"" + traversal + "\"");
+  auto b = parse_backend(backend);
+  if (!b) return invalid_argument("\"backend\" must be cpu|cuda, got \"" + backend + "\"");
+  c.method = *m;
+  c.traversal = *t;
+  c.backend = *b;
+  c.triangles_original = c.triangles;
+  if (Status s = count("triangles_original", &c.triangles_original, false); !s) return s;
+  if (model)
+    if (auto usual = model->usual_host(c.backend)) {
+      c.device = usual->device;
+      c.threads = usual->threads;
+    }
+  if (j.contains("device")) {
+    if (!j["device"].is_string())
+      return invalid_argument("\"device\" must be a string, got " + j["device"].dump());
+    c.device = j["device"].get<std::string>();
+  }
+  if (Status s = count("threads", &c.threads, false); !s) return s;
+  if (Status s = validate(c); !s) return s;
+  return c;
+}
+
+std::string prediction_to_json(const RunConfig& c, const Prediction& p) {
+  nlohmann::json j;
+  j["time_per_frame_s"] = p.measure.time_per_frame_s;
+  j["total_time_s"] = p.measure.total_time_s;
+  j["peak_host_bytes"] = p.measure.peak_host_bytes;
+  j["peak_device_bytes"] = p.measure.peak_device_bytes;
+  j["gpu_load"] = p.measure.gpu_load;
+  j["in_range"] = p.in_range();
+  j["warnings"] = p.warnings;
+  j["config"] = {{"particles", c.particles},
+                 {"triangles", c.triangles},
+                 {"triangles_original", c.triangles_original},
+                 {"method", method_name(c.method)},
+                 {"traversal", traversal_name(c.traversal)},
+                 {"frames", c.frames},
+                 {"backend", backend_name(c.backend)},
+                 {"device", c.device},
+                 {"threads", c.threads}};
+  return j.dump(2);
+}
+
+}  // namespace collido::gvm

@@ -1,0 +1,339 @@
+#include "gvm/run_log.h"
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+namespace collido::gvm {
+
+const char* method_name(Method m) {
+  switch (m) {
+    case Method::kGravity:
+      return "gravity";
+    case Method::kCircumcircle:
+      return "circumcircle";
+    case Method::kMidpoint4:
+      return "midpoint4";
+    case Method::kBin:
+      return "bin";
+    case Method::kReference:
+      return "reference";
+  }
+  return "?";
+}
+const char* traversal_name(Traversal t) {
+  return t == Traversal::kWall ? "wall" : "particle";
+}
+const char* backend_name(Backend b) {
+  return b == Backend::kCpu ? "cpu" : "cuda";
+}
+
+std::optional<Method> parse_method(const std::string& s) {
+  for (Method m : kAllMethods)
+    if (s == method_name(m)) return m;
+  return std::nullopt;
+}
+std::optional<Traversal> parse_traversal(const std::string& s) {
+  if (s == "wall") return Traversal::kWall;
+  if (s == "particle") return Traversal::kParticle;
+  return std::nullopt;
+}
+std::optional<Backend> parse_backend(const std::string& s) {
+  if (s == "cpu") return Backend::kCpu;
+  if (s == "cuda") return Backend::kCuda;
+  return std::nullopt;
+}
+
+const std::vector<std::string>& run_log_columns() {
+  static const std::vector<std::string> cols = {"particles",
+                                                "triangles",
+                                                "triangles_original",
+                                                "method",
+                                                "traversal",
+                                                "frames",
+                                                "backend",
+                                                "device",
+                                                "threads",
+                                                "time_per_frame_s",
+                                                "total_time_s",
+                                                "peak_host_bytes",
+                                                "peak_device_bytes",
+                                                "gpu_load"};
+  return cols;
+}
+
+Status validate(const RunConfig& c) {
+  if (c.particles < 1) return invalid_argument("particles must be >= 1");
+  if (c.triangles < 1) return invalid_argument("triangles must be >= 1");
+  if (c.triangles_original < 1) return invalid_argument("triangles_original must be >= 1");
+  if (c.frames < 1) return invalid_argument("frames must be >= 1");
+  if (c.threads < 0) return invalid_argument("threads must be >= 0");
+  return Status::ok();
+}
+
+Status validate(const RunMeasure& m) {
+  const std::pair<const char*, double> fields[] = {{"time_per_frame_s", m.time_per_frame_s},
+                                                   {"total_time_s", m.total_time_s},
+                                                   {"peak_host_bytes", m.peak_host_bytes},
+                                                   {"peak_device_bytes", m.peak_device_bytes},
+                                                   {"gpu_load", m.gpu_load}};
+  for (const auto& [name, v] : fields)
+    if (!std::isfinite(v) || v < 0.0)
+      return invalid_argument(std::string(name) + " must be a finite number >= 0");
+  if (m.gpu_load > 1.0) return invalid_argument("gpu_load must be <= 1");
+  return Status::ok();
+}
+
+namespace {
+
+struct CsvRecord {
+  int line;  // line where the record starts, 1-based
+  std::vector<std::string> fields;
+};
+
+// RFC 4180: fields separated by commas, optionally in double quotes ("" inside quotes is
+// one quote), records end at CR LF or LF; quoted fields may contain newlines.
+Expected<std::vector<CsvRecord>> split_csv(const std::string& text) {
+  std::vector<CsvRecord> out;
+  int line = 1;
+  size_t i = 0;
+  const size_t n = text.size();
+  while (i < n) {
+    CsvRecord rec{line, {}};
+    std::string field;
+    bool quoted_any = false;
+    for (;;) {
+      field.clear();
+      if (i < n && text[i] == '"') {
+        quoted_any = true;
+        const int open_line = line;
+        ++i;
+        for (;;) {
+          if (i >= n)
+            return parse_error("line " + std::to_string(open_line) + ", column " +
+                               std::to_string(rec.fields.size() + 1) + ": unterminated quote");
+          if (text[i] == '"') {
+            if (i + 1 < n && text[i + 1] == '"') {
+              field += '"';
+              i += 2;
+              continue;
+            }
+            ++i;
+            break;
+          }
+          if (text[i] == '\n') ++line;
+          field += text[i++];
+        }
+      } else {
+        while (i < n && text[i] != ',' && text[i] != '\n' && text[i] != '\r') {
+          if (text[i] == '"')
+            return parse_error("line " + std::to_string(line) + ", column " +
+                               std::to_string(rec.fields.size() + 1) +
+                               ": quote inside an unquoted field");
+          field += text[i++];
+        }
+      }
+      rec.fields.push_back(field);
+      if (i < n && text[i] == ',') {
+        ++i;
+        continue;
+      }
+      if (i < n && text[i] == '\r') ++i;
+      if (i < n && text[i] == '\n') {
+        ++i;
+        ++line;
+        break;
+      }
+      if (i >= n) break;
+      return parse_error("line " + std::to_string(line) + ", column " +
+                         std::to_string(rec.fields.size()) +
+                         ": unexpected character after a closing quote");
+    }
+    // Blank lines separate nothing; skip them.
+    if (rec.fields.size() == 1 && rec.fields[0].empty() && !quoted_any) continue;
+    out.push_back(std::move(rec));
+  }
+  return out;
+}
+
+std::string trim(const std::string& s) {
+  size_t a = 0, b = s.size();
+  while (a < b && (s[a] == ' ' || s[a] == '\t')) ++a;
+  while (b > a && (s[b - 1] == ' ' || s[b - 1] == '\t')) --b;
+  return s.substr(a, b - a);
+}
+
+bool parse_int(const std::string& s, int64_t* out) {
+  if (s.empty()) return false;
+  const char* p = s.c_str();
+  char* end = nullptr;
+  errno = 0;
+  long long v = std::strtoll(p, &end, 10);
+  if (end != p && *end == '\0' && errno == 0) {
+    *out = v;
+    return true;
+  }
+  // Counts like 1e6 are integers too.
+  errno = 0;
+  double d = std::strtod(p, &end);
+  if (end == p || *end != '\0' || errno != 0 || !std::isfinite(d) || d != std::floor(d) ||
+      std::abs(d) > 9.0e18)
+    return false;
+  *out = static_cast<int64_t>(d);
+  return true;
+}
+
+bool parse_double(const std::string& s, double* out) {
+  if (s.empty()) return false;
+  const char* p = s.c_str();
+  char* end = nullptr;
+  errno = 0;
+  double d = std::strtod(p, &end);
+  if (end == p || *end != '\0' || errno == ERANGE || !std::isfinite(d)) return false;
+  *out = d;
+  return true;
+}
+
+std::string quote_csv(const std::string& s) {
+  if (s.find_first_of(",\"\r\n") == std::string::npos) return s;
+  std::string q = "\"";
+  for (char c : s) q += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return q + "\"";
+}
+
+std::string format_double(double d) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.17g", d);
+  return buf;
+}
+
+}  // namespace
+
+Expected<std::vector<RunRecord>> parse_run_log(const std::string& text) {
+  auto recs = split_csv(text);
+  if (!recs) return recs.status();
+  if (recs->empty()) return parse_error("line 1: empty run log, no header line");
+  const CsvRecord& header = recs->front();
+  std::map<std::string, size_t> where;
+  for (size_t c = 0; c < header.fields.size(); ++c) {
+    const std::string name = trim(header.fields[c]);
+    if (where.count(name))
+      return parse_error("line " + std::to_string(header.line) + ", column " +
+                         std::to_string(c + 1) + ": duplicate column '" + name + "'");
+    where[name] = c;
+  }
+  std::vector<size_t> col;
+  for (const auto& name : run_log_columns()) {
+    auto it = where.find(name);
+    if (it == where.end())
+      return parse_error("line " + std::to_string(header.line) + ": missing column '" + name + "'");
+    col.push_back(it->second);
+  }
+
+  std::vector<RunRecord> rows;
+  for (size_t r = 1; r < recs->size(); ++r) {
+    const CsvRecord& rec = (*recs)[r];
+    const std::string at_line = "line " + std::to_string(rec.line);
+    if (rec.fields.size() != header.fields.size())
+      return parse_error(at_line + ": " + std::to_string(rec.fields.size()) +
+                         " fields, the header has " + std::to_string(header.fields.size()));
+    // Returns the field of known column k and a prefix for errors about it.
+    auto field = [&](size_t k, std::string* where_msg) {
+      *where_msg =
+          at_line + ", column " + std::to_string(col[k] + 1) + " (" + run_log_columns()[k] + ")";
+      return trim(rec.fields[col[k]]);
+    };
+    std::string loc;
+    auto bad = [&](const std::string& what, const std::string& got) {
+      return parse_error(loc + ": expected " + what + ", got '" + got + "'");
+    };
+    RunRecord row;
+    RunConfig& c = row.config;
+    RunMeasure& m = row.measure;
+    int64_t* ints[] = {&c.particles, &c.triangles, &c.triangles_original};
+    for (size_t k = 0; k < 3; ++k) {
+      std::string s = field(k, &loc);
+      if (!parse_int(s, ints[k]) || *ints[k] < 1) return bad("an integer >= 1", s);
+    }
+    {
+      std::string s = field(3, &loc);
+      auto v = parse_method(s);
+      if (!v) return bad("gravity|circumcircle|midpoint4|bin|reference", s);
+      c.method = *v;
+    }
+    {
+      std::string s = field(4, &loc);
+      auto v = parse_traversal(s);
+      if (!v) return bad("wall|particle", s);
+      c.traversal = *v;
+    }
+    {
+      std::string s = field(5, &loc);
+      if (!parse_int(s, &c.frames) || c.frames < 1) return bad("an integer >= 1", s);
+    }
+    {
+      std::string s = field(6, &loc);
+      auto v = parse_backend(s);
+      if (!v) return bad("cpu|cuda", s);
+      c.backend = *v;
+    }
+    c.device = field(7, &loc);
+    {
+      std::string s = field(8, &loc);
+      if (!parse_int(s, &c.threads) || c.threads < 0) return bad("an integer >= 0", s);
+    }
+    double* dbl[] = {&m.time_per_frame_s, &m.total_time_s, &m.peak_host_bytes, &m.peak_device_bytes,
+                     &m.gpu_load};
+    for (size_t k = 0; k < 5; ++k) {
+      std::string s = field(9 + k, &loc);
+      if (!parse_double(s, dbl[k]) || *dbl[k] < 0.0) return bad("a finite number >= 0", s);
+      if (dbl[k] == &m.gpu_load && m.gpu_load > 1.0) return bad("a load in [0, 1]", s);
+    }
+    rows.push_back(std::move(row));
+  }
+  return rows;
+}
+
+std::string format_run_log(const std::vector<RunRecord>& rows) {
+  std::string out;
+  const auto& cols = run_log_columns();
+  for (size_t k = 0; k < cols.size(); ++k) out += (k ? "," : "") + cols[k];
+  out += "\n";
+  for (const auto& r : rows) {
+    const RunConfig& c = r.config;
+    const RunMeasure& m = r.measure;
+    out += std::to_string(c.particles) + "," + std::to_string(c.triangles) + "," +
+           std::to_string(c.triangles_original) + "," + method_name(c.method) + "," +
+           traversal_name(c.traversal) + "," + std::to_string(c.frames) + "," +
+           backend_name(c.backend) + "," + quote_csv(c.device) + "," + std::to_string(c.threads) +
+           "," + format_double(m.time_per_frame_s) + "," + format_double(m.total_time_s) + "," +
+           format_double(m.peak_host_bytes) + "," + format_double(m.peak_device_bytes) + "," +
+           format_double(m.gpu_load) + "\n";
+  }
+  return out;
+}
+
+Expected<std::vector<RunRecord>> read_run_log(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return io_error("cannot open run log '" + path + "'");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  auto rows = parse_run_log(ss.str());
+  if (!rows) return Status(rows.status().code(), path + ": " + rows.status().message());
+  return rows;
+}
+
+Status write_run_log(const std::string& path, const std::vector<RunRecord>& rows) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  if (!out) return io_error("cannot write run log '" + path + "'");
+  out << format_run_log(rows);
+  out.close();
+  if (!out) return io_error("error writing run log '" + path + "'");
+  return Status::ok();
+}
+
+}  // namespace collido::gvm
