@@ -1,0 +1,180 @@
+// The resource predictor: training on a run log, predicting a configuration, range
+// warnings, saving and loading, and reading a configuration from JSON.
+#include "gvm/predictor.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+
+#include "gvm/evaluate.h"
+
+namespace collido::gvm {
+namespace {
+
+// One trained predictor shared by the tests (training takes a fraction of a second).
+const ResourcePredictor& trained() {
+  static const ResourcePredictor model = [] {
+    auto split = split_rows(synthetic_run_log(100, 1), 0.7, 1);
+    GvmOptions opt;
+    opt.epochs = 200;
+    auto p = ResourcePredictor::train(split->train, split->validation, opt, nullptr);
+    EXPECT_TRUE(p) << p.status().message();
+    return p ? *p : ResourcePredictor();
+  }();
+  return model;
+}
+
+RunConfig typical(Backend b) {
+  RunConfig c;
+  c.particles = 20000;
+  c.triangles = 5000;
+  c.triangles_original = 1000;
+  c.method = Method::kGravity;
+  c.traversal = Traversal::kParticle;
+  c.frames = 10;
+  c.backend = b;
+  c.device = b == Backend::kCuda ? "synthetic-gpu" : "synthetic-cpu";
+  c.threads = b == Backend::kCuda ? 1 : 16;
+  return c;
+}
+
+bool contains(const std::vector<std::string>& lines, const std::string& what) {
+  for (const auto& l : lines)
+    if (l.find(what) != std::string::npos) return true;
+  return false;
+}
+
+TEST(Predictor, PredictsFinitePositiveCostsInRange) {
+  for (Backend b : {Backend::kCpu, Backend::kCuda}) {
+    auto p = trained().predict(typical(b));
+    ASSERT_TRUE(p) << p.status().message();
+    EXPECT_TRUE(p->in_range()) << (p->warnings.empty() ? "" : p->warnings[0]);
+    EXPECT_GT(p->measure.time_per_frame_s, 0.0);
+    EXPECT_GT(p->measure.total_time_s, 0.0);
+    EXPECT_GT(p->measure.peak_host_bytes, 1e6);
+    EXPECT_GE(p->measure.gpu_load, 0.0);
+    EXPECT_LE(p->measure.gpu_load, 1.0);
+    if (b == Backend::kCpu) {
+      // A CPU run has no device: exactly zero, not a learned small number.
+      EXPECT_EQ(p->measure.peak_device_bytes, 0.0);
+      EXPECT_EQ(p->measure.gpu_load, 0.0);
+    } else {
+      EXPECT_GT(p->measure.peak_device_bytes, 1e6);
+    }
+  }
+}
+
+TEST(Predictor, MoreParticlesCostMoreTime) {
+  RunConfig small = typical(Backend::kCpu), big = small;
+  big.particles = 500000;
+  EXPECT_GT(trained().predict_measure(big).time_per_frame_s,
+            trained().predict_measure(small).time_per_frame_s);
+}
+
+TEST(Predictor, WarnsAboutEveryInputOutsideTheTrainedRange) {
+  RunConfig c = typical(Backend::kCuda);
+  c.particles = 1000000000;
+  c.method = Method::kReference;  // the synthetic log never runs the reference
+  c.device = "Quantum 9000";
+  auto p = trained().predict(c);
+  ASSERT_TRUE(p);
+  EXPECT_FALSE(p->in_range());
+  EXPECT_TRUE(contains(p->warnings, "particles = 1000000000 is above the trained range"));
+  EXPECT_TRUE(contains(p->warnings, "method 'reference' is not in the training data"));
+  EXPECT_TRUE(contains(p->warnings, "device 'Quantum 9000' is not in the training data"));
+  EXPECT_EQ(p->warnings.size(), 3u);
+  EXPECT_TRUE(std::isfinite(p->measure.time_per_frame_s));
+
+  c = typical(Backend::kCpu);
+  c.frames = 100000;
+  p = trained().predict(c);
+  ASSERT_TRUE(p);
+  ASSERT_EQ(p->warnings.size(), 1u);
+  EXPECT_NE(p->warnings[0].find("frames = 100000 is above"), std::string::npos);
+}
+
+TEST(Predictor, RejectsInvalidConfiguration) {
+  RunConfig c = typical(Backend::kCpu);
+  c.particles = 0;
+  auto p = trained().predict(c);
+  ASSERT_FALSE(p);
+  EXPECT_NE(p.status().message().find("particles"), std::string::npos);
+  EXPECT_FALSE(ResourcePredictor().predict(typical(Backend::kCpu)));  // untrained
+}
+
+TEST(Predictor, SaveAndLoadGiveBitIdenticalPredictions) {
+  const std::string path = testing::TempDir() + "/gvm_predictor_test.json";
+  ASSERT_TRUE(trained().save(path));
+  auto back = ResourcePredictor::load(path);
+  ASSERT_TRUE(back) << back.status().message();
+  for (const auto& row : synthetic_run_log(50, 99)) {
+    double a[kOutputCount], b[kOutputCount];
+    measure_to_array(trained().predict_measure(row.config), a);
+    measure_to_array(back->predict_measure(row.config), b);
+    EXPECT_EQ(std::memcmp(a, b, sizeof a), 0);
+  }
+  EXPECT_EQ(back->to_json(), trained().to_json());
+  EXPECT_EQ(back->features().devices(), trained().features().devices());
+}
+
+TEST(Predictor, CorruptModelFilesAreErrors) {
+  EXPECT_FALSE(ResourcePredictor::from_json("[1, 2"));
+  EXPECT_FALSE(ResourcePredictor::from_json(R"({"kind": "something else"})"));
+  std::string text = trained().to_json();
+  // A device list that no longer matches the machine's inputs.
+  const size_t at = text.find("\"synthetic-cpu\"");
+  ASSERT_NE(at, std::string::npos);
+  text.insert(at, "\"extra-device\", ");
+  auto r = ResourcePredictor::from_json(text);
+  ASSERT_FALSE(r);
+  EXPECT_NE(r.status().message().find("feature"), std::string::npos) << r.status().message();
+  EXPECT_EQ(ResourcePredictor::load("/nonexistent/model.json").status().code(), ErrorCode::kIo);
+}
+
+TEST(Predictor, ReadsConfigurationJson) {
+  auto c = run_config_from_json(
+      R"({"particles": 1e6, "triangles": 99612, "method": "circumcircle",
+          "traversal": "wall", "frames": 100, "backend": "cuda", "mesh": "wall1.stl"})",
+      &trained());
+  ASSERT_TRUE(c) << c.status().message();
+  EXPECT_EQ(c->particles, 1000000);
+  EXPECT_EQ(c->triangles_original, 99612);  // defaults to the triangle count
+  EXPECT_EQ(c->method, Method::kCircumcircle);
+  EXPECT_EQ(c->traversal, Traversal::kWall);
+  EXPECT_EQ(c->device, "synthetic-gpu");  // the model's usual device for cuda
+  EXPECT_EQ(c->threads, 1);
+
+  auto missing = run_config_from_json(R"({"particles": 10})", nullptr);
+  ASSERT_FALSE(missing);
+  EXPECT_NE(missing.status().message().find("\"triangles\""), std::string::npos);
+  auto fractional = run_config_from_json(
+      R"({"particles": 10.5, "triangles": 1, "method": "bin", "traversal": "wall",
+          "frames": 1, "backend": "cpu"})",
+      nullptr);
+  ASSERT_FALSE(fractional);
+  EXPECT_NE(fractional.status().message().find("particles"), std::string::npos);
+  auto bad_method = run_config_from_json(
+      R"({"particles": 10, "triangles": 1, "method": "fast", "traversal": "wall",
+          "frames": 1, "backend": "cpu"})",
+      nullptr);
+  ASSERT_FALSE(bad_method);
+  EXPECT_NE(bad_method.status().message().find("method"), std::string::npos);
+  EXPECT_FALSE(run_config_from_json("[]", nullptr));
+  EXPECT_FALSE(run_config_from_json("{", nullptr));
+}
+
+TEST(Predictor, PredictionJsonHasEveryField) {
+  RunConfig c = typical(Backend::kCuda);
+  c.particles = 1000000000;
+  auto p = trained().predict(c);
+  ASSERT_TRUE(p);
+  const std::string j = prediction_to_json(c, *p);
+  for (const char* key :
+       {"\"time_per_frame_s\"", "\"total_time_s\"", "\"peak_host_bytes\"", "\"peak_device_bytes\"",
+        "\"gpu_load\"", "\"in_range\": false", "\"warnings\"", "\"particles\": 1000000000"})
+    EXPECT_NE(j.find(key), std::string::npos) << key << " in " << j;
+}
+
+}  // namespace
+}  // namespace collido::gvm

@@ -1,0 +1,168 @@
+// The run-log CSV: round trips and the errors a hand-edited or truncated file gives.
+#include "gvm/run_log.h"
+
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <string>
+
+#include "gvm/evaluate.h"
+
+namespace collido::gvm {
+namespace {
+
+const char* kHeader =
+    "particles,triangles,triangles_original,method,traversal,frames,backend,device,threads,"
+    "time_per_frame_s,total_time_s,peak_host_bytes,peak_device_bytes,gpu_load\n";
+
+bool same_bits(double a, double b) {
+  return std::memcmp(&a, &b, sizeof a) == 0;
+}
+
+void expect_equal(const RunRecord& a, const RunRecord& b) {
+  EXPECT_EQ(a.config.particles, b.config.particles);
+  EXPECT_EQ(a.config.triangles, b.config.triangles);
+  EXPECT_EQ(a.config.triangles_original, b.config.triangles_original);
+  EXPECT_EQ(a.config.method, b.config.method);
+  EXPECT_EQ(a.config.traversal, b.config.traversal);
+  EXPECT_EQ(a.config.frames, b.config.frames);
+  EXPECT_EQ(a.config.backend, b.config.backend);
+  EXPECT_EQ(a.config.device, b.config.device);
+  EXPECT_EQ(a.config.threads, b.config.threads);
+  EXPECT_TRUE(same_bits(a.measure.time_per_frame_s, b.measure.time_per_frame_s));
+  EXPECT_TRUE(same_bits(a.measure.total_time_s, b.measure.total_time_s));
+  EXPECT_TRUE(same_bits(a.measure.peak_host_bytes, b.measure.peak_host_bytes));
+  EXPECT_TRUE(same_bits(a.measure.peak_device_bytes, b.measure.peak_device_bytes));
+  EXPECT_TRUE(same_bits(a.measure.gpu_load, b.measure.gpu_load));
+}
+
+// Parses text expected to fail and returns the message.
+std::string error_of(const std::string& text) {
+  auto r = parse_run_log(text);
+  EXPECT_FALSE(r) << "parsed: " << text;
+  return r ? "" : r.status().message();
+}
+
+const char* kGoodRow =
+    "1000,226056,156,gravity,particle,10,cuda,NVIDIA H100,8,0.0123,0.5,1e8,2e9,0.75\n";
+
+TEST(RunLog, RoundTripKeepsEveryFieldExactly) {
+  auto rows = synthetic_run_log(50, 4);
+  rows[0].config.device = "GPU \"big\", rev 2";  // quotes and a comma need CSV quoting
+  rows[1].config.device = "";
+  rows[2].config.method = Method::kReference;
+  rows[2].measure.time_per_frame_s = 0.1;  // not exactly representable in binary
+  auto back = parse_run_log(format_run_log(rows));
+  ASSERT_TRUE(back) << back.status().message();
+  ASSERT_EQ(back->size(), rows.size());
+  for (size_t i = 0; i < rows.size(); ++i) expect_equal(rows[i], (*back)[i]);
+}
+
+TEST(RunLog, FileRoundTrip) {
+  const std::string path = testing::TempDir() + "/gvm_run_log_test.csv";
+  auto rows = synthetic_run_log(10, 5);
+  ASSERT_TRUE(write_run_log(path, rows));
+  auto back = read_run_log(path);
+  ASSERT_TRUE(back) << back.status().message();
+  ASSERT_EQ(back->size(), 10u);
+  for (size_t i = 0; i < rows.size(); ++i) expect_equal(rows[i], (*back)[i]);
+  auto missing = read_run_log(path + ".absent");
+  ASSERT_FALSE(missing);
+  EXPECT_EQ(missing.status().code(), ErrorCode::kIo);
+}
+
+TEST(RunLog, HeaderNamesEveryColumnInOrder) {
+  std::string header;
+  for (const auto& c : run_log_columns()) header += (header.empty() ? "" : ",") + c;
+  EXPECT_EQ(header + "\n", kHeader);
+  EXPECT_EQ(format_run_log({}), kHeader);
+}
+
+TEST(RunLog, AcceptsAnyColumnOrderExtraColumnsCrlfAndBlankLines) {
+  const std::string text =
+      "job_id,gpu_load,peak_device_bytes,peak_host_bytes,total_time_s,time_per_frame_s,"
+      "threads,device,backend,frames,traversal,method,triangles_original,triangles,"
+      "particles\r\n"
+      "\r\n"
+      "j7,0.5,100,200,3.5,0.25,4,cpu0,cpu,14,wall,bin,12,12,1e6\r\n"
+      "\n";
+  auto rows = parse_run_log(text);
+  ASSERT_TRUE(rows) << rows.status().message();
+  ASSERT_EQ(rows->size(), 1u);
+  const RunRecord& r = (*rows)[0];
+  EXPECT_EQ(r.config.particles, 1000000);
+  EXPECT_EQ(r.config.method, Method::kBin);
+  EXPECT_EQ(r.config.traversal, Traversal::kWall);
+  EXPECT_EQ(r.config.device, "cpu0");
+  EXPECT_EQ(r.config.frames, 14);
+  EXPECT_EQ(r.measure.gpu_load, 0.5);
+  EXPECT_EQ(r.measure.time_per_frame_s, 0.25);
+}
+
+TEST(RunLog, BadValueNamesLineAndColumn) {
+  const std::string bad_frames =
+      std::string(kHeader) + kGoodRow +
+      "1000,226056,156,gravity,particle,ten,cuda,NVIDIA H100,8,0.0123,0.5,1e8,2e9,0.75\n";
+  const std::string msg = error_of(bad_frames);
+  EXPECT_NE(msg.find("line 3, column 6 (frames)"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("'ten'"), std::string::npos) << msg;
+
+  const std::string m2 =
+      error_of(std::string(kHeader) + "1000,226056,156,voronoi,particle,10,cuda,X,8,1,1,1,1,0.5\n");
+  EXPECT_NE(m2.find("line 2, column 4 (method)"), std::string::npos) << m2;
+
+  const std::string m3 =
+      error_of(std::string(kHeader) + "1000,226056,156,bin,particle,10,cuda,X,8,1,1,1,1,1.5\n");
+  EXPECT_NE(m3.find("column 14 (gpu_load)"), std::string::npos) << m3;
+
+  const std::string m4 =
+      error_of(std::string(kHeader) + "0,226056,156,bin,particle,10,cuda,X,8,1,1,1,1,0.5\n");
+  EXPECT_NE(m4.find("column 1 (particles)"), std::string::npos) << m4;
+
+  const std::string m5 =
+      error_of(std::string(kHeader) + "10,20,20,bin,particle,10,gpu,X,8,1,1,1,1,0.5\n");
+  EXPECT_NE(m5.find("column 7 (backend)"), std::string::npos) << m5;
+
+  const std::string m6 =
+      error_of(std::string(kHeader) + "10,20,20,bin,particle,10,cpu,X,8,-1,1,1,1,0.5\n");
+  EXPECT_NE(m6.find("column 10 (time_per_frame_s)"), std::string::npos) << m6;
+
+  const std::string m7 =
+      error_of(std::string(kHeader) + "10,20,20,bin,particle,10,cpu,X,8,nan,1,1,1,0.5\n");
+  EXPECT_NE(m7.find("column 10"), std::string::npos) << m7;
+}
+
+TEST(RunLog, StructuralErrorsNameTheLine) {
+  EXPECT_NE(error_of("").find("line 1"), std::string::npos);
+  const std::string missing = error_of("particles,triangles\n1,2\n");
+  EXPECT_NE(missing.find("missing column 'triangles_original'"), std::string::npos) << missing;
+  const std::string dup = error_of("particles,particles\n");
+  EXPECT_NE(dup.find("line 1, column 2: duplicate column 'particles'"), std::string::npos) << dup;
+  const std::string short_row = error_of(std::string(kHeader) + kGoodRow + kGoodRow + "1,2,3\n");
+  EXPECT_NE(short_row.find("line 4: 3 fields, the header has 14"), std::string::npos) << short_row;
+  const std::string open_quote = error_of(std::string(kHeader) + "1,2,3,\"bin\n");
+  EXPECT_NE(open_quote.find("line 2, column 4: unterminated quote"), std::string::npos)
+      << open_quote;
+  const std::string stray = error_of(std::string(kHeader) + "1,2,3,b\"in,");
+  EXPECT_NE(stray.find("line 2, column 4: quote inside an unquoted field"), std::string::npos)
+      << stray;
+  const std::string after = error_of(std::string(kHeader) + "1,2,3,\"bin\"x,");
+  EXPECT_NE(after.find("line 2"), std::string::npos) << after;
+}
+
+TEST(RunLog, ValidateNamesTheField) {
+  RunConfig c;
+  c.particles = 10;
+  c.triangles = 10;
+  c.triangles_original = 10;
+  EXPECT_TRUE(validate(c));
+  c.frames = 0;
+  EXPECT_NE(validate(c).message().find("frames"), std::string::npos);
+  RunMeasure m;
+  EXPECT_TRUE(validate(m));
+  m.gpu_load = 2.0;
+  EXPECT_NE(validate(m).message().find("gpu_load"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace collido::gvm
