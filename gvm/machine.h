@@ -84,8 +84,8 @@ class Machine {
   // Trains on rows of x (inputs) and y (targets), both in raw units; the scaling is
   // fitted on these rows. A NaN target means that output has no value in that row (it
   // is left out of the loss and the fits). val_x/val_y (may have 0 rows) only feed the
-  // reported curve. Errors: empty data, mismatched shapes, NaN/inf inputs, infinite
-  // targets, an output with no value at all, bad options.
+  // reported curve; an output with no value in any row predicts 0. Errors: empty data,
+  // mismatched shapes, NaN/inf inputs, infinite targets, bad options.
   static Expected<Machine> train(const Matrix& x, const Matrix& y, const Matrix& val_x,
                                  const Matrix& val_y, const GvmOptions& options,
                                  TrainReport* report, std::vector<std::string> input_names = {},

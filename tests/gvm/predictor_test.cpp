@@ -94,6 +94,22 @@ TEST(Predictor, WarnsAboutEveryInputOutsideTheTrainedRange) {
   EXPECT_NE(p->warnings[0].find("frames = 100000 is above"), std::string::npos);
 }
 
+TEST(Predictor, TrainsOnACpuOnlyLog) {
+  std::vector<RunRecord> cpu;
+  for (const auto& r : synthetic_run_log(80, 8))
+    if (r.config.backend == Backend::kCpu) cpu.push_back(r);
+  ASSERT_GT(cpu.size(), 20u);
+  GvmOptions opt;
+  opt.epochs = 20;
+  auto p = ResourcePredictor::train(cpu, {}, opt, nullptr);
+  ASSERT_TRUE(p) << p.status().message();
+  auto pr = p->predict(typical(Backend::kCuda));
+  ASSERT_TRUE(pr);
+  EXPECT_EQ(pr->measure.peak_device_bytes, 0.0);
+  EXPECT_TRUE(contains(pr->warnings, "backend 'cuda' is not in the training data"));
+  EXPECT_TRUE(std::isfinite(pr->measure.time_per_frame_s));
+}
+
 TEST(Predictor, RejectsInvalidConfiguration) {
   RunConfig c = typical(Backend::kCpu);
   c.particles = 0;

@@ -1,0 +1,92 @@
+// The `gvm` and `predict` commands end to end: exit codes, files written, output.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "app/cli.h"
+#include "app/commands.h"
+#include "gvm/evaluate.h"
+
+namespace collido::app {
+namespace {
+
+std::string tmp(const std::string& name) {
+  return testing::TempDir() + "/cmd_gvm_test_" + name;
+}
+
+std::string slurp(const std::string& path) {
+  std::ifstream in(path);
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+// Runs f with stdout captured; returns {exit code, stdout}.
+template <class F>
+std::pair<int, std::string> run(F f) {
+  testing::internal::CaptureStdout();
+  const int code = f();
+  std::fflush(stdout);
+  return {code, testing::internal::GetCapturedStdout()};
+}
+
+TEST(CmdGvm, BadArgumentsExitTwo) {
+  EXPECT_EQ(run([] { return cmd_gvm({}); }).first, kExitUsage);
+  EXPECT_EQ(cmd_gvm({"fit"}), kExitUsage);
+  EXPECT_EQ(cmd_gvm({"train"}), kExitUsage);                     // no --logs
+  EXPECT_EQ(cmd_gvm({"train", "--logs", "x.csv"}), kExitUsage);  // no --out
+  EXPECT_EQ(cmd_gvm({"train", "--logs", "x", "--out", "y", "--hidden", "many"}), kExitUsage);
+  EXPECT_EQ(cmd_gvm({"train", "--logs", "x", "--out", "y", "--epochs", "0"}), kExitUsage);
+  EXPECT_EQ(cmd_gvm({"train", "--logs", "x", "--out", "y", "--delta", "2"}), kExitUsage);
+  EXPECT_EQ(cmd_gvm({"train", "--logs", "x", "--out", "y", "--activation", "relu"}), kExitUsage);
+  EXPECT_EQ(cmd_gvm({"train", "--logs", "x", "--out", "y", "--bogus"}), kExitUsage);
+  EXPECT_EQ(cmd_gvm({"synth", "--rows", "10"}), kExitUsage);
+  EXPECT_EQ(cmd_predict({}), kExitUsage);
+  EXPECT_EQ(cmd_predict({"config.json"}), kExitUsage);  // no --model
+  EXPECT_EQ(run([] { return cmd_gvm({"train", "--help"}); }).first, kExitOk);
+  EXPECT_EQ(run([] { return cmd_predict({"--help"}); }).first, kExitOk);
+}
+
+TEST(CmdGvm, UnreadableFilesExitOne) {
+  EXPECT_EQ(cmd_gvm({"train", "--logs", tmp("absent.csv"), "--out", tmp("m.json")}), kExitFailure);
+  EXPECT_EQ(cmd_predict({tmp("absent.json"), "--model", tmp("absent-model.json")}), kExitFailure);
+}
+
+TEST(CmdGvm, SynthTrainPredict) {
+  const std::string log = tmp("runs.csv"), model = tmp("model.json"), curve = tmp("curve.csv");
+  auto synth = run([&] { return cmd_gvm({"synth", "--out", log, "--rows", "100"}); });
+  ASSERT_EQ(synth.first, kExitOk) << synth.second;
+  auto train = run([&] {
+    return cmd_gvm({"train", "--logs", log, "--out", model, "--epochs", "40", "--mlp-epochs", "100",
+                    "--curve", curve});
+  });
+  ASSERT_EQ(train.first, kExitOk) << train.second;
+  for (const char* s : {"70 train, 30 validation", "validation MAPE", "gvm", "paper-linear",
+                        "least-squares", "mlp-backprop", "prediction time", "trained in"})
+    EXPECT_NE(train.second.find(s), std::string::npos) << s;
+  const std::string c = slurp(curve);
+  EXPECT_EQ(c.rfind("epoch,train_loss,validation_loss,acceptance\n", 0), 0u);
+  EXPECT_EQ(std::count(c.begin(), c.end(), '\n'), 41);
+
+  const std::string config = tmp("config.json");
+  std::ofstream(config) << R"({"particles": 1e9, "triangles": 5000, "method": "gravity",
+                               "traversal": "particle", "frames": 10, "backend": "cuda"})";
+  auto pred = run([&] { return cmd_predict({config, "--model", model}); });
+  ASSERT_EQ(pred.first, kExitOk) << pred.second;
+  EXPECT_NE(pred.second.find("time per frame"), std::string::npos);
+  EXPECT_NE(pred.second.find("warning: particles = 1000000000 is above"), std::string::npos)
+      << pred.second;
+  auto js = run([&] { return cmd_predict({config, "--model", model, "--json"}); });
+  ASSERT_EQ(js.first, kExitOk);
+  EXPECT_NE(js.second.find("\"in_range\": false"), std::string::npos) << js.second;
+
+  std::ofstream(config) << R"({"particles": 100, "method": "gravity"})";
+  EXPECT_EQ(cmd_predict({config, "--model", model}), kExitUsage);  // lacks "triangles"
+}
+
+}  // namespace
+}  // namespace collido::app
