@@ -29,18 +29,18 @@ namespace collido::sim {
 inline constexpr char kSnapshotMagic[8] = {'C', 'L', 'S', 'N', 'A', 'P', '0', '1'};
 inline constexpr uint32_t kSnapshotVersion = 1;
 inline constexpr size_t kSnapshotHeaderBytes = 8 + 4 + 4 + 8 + 8 + 3 * 8;  // 56
-inline constexpr size_t kSnapshotBytesPerParticle = 7 * 4 + 1;              // 29
+inline constexpr size_t kSnapshotBytesPerParticle = 7 * 4 + 1;             // 29
 // Far more particles than any run holds; a count above it means a corrupt file.
 inline constexpr uint32_t kSnapshotMaxParticles = 1u << 30;
 
 struct Snapshot {
   uint64_t frame = 0;
-  double time = 0;                 // s
-  Vec3d origin{0, 0, 0};           // world units
-  std::vector<float> x, y, z;      // position relative to origin, world units
-  std::vector<float> r;            // radius, world units
-  std::vector<float> vx, vy, vz;   // velocity, world units per second
-  std::vector<uint8_t> contact;    // 0 or 1
+  double time = 0;                // s
+  Vec3d origin{0, 0, 0};          // world units
+  std::vector<float> x, y, z;     // position relative to origin, world units
+  std::vector<float> r;           // radius, world units
+  std::vector<float> vx, vy, vz;  // velocity, world units per second
+  std::vector<uint8_t> contact;   // 0 or 1
 
   size_t size() const { return x.size(); }
   // Sizes every array for n particles (contents zeroed).

@@ -1,0 +1,136 @@
+// `collidoscope render DIR` end to end: a run directory in the engine's format
+// in, PNG frames, poster, MP4 and WebM out; bad arguments exit 2.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+
+#include "app/cli.h"
+#include "app/commands.h"
+#include "render/render.h"
+#include "sim/mesh.h"
+#include "sim/shapes.h"
+#include "sim/snapshot.h"
+
+namespace collido::app {
+namespace {
+
+namespace fs = std::filesystem;
+
+class RenderCliTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("collido_render_cli_" + std::to_string(getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir_ / "run" / "frames");
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  // A cylinder of radius 10, height 20 at `shift`, and `frames` frames of 150
+  // particles falling inside it, positions stored relative to `shift`.
+  void write_run(int frames, sim::Vec3d shift = {0, 0, 0}) {
+    sim::TriangleMesh wall = sim::make_cylinder(10, 20, 24);
+    sim::translate(wall, shift);
+    ASSERT_TRUE(sim::save_stl(wall, run() + "/wall.stl"));
+    for (int f = 0; f < frames; ++f) {
+      sim::Snapshot s;
+      s.frame = uint64_t(f);
+      s.time = 0.05 * f;
+      s.origin = shift;
+      s.resize(150);
+      for (int i = 0; i < 150; ++i) {
+        const double phi = 0.7 * i, rho = 8.0 * std::sqrt((i + 0.5) / 150.0);
+        s.x[i] = float(rho * std::cos(phi));
+        s.y[i] = float(rho * std::sin(phi));
+        s.vz[i] = float(-9.81 * s.time);
+        s.z[i] = float(std::max(0.6, 5.0 + 0.1 * i - 4.9 * s.time * s.time));
+        s.r[i] = 0.6f;
+        s.contact[i] = s.z[i] <= 0.6f;
+      }
+      ASSERT_TRUE(sim::write_snapshot(sim::snapshot_path(run(), uint64_t(f)), s));
+    }
+  }
+  std::string run() const { return (dir_ / "run").string(); }
+  std::string out() const { return (dir_ / "out").string(); }
+
+  fs::path dir_;
+};
+
+TEST_F(RenderCliTest, RendersFramesPosterAndBothVideos) {
+  write_run(8);
+  ASSERT_EQ(cmd_render({run(), "--out", out(), "--width", "160", "--height", "120", "--fps", "8",
+                        "--png-every", "4", "--camera", "orbit"}),
+            kExitOk);
+  render::Image img;
+  ASSERT_TRUE(render::read_png(out() + "/poster.png", &img));
+  EXPECT_EQ(img.width, 160);
+  EXPECT_EQ(img.height, 120);
+  EXPECT_TRUE(fs::exists(out() + "/frames/frame_000000.png"));
+  EXPECT_TRUE(fs::exists(out() + "/frames/frame_000004.png"));
+  EXPECT_FALSE(fs::exists(out() + "/frames/frame_000001.png"));
+  for (const char* name : {"/video.mp4", "/video.webm"}) {
+    render::VideoInfo info;
+    render::Status st = render::probe_video(out() + name, &info);
+    ASSERT_TRUE(st) << st.message();
+    EXPECT_EQ(info.frames, 8) << name;
+    EXPECT_EQ(info.width, 160) << name;
+    EXPECT_NEAR(info.duration_s, 1.0, 0.13) << name;
+  }
+}
+
+TEST_F(RenderCliTest, FarFromOriginRendersLikeNearOrigin) {
+  // The same scene a million units away: the render origin keeps float
+  // precision, so the poster matches the one rendered at the origin.
+  write_run(1);
+  ASSERT_EQ(cmd_render({run(), "--out", out(), "--width", "160", "--height", "120", "--video",
+                        "none", "--png-every", "0", "--no-overlay", "--msaa", "0"}),
+            kExitOk);
+  render::Image near_img, far_img;
+  ASSERT_TRUE(render::read_png(out() + "/poster.png", &near_img));
+  fs::remove_all(dir_ / "run");
+  fs::create_directories(dir_ / "run" / "frames");
+  write_run(1, {1e6, -1e6, 5e5});
+  ASSERT_EQ(cmd_render({run(), "--out", out(), "--width", "160", "--height", "120", "--video",
+                        "none", "--png-every", "0", "--no-overlay", "--msaa", "0"}),
+            kExitOk);
+  ASSERT_TRUE(render::read_png(out() + "/poster.png", &far_img));
+  int differing = 0;
+  for (size_t i = 0; i < near_img.rgb.size(); ++i)
+    differing += std::abs(int(near_img.rgb[i]) - int(far_img.rgb[i])) > 8;
+  EXPECT_LT(differing, int(near_img.rgb.size() / 100));
+}
+
+TEST_F(RenderCliTest, BadArgumentsExitTwo) {
+  write_run(1);
+  EXPECT_EQ(cmd_render({}), kExitUsage);
+  EXPECT_EQ(cmd_render({run(), "--camera", "side"}), kExitUsage);
+  EXPECT_EQ(cmd_render({run(), "--color", "rainbow"}), kExitUsage);
+  EXPECT_EQ(cmd_render({run(), "--width", "abc"}), kExitUsage);
+  EXPECT_EQ(cmd_render({run(), "--width", "161"}), kExitUsage);  // odd, and video is on
+  EXPECT_EQ(cmd_render({run(), "--fps", "0"}), kExitUsage);
+  EXPECT_EQ(cmd_render({run(), "--bogus"}), kExitUsage);
+  EXPECT_EQ(cmd_render({run(), run()}), kExitUsage);
+  EXPECT_EQ(cmd_render({"--help"}), kExitOk);
+  EXPECT_EQ(bench_render({"--counts", "ten"}), kExitUsage);
+  EXPECT_EQ(bench_render({"--help"}), kExitOk);
+}
+
+TEST_F(RenderCliTest, MissingOrCorruptFramesFailWithoutLeavingVideo) {
+  EXPECT_EQ(cmd_render({(dir_ / "nowhere").string()}), kExitFailure);
+  write_run(3);
+  {
+    std::ofstream f(sim::snapshot_path(run(), 2), std::ios::binary | std::ios::trunc);
+    f << "CLSNAP01 but then nothing";
+  }
+  EXPECT_EQ(cmd_render({run(), "--out", out(), "--width", "64", "--height", "48"}), kExitFailure);
+  EXPECT_FALSE(fs::exists(out() + "/video.mp4"));
+  EXPECT_FALSE(fs::exists(out() + "/video.webm"));
+  for (const auto& e : fs::directory_iterator(out()))
+    EXPECT_EQ(e.path().filename().string().find(".tmp"), std::string::npos) << e.path();
+}
+
+}  // namespace
+}  // namespace collido::app
