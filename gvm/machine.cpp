@@ -454,7 +454,8 @@ std::vector<RangeIssue> Machine::check_range(const double* x) const {
 }
 
 std::string Machine::to_json() const {
-  return machine_to_json(p_).dump(1);
+  // Names come from user data; invalid UTF-8 is replaced rather than thrown about.
+  return machine_to_json(p_).dump(1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 Expected<Machine> Machine::from_json(const std::string& text) {

@@ -158,7 +158,8 @@ std::string ResourcePredictor::to_json() const {
   // NaN (no validation rows) has no JSON spelling; leave the field out instead.
   if (std::isfinite(validation_loss_)) j["training"]["validation_loss"] = validation_loss_;
   j["machine"] = machine_to_json(machine_.params());
-  return j.dump(1);
+  // Device names come from logs; invalid UTF-8 is replaced rather than thrown about.
+  return j.dump(1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 Expected<ResourcePredictor> ResourcePredictor::from_json(const std::string& text) {
@@ -324,7 +325,7 @@ std::string prediction_to_json(const RunConfig& c, const Prediction& p) {
                  {"backend", backend_name(c.backend)},
                  {"device", c.device},
                  {"threads", c.threads}};
-  return j.dump(2);
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 }  // namespace collido::gvm

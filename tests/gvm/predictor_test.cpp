@@ -180,6 +180,21 @@ TEST(Predictor, ReadsConfigurationJson) {
   EXPECT_FALSE(run_config_from_json("{", nullptr));
 }
 
+TEST(Predictor, InvalidUtf8DeviceNamesDoNotThrow) {
+  auto rows = synthetic_run_log(20, 3);
+  rows[0].config.device = "bad \xff\xfe name";
+  GvmOptions opt;
+  opt.epochs = 2;
+  auto p = ResourcePredictor::train(rows, {}, opt, nullptr);
+  ASSERT_TRUE(p);
+  auto back = ResourcePredictor::from_json(p->to_json());
+  EXPECT_TRUE(back) << back.status().message();
+  RunConfig c = rows[0].config;
+  auto pr = p->predict(c);
+  ASSERT_TRUE(pr);
+  EXPECT_FALSE(prediction_to_json(c, *pr).empty());
+}
+
 TEST(Predictor, PredictionJsonHasEveryField) {
   RunConfig c = typical(Backend::kCuda);
   c.particles = 1000000000;
