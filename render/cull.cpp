@@ -8,27 +8,6 @@
 namespace collido::render {
 namespace {
 
-// LSD radix sort of (key, index) pairs by key, 11 bits per pass: a few ms for
-// a million particles, where std::sort would take tens.
-void radix_sort(std::vector<uint32_t>& keys, std::vector<uint32_t>& order,
-                std::vector<uint32_t>& tmp_keys, std::vector<uint32_t>& tmp_order) {
-  const size_t n = keys.size();
-  tmp_keys.resize(n);
-  tmp_order.resize(n);
-  for (int shift = 0; shift < 32; shift += 11) {
-    uint32_t count[2049] = {};
-    for (size_t i = 0; i < n; ++i) ++count[((keys[i] >> shift) & 2047) + 1];
-    for (int b = 0; b < 2048; ++b) count[b + 1] += count[b];
-    for (size_t i = 0; i < n; ++i) {
-      const uint32_t dst = count[(keys[i] >> shift) & 2047]++;
-      tmp_keys[dst] = keys[i];
-      tmp_order[dst] = order[i];
-    }
-    keys.swap(tmp_keys);
-    order.swap(tmp_order);
-  }
-}
-
 // floor/ceil without the libm call the x86-64 baseline needs for them.
 inline int floor_int(float x) {
   const int i = int(x);
@@ -41,12 +20,6 @@ inline int ceil_int(float x) {
 
 constexpr int kTile = 8;  // pixels per side of the coarse depth tiles
 
-uint32_t float_key(float positive) {
-  uint32_t k;
-  std::memcpy(&k, &positive, 4);
-  return k;  // non-negative IEEE floats order like their bit patterns
-}
-
 }  // namespace
 
 void cull_particles(const Snapshot& s, const CullView& v, CullScratch* sc,
@@ -56,12 +29,16 @@ void cull_particles(const Snapshot& s, const CullView& v, CullScratch* sc,
   const float* p = v.proj.m;
   const int w = v.width, h = v.height;
   visible->clear();
-  sc->keys.resize(n);
-  sc->order.resize(n);
-  size_t kept = 0;
 
-  // 1. View depth of each particle's nearest point; drop those behind the
-  //    camera or entirely off screen.
+  // 1. Project every particle once; drop those behind the camera or entirely
+  //    off screen. The rest get a 16-bit key from the depth of their nearest
+  //    point: order only decides how early occluders are found (culling is
+  //    conservative in any order), so a coarse key and one counting-sort pass
+  //    are enough.
+  sc->projected.resize(n);
+  sc->keys.resize(n);
+  size_t kept = 0;
+  const float key_scale = 65535.f / std::max(v.far_plane - v.near_plane, 1e-6f);
   for (size_t i = 0; i < n; ++i) {
     const float x = s.positions[3 * i], y = s.positions[3 * i + 1], z = s.positions[3 * i + 2];
     const float r = s.radius[i];
@@ -69,17 +46,24 @@ void cull_particles(const Snapshot& s, const CullView& v, CullScratch* sc,
     if (!(dist + r > v.near_plane)) continue;  // also drops NaN positions
     const float ex = m[0] * x + m[4] * y + m[8] * z + m[12];
     const float ey = m[1] * x + m[5] * y + m[9] * z + m[13];
-    const float d = std::max(dist, 1e-6f);
-    const float px = (p[0] * ex / d * 0.5f + 0.5f) * w;
-    const float py = (p[5] * ey / d * 0.5f + 0.5f) * h;
-    const float half = 0.5f * std::min(2.f * r * v.point_scale / d + 1.f, v.max_point) + 1.f;
+    const float inv = 1.f / std::max(dist, 1e-6f);
+    const float px = (p[0] * ex * inv * 0.5f + 0.5f) * w;
+    const float py = (p[5] * ey * inv * 0.5f + 0.5f) * h;
+    const float rpx = r * v.point_scale * inv;
+    const float half = 0.5f * std::min(2.f * rpx + 1.f, v.max_point) + 1.f;
     if (px + half < 0 || px - half > w || py + half < 0 || py - half > h) continue;
-    sc->keys[kept] = float_key(std::max(dist - r, 0.f));
-    sc->order[kept++] = uint32_t(i);
+    sc->projected[kept] = {px, py, rpx, dist - r, dist + r, uint32_t(i)};
+    const float k = (dist - r - v.near_plane) * key_scale;
+    sc->keys[kept++] = uint16_t(std::clamp(k, 0.f, 65535.f));
   }
-  sc->keys.resize(kept);
-  sc->order.resize(kept);
-  radix_sort(sc->keys, sc->order, sc->tmp_keys, sc->tmp_order);
+  sc->sorted.resize(kept);
+  {
+    std::vector<uint32_t>& count = sc->count;
+    count.assign(65537, 0);
+    for (size_t k = 0; k < kept; ++k) ++count[size_t(sc->keys[k]) + 1];
+    for (size_t b = 0; b < 65536; ++b) count[b + 1] += count[b];
+    for (size_t k = 0; k < kept; ++k) sc->sorted[count[sc->keys[k]]++] = sc->projected[k];
+  }
 
   // 2. Nearest first: keep a particle if any pixel it would shade is not yet
   //    covered by something certainly nearer; then record the pixels it
@@ -98,18 +82,9 @@ void cull_particles(const Snapshot& s, const CullView& v, CullScratch* sc,
   const int tw = (w + kTile - 1) / kTile, th = (h + kTile - 1) / kTile;
   sc->tile_max.assign(size_t(tw) * th, kInf);
   float* tile_max = sc->tile_max.data();
-  visible->reserve(sc->order.size());
-  for (uint32_t i : sc->order) {
-    const float x = s.positions[3 * i], y = s.positions[3 * i + 1], z = s.positions[3 * i + 2];
-    const float r = s.radius[i];
-    const float dist = -(m[2] * x + m[6] * y + m[10] * z + m[14]);
-    const float ex = m[0] * x + m[4] * y + m[8] * z + m[12];
-    const float ey = m[1] * x + m[5] * y + m[9] * z + m[13];
-    const float d = std::max(dist, 1e-6f);
-    const float px = (p[0] * ex / d * 0.5f + 0.5f) * w;
-    const float py = (p[5] * ey / d * 0.5f + 0.5f) * h;
-    const float radius_px = r * v.point_scale / d;
-    const float front = dist - r;
+  visible->reserve(kept);
+  for (const CullScratch::Projected& q : sc->sorted) {
+    const float px = q.px, py = q.py, radius_px = q.radius_px, front = q.front;
     bool show = front <= v.near_plane;  // cut by the near plane: never judge
     // Row by row over the disc's span: the first pixel not yet certainly
     // covered in front of this particle makes it visible.
@@ -133,14 +108,14 @@ void cull_particles(const Snapshot& s, const CullView& v, CullScratch* sc,
       for (int xx = x0; xx <= x1; ++xx) show |= row[xx] >= front;
     }
     if (!show) continue;
-    visible->push_back(i);
+    visible->push_back(q.index);
     if (front <= v.near_plane) continue;
     // The point square is clamped to the driver's largest point size; only
     // pixels inside both the square and the disc are certainly shaded.
     const float square = 0.5f * std::min(2.f * radius_px + 1.f, v.max_point) - kSlack;
     const float inner = std::min(radius_px - kSlack, square);
     if (inner < 0.5f) continue;
-    const float far_side = dist + r, inner2 = inner * inner;
+    const float far_side = q.back, inner2 = inner * inner;
     const int iy0 = std::max(0, (ceil_int(py - inner - 0.5f)));
     const int iy1 = std::min(h - 1, (floor_int(py + inner - 0.5f)));
     for (int yy = iy0; yy <= iy1; ++yy) {

@@ -21,6 +21,7 @@ struct CullView {
   float point_scale = 0;      // pixels per world unit at eye distance 1 (as the shader)
   float max_point = 0;        // largest point size GL draws, pixels
   float near_plane = 0;       // world units
+  float far_plane = 0;        // world units
   // Pixels by which the shaded disc may differ from the exact one: 0.05 for
   // single-sampled rendering, 0.75 with multisampling.
   float slack = 0.05f;
@@ -30,7 +31,15 @@ struct CullView {
 struct CullScratch {
   std::vector<float> depth;     // per pixel: nearest occluder's farthest possible depth
   std::vector<float> tile_max;  // per 8x8 tile: the largest depth in it
-  std::vector<uint32_t> keys, order, tmp_keys, tmp_order;
+  struct Projected {
+    float px, py;       // centre in pixels
+    float radius_px;    // radius in pixels
+    float front, back;  // view depth of the nearest and farthest point, world units
+    uint32_t index;     // particle index in the snapshot
+  };
+  std::vector<Projected> projected, sorted;
+  std::vector<uint16_t> keys;
+  std::vector<uint32_t> count;
 };
 
 // Writes to *visible the particles that may be visible, nearest first.

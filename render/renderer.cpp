@@ -513,6 +513,7 @@ Status Renderer::Impl::render(const Snapshot& s, Image* image) {
     cv.point_scale = point_scale;
     cv.max_point = max_point_size;
     cv.near_plane = cam.near_plane;
+    cv.far_plane = cam.far_plane;
     cv.slack = samples ? 0.75f : 0.05f;
     cull_particles(s, cv, &cull_scratch, &drawn);
     subset = &drawn;

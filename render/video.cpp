@@ -329,4 +329,81 @@ Status probe_video(const std::string& path, VideoInfo* info) {
   return Status::ok();
 }
 
+Status read_video_frame(const std::string& path, int index, Image* image) {
+  quiet_libav_logs();
+  AVFormatContext* fmt = nullptr;
+  int rc = avformat_open_input(&fmt, path.c_str(), nullptr, nullptr);
+  if (rc < 0) return Status::error("cannot open video " + path + ": " + av_error(rc));
+  struct Cleanup {
+    AVFormatContext** fmt;
+    AVCodecContext* dec = nullptr;
+    AVPacket* pkt = nullptr;
+    AVFrame* frame = nullptr;
+    SwsContext* sws = nullptr;
+    ~Cleanup() {
+      sws_freeContext(sws);
+      av_frame_free(&frame);
+      av_packet_free(&pkt);
+      avcodec_free_context(&dec);
+      avformat_close_input(fmt);
+    }
+  } c{&fmt};
+  if ((rc = avformat_find_stream_info(fmt, nullptr)) < 0)
+    return Status::error(path + ": no stream info: " + av_error(rc));
+  const AVCodec* decoder = nullptr;
+  const int si = av_find_best_stream(fmt, AVMEDIA_TYPE_VIDEO, -1, -1, &decoder, 0);
+  if (si < 0 || !decoder) return Status::error(path + ": no decodable video stream");
+  c.dec = avcodec_alloc_context3(decoder);
+  avcodec_parameters_to_context(c.dec, fmt->streams[si]->codecpar);
+  if ((rc = avcodec_open2(c.dec, decoder, nullptr)) < 0)
+    return Status::error(path + ": cannot open decoder: " + av_error(rc));
+  c.pkt = av_packet_alloc();
+  c.frame = av_frame_alloc();
+  int seen = 0;
+  bool flushing = false;
+  for (;;) {
+    rc = avcodec_receive_frame(c.dec, c.frame);
+    if (rc == 0) {
+      if (seen++ < index) continue;
+      AVFrame* f = c.frame;
+      c.sws = sws_getContext(f->width, f->height, AVPixelFormat(f->format), f->width, f->height,
+                             AV_PIX_FMT_RGB24, SWS_BILINEAR, nullptr, nullptr, nullptr);
+      if (!c.sws) return Status::error(path + ": cannot convert the frame to RGB");
+      const int space = f->colorspace == AVCOL_SPC_BT709 ? SWS_CS_ITU709 : SWS_CS_ITU601;
+      const int* coeffs = sws_getCoefficients(space);
+      sws_setColorspaceDetails(c.sws, coeffs, f->color_range == AVCOL_RANGE_JPEG, coeffs, 1, 0,
+                               1 << 16, 1 << 16);
+      Image out;
+      out.resize(f->width, f->height);
+      uint8_t* dst[1] = {out.rgb.data()};
+      const int stride[1] = {f->width * 3};
+      sws_scale(c.sws, f->data, f->linesize, 0, f->height, dst, stride);
+      *image = std::move(out);
+      return Status::ok();
+    }
+    if (rc == AVERROR_EOF) break;
+    if (rc != AVERROR(EAGAIN)) return Status::error(path + ": decoding failed: " + av_error(rc));
+    if (flushing) break;
+    // The decoder wants input: the next packet of our stream, or a flush.
+    for (;;) {
+      rc = av_read_frame(fmt, c.pkt);
+      if (rc < 0) {
+        avcodec_send_packet(c.dec, nullptr);
+        flushing = true;
+        break;
+      }
+      const bool ours = c.pkt->stream_index == si;
+      if (ours) rc = avcodec_send_packet(c.dec, c.pkt);
+      av_packet_unref(c.pkt);
+      if (ours) {
+        if (rc < 0 && rc != AVERROR(EAGAIN))
+          return Status::error(path + ": corrupt packet: " + av_error(rc));
+        break;
+      }
+    }
+  }
+  return Status::error(path + ": has " + std::to_string(seen) + " frames, no frame " +
+                       std::to_string(index));
+}
+
 }  // namespace collido::render

@@ -67,4 +67,8 @@ struct VideoInfo {
 // Opens and decodes a whole video; used by tests and to check outputs.
 Status probe_video(const std::string& path, VideoInfo* info);
 
+// Decodes frame `index` (0-based, in display order) to RGB, converting with
+// the colour matrix the stream declares; for thumbnails and colour checks.
+Status read_video_frame(const std::string& path, int index, Image* image);
+
 }  // namespace collido::render

@@ -24,7 +24,8 @@ class VideoTest : public ::testing::Test {
   }
   void TearDown() override { fs::remove_all(dir_); }
 
-  // Renders `frames` frames of a particle crossing the vessel into a video.
+  // Renders `frames` frames of a particle crossing the vessel into a video;
+  // keeps the first frame in first_.
   void write_video(VideoCodec codec, int frames, int fps, const std::string& path) {
     RenderOptions o;
     o.width = 320;
@@ -47,6 +48,7 @@ class VideoTest : public ::testing::Test {
       s.frame = f;
       s.time = double(f) / fps;
       ASSERT_TRUE(r->render(s, &img));
+      if (f == 0) first_ = img;
       ASSERT_TRUE(st = w->add_frame(img)) << st.message();
     }
     EXPECT_FALSE(fs::exists(path)) << "the file appears only when finished";
@@ -54,7 +56,21 @@ class VideoTest : public ::testing::Test {
     EXPECT_EQ(w->frames_written(), frames);
   }
 
+  // Mean absolute difference per channel between the decoded first frame and
+  // the rendered one: catches wrong colour matrices, ranges and flipped rows.
+  double first_frame_error(const std::string& path) {
+    Image decoded;
+    Status st = read_video_frame(path, 0, &decoded);
+    EXPECT_TRUE(st) << st.message();
+    if (decoded.rgb.size() != first_.rgb.size()) return 1e9;
+    double sum = 0;
+    for (size_t i = 0; i < decoded.rgb.size(); ++i)
+      sum += std::abs(int(decoded.rgb[i]) - int(first_.rgb[i]));
+    return sum / double(decoded.rgb.size());
+  }
+
   fs::path dir_;
+  Image first_;
 };
 
 TEST_F(VideoTest, Mp4H264DecodesToTheFramesWritten) {
@@ -72,6 +88,7 @@ TEST_F(VideoTest, Mp4H264DecodesToTheFramesWritten) {
   EXPECT_NEAR(info.duration_s, 0.5, 1.0 / 30 + 1e-6);
   EXPECT_NEAR(info.fps, 30.0, 0.01);
   EXPECT_TRUE(info.index_at_front) << "+faststart puts moov before mdat";
+  EXPECT_LT(first_frame_error(path), 3.0);
 }
 
 TEST_F(VideoTest, WebmVp9DecodesToTheFramesWritten) {
@@ -87,6 +104,7 @@ TEST_F(VideoTest, WebmVp9DecodesToTheFramesWritten) {
   EXPECT_EQ(info.pixel_format, "yuv420p");
   EXPECT_EQ(info.frames, 12);
   EXPECT_NEAR(info.duration_s, 0.5, 1.0 / 24 + 1e-6);
+  EXPECT_LT(first_frame_error(path), 3.0);
 }
 
 TEST_F(VideoTest, OddSizeAndWrongFrameSizeAreErrors) {
