@@ -121,27 +121,24 @@ class GridDetector final : public Detector {
       lap(out->times.traverse_ms);
     } else {
       hash_and_sort(out, lap);
-      if (wall || cfg_.collect_contacts) {
-        for (bool fits = false; !fits; fits = pairs_fit()) {
-          reset_pairs();
-          if (bin)
-            bin_wall_traversal();
-          else if (wall)
-            pieces_wall_traversal();
-          else
-            pieces_particle_traversal(true);
-        }
-      } else {
-        pieces_particle_traversal(false);
+      for (bool fits = false; !fits; fits = pairs_fit()) {
+        reset_pairs();
+        if (bin)
+          bin_wall_traversal();
+        else if (wall)
+          pieces_wall_traversal();
+        else
+          pieces_particle_traversal();
       }
       lap(out->times.traverse_ms);
     }
     // Contacts as (particle, original) pairs, deduplicated with the smallest distance.
+    const bool from_pairs = !(bin && !wall);
     uint32_t unique = 0;
-    if (wall || cfg_.collect_contacts) {
+    if (from_pairs || cfg_.collect_contacts) {
       unique = backend_.dedup_min(pair_key_.data(), pair_dist_.data(), pair_count_host_,
                                   pair_key2_.data(), pair_dist2_.data());
-      if (wall) counts_from_pairs(unique);
+      if (from_pairs) counts_from_pairs(unique);
       lap(out->times.finalize_ms);
     }
     backend_.sync();
@@ -235,12 +232,12 @@ class GridDetector final : public Detector {
     info_.hashed = grid_.hashed != 0;
 
     // Hash the pieces by bounding-sphere centre and sort them by cell (paper Table 2).
-    std::vector<TriangleF> tris(m);
+    std::vector<PlanarTriangle> tris(m);
     std::vector<uint32_t> orig(m), key(m), idx(m);
     std::vector<uint64_t> cellkey(m);
     for (size_t i = 0; i < m; ++i) {
       const auto& p = dv.pieces[i];
-      tris[i] = {cast3<float>(p[0] - origin_), cast3<float>(p[1] - origin_), cast3<float>(p[2] - origin_)};
+      tris[i] = make_planar(p[0], p[1], p[2], origin_);
       int x, y, z;
       Vec3f c = cast3<float>(dv.sphere_centre[i] - origin_);
       if (!grid_.cell_of(c, x, y, z)) return Status(ErrorCode::kBackend, "piece centre outside its grid");
@@ -249,7 +246,7 @@ class GridDetector final : public Detector {
       idx[i] = static_cast<uint32_t>(i);
     }
     std::stable_sort(idx.begin(), idx.end(), [&](uint32_t a, uint32_t b) { return key[a] < key[b]; });
-    std::vector<TriangleF> tris_sorted(m);
+    std::vector<PlanarTriangle> tris_sorted(m);
     std::vector<uint32_t> orig_sorted(m);
     std::vector<uint64_t> cell_sorted(m);
     std::vector<uint32_t> start(grid_.buckets, 0), end(grid_.buckets, 0);
@@ -282,22 +279,22 @@ class GridDetector final : public Detector {
     info_.buckets = grid_.buckets;
     info_.hashed = grid_.hashed != 0;
 
-    std::vector<TriangleF> tris(m);
-    std::vector<uint32_t> orig(m);
+    std::vector<TriangleF> corners(m);
+    std::vector<PlanarTriangle> tris(m);
     for (size_t t = 0; t < m; ++t) {
-      tris[t] = {cast3<float>(mesh.corner(t, 0) - origin_), cast3<float>(mesh.corner(t, 1) - origin_),
-                 cast3<float>(mesh.corner(t, 2) - origin_)};
-      orig[t] = static_cast<uint32_t>(t);
+      corners[t] = {cast3<float>(mesh.corner(t, 0) - origin_), cast3<float>(mesh.corner(t, 1) - origin_),
+                    cast3<float>(mesh.corner(t, 2) - origin_)};
+      tris[t] = make_planar(mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2), origin_);
     }
     upload(tris_, tris);
-    upload(tri_original_, orig);
+    upload(corners_, corners);
 
     // CSR build on the backend: count (cell, triangle) overlaps, scan, fill.
     Buf<uint32_t> bin_count;
     backend_.resize(bin_count, size_t(grid_.buckets) + 1);
     backend_.fill(bin_count.data(), size_t(grid_.buckets) + 1, 0u);
     const GridSpec g = grid_;
-    const TriangleF* T = tris_.data();
+    const TriangleF* T = corners_.data();
     const float fgrow = static_cast<float>(grow);
     uint32_t* count = bin_count.data();
     backend_.parallel_for(m, [=] COLLIDO_HD(uint32_t t) {
@@ -434,7 +431,7 @@ class GridDetector final : public Detector {
   void bin_particle_traversal(bool collect) {
     const GridSpec g = grid_;
     const PackedParticle* P = particles_.data();
-    const TriangleF* T = tris_.data();
+    const PlanarTriangle* T = tris_.data();
     const uint32_t* start = bin_start_.data();
     const uint32_t* tri = bin_tri_.data();
     const uint64_t* cellk = bin_cell_.data();
@@ -451,8 +448,7 @@ class GridDetector final : public Detector {
         for (uint32_t k = start[b], e = start[b + 1]; k < e; ++k) {
           if (g.hashed && cellk[k] != l) continue;
           const uint32_t t = tri[k];
-          const TriangleF tr = T[t];
-          const float d2 = point_triangle_dist2(position(p), tr.a, tr.b, tr.c);
+          const float d2 = point_triangle_dist2(position(p), T[t]);
           if (d2 < r2) {
             ++n;
             if (collect) out.push(i, t, sqrtf(d2));
@@ -469,7 +465,7 @@ class GridDetector final : public Detector {
     const GridSpec g = grid_;
     const PackedParticle* SP = sorted_particles_.data();
     const uint32_t* sidx = p_idx_sorted_.data();
-    const TriangleF* T = tris_.data();
+    const PlanarTriangle* T = tris_.data();
     const uint32_t* tri = bin_tri_.data();
     const uint64_t* cellk = bin_cell_.data();
     const uint32_t* pstart = p_cell_start_.data();
@@ -479,7 +475,7 @@ class GridDetector final : public Detector {
       const uint64_t l = cellk[k];
       const uint32_t b = g.bucket(l);
       const uint32_t t = tri[k];
-      const TriangleF tr = T[t];
+      const PlanarTriangle tr = T[t];
       for (uint32_t j = pstart[b], e = pend[b]; j < e; ++j) {
         const PackedParticle p = SP[j];
         if (g.hashed) {
@@ -487,82 +483,50 @@ class GridDetector final : public Detector {
           g.cell_of(position(p), x, y, z);
           if (g.linear(x, y, z) != l) continue;
         }
-        const float d2 = point_triangle_dist2(position(p), tr.a, tr.b, tr.c);
+        const float d2 = point_triangle_dist2(position(p), tr);
         if (d2 < p.r * p.r) out.push(sidx[j], t, sqrtf(d2));
       }
     });
   }
 
   // Divided pieces, particle traversal (paper 3.6): a thread per particle
-  // loops over the pieces of its neighbouring cells. Pieces of one original
-  // triangle may all touch; the count keeps one per original: the first K
-  // originals live in registers, beyond that a rescan of the earlier
-  // candidates decides (rare: many originals around one particle).
-  void pieces_particle_traversal(bool collect) {
+  // loops over the pieces of its neighbouring cells and emits every hit.
+  // Several pieces of one original may touch the particle; the pairs are
+  // deduplicated afterwards, as for the wall traversal, which keeps the
+  // smallest distance and needs no per-thread memory however many originals meet.
+  void pieces_particle_traversal() {
     const GridSpec g = grid_;
     const int reach = reach_;
     const PackedParticle* SP = sorted_particles_.data();
     const uint32_t* skey = p_key_sorted_.data();
     const uint32_t* sidx = p_idx_sorted_.data();
-    const TriangleF* T = tris_.data();
+    const PlanarTriangle* T = tris_.data();
     const uint32_t* orig = tri_original_.data();
     const uint64_t* tcell = tri_cell_.data();
     const uint32_t* tstart = tri_start_.data();
     const uint32_t* tend = tri_end_.data();
-    uint32_t* counts = counts_.data();
     const PairSink out = sink();
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t j) {
+      if (skey[j] == kInvalidBucket) return;
       const uint32_t i = sidx[j];
-      if (skey[j] == kInvalidBucket) {
-        counts[i] = 0;
-        return;
-      }
       const PackedParticle p = SP[j];
       const Vec3f c = position(p);
       const float r2 = p.r * p.r;
       int cx, cy, cz;
       g.cell_of(c, cx, cy, cz);
-      constexpr int K = 8;
-      uint32_t seen[K];
-      int nseen = 0;
-      uint32_t n = 0;
-      // Visits candidates in a fixed order; stop_at bounds a rescan.
-      auto visit = [&](uint64_t stop_at, auto&& on_hit) {
-        uint64_t ordinal = 0;
-        for (int dz = -reach; dz <= reach; ++dz)
-          for (int dy = -reach; dy <= reach; ++dy)
-            for (int dx = -reach; dx <= reach; ++dx) {
-              const int x = cx + dx, y = cy + dy, z = cz + dz;
-              if (!g.inside(x, y, z)) continue;
-              const uint64_t l = g.linear(x, y, z);
-              const uint32_t b = g.bucket(l);
-              for (uint32_t k = tstart[b], e = tend[b]; k < e; ++k) {
-                if (g.hashed && tcell[k] != l) continue;
-                if (ordinal++ >= stop_at) return;
-                const TriangleF tr = T[k];
-                const float d2 = point_triangle_dist2(c, tr.a, tr.b, tr.c);
-                if (d2 < r2 && !on_hit(ordinal - 1, orig[k], d2)) return;
-              }
+      for (int dz = -reach; dz <= reach; ++dz)
+        for (int dy = -reach; dy <= reach; ++dy)
+          for (int dx = -reach; dx <= reach; ++dx) {
+            const int x = cx + dx, y = cy + dy, z = cz + dz;
+            if (!g.inside(x, y, z)) continue;
+            const uint64_t l = g.linear(x, y, z);
+            const uint32_t b = g.bucket(l);
+            for (uint32_t k = tstart[b], e = tend[b]; k < e; ++k) {
+              if (g.hashed && tcell[k] != l) continue;
+              const float d2 = point_triangle_dist2(c, T[k]);
+              if (d2 < r2) out.push(i, orig[k], sqrtf(d2));
             }
-      };
-      visit(~0ull, [&](uint64_t ordinal, uint32_t o, float d2) {
-        if (collect) out.push(i, o, sqrtf(d2));
-        for (int s = 0; s < nseen; ++s)
-          if (seen[s] == o) return true;
-        if (nseen < K) {
-          seen[nseen++] = o;
-          ++n;
-          return true;
-        }
-        bool earlier = false;
-        visit(ordinal, [&](uint64_t, uint32_t o2, float) {
-          earlier = (o2 == o);
-          return !earlier;
-        });
-        if (!earlier) ++n;
-        return true;
-      });
-      counts[i] = n;
+          }
     });
   }
 
@@ -574,14 +538,14 @@ class GridDetector final : public Detector {
     const int reach = reach_;
     const PackedParticle* SP = sorted_particles_.data();
     const uint32_t* sidx = p_idx_sorted_.data();
-    const TriangleF* T = tris_.data();
+    const PlanarTriangle* T = tris_.data();
     const uint32_t* orig = tri_original_.data();
     const uint64_t* tcell = tri_cell_.data();
     const uint32_t* pstart = p_cell_start_.data();
     const uint32_t* pend = p_cell_end_.data();
     const PairSink out = sink();
     backend_.parallel_for(info_.triangles_used, [=] COLLIDO_HD(uint32_t k) {
-      const TriangleF tr = T[k];
+      const PlanarTriangle& tr = T[k];
       const uint32_t o = orig[k];
       int cx, cy, cz;
       g.unlinear(tcell[k], cx, cy, cz);
@@ -599,7 +563,7 @@ class GridDetector final : public Detector {
                 g.cell_of(position(p), px, py, pz);
                 if (g.linear(px, py, pz) != l) continue;
               }
-              const float d2 = point_triangle_dist2(position(p), tr.a, tr.b, tr.c);
+              const float d2 = point_triangle_dist2(position(p), tr);
               if (d2 < p.r * p.r) out.push(sidx[j], o, sqrtf(d2));
             }
           }
@@ -646,7 +610,8 @@ class GridDetector final : public Detector {
   GridSpec grid_;
   int reach_ = 1;
 
-  Buf<TriangleF> tris_;
+  Buf<PlanarTriangle> tris_;  // narrow-phase form
+  Buf<TriangleF> corners_;    // bin preparation only
   Buf<uint32_t> tri_original_, tri_start_, tri_end_;
   Buf<uint64_t> tri_cell_;
   Buf<uint32_t> bin_start_, bin_tri_;

@@ -1,0 +1,287 @@
+// Every method and traversal against the exact double-precision reference.
+#include "sim/detect.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+
+#include "sim/narrow_phase.h"
+#include "sim/particles.h"
+#include "sim/shapes.h"
+
+namespace collido::sim {
+namespace {
+
+const std::string kData = COLLIDO_TEST_DATA;
+
+struct Combo {
+  Method method;
+  Traversal traversal;
+};
+const Combo kCombos[] = {{Method::kBin, Traversal::kParticle},          {Method::kBin, Traversal::kWall},
+                         {Method::kGravity, Traversal::kParticle},      {Method::kGravity, Traversal::kWall},
+                         {Method::kCircumcircle, Traversal::kParticle}, {Method::kCircumcircle, Traversal::kWall},
+                         {Method::kMidpoint4, Traversal::kParticle},    {Method::kMidpoint4, Traversal::kWall}};
+
+DetectResult run(const TriangleMesh& mesh, const Particles& p, DetectConfig cfg) {
+  auto det = Detector::create(mesh, cfg, p.size());
+  EXPECT_TRUE(det) << det.status().message();
+  if (!det) return {};
+  DetectResult r;
+  Status s = (*det)->set_particles(p);
+  EXPECT_TRUE(s) << s.message();
+  s = (*det)->detect(&r);
+  EXPECT_TRUE(s) << s.message();
+  return r;
+}
+
+// Exact distance from particle i to the triangle with source id `tri`.
+double exact_distance(const TriangleMesh& mesh, const Particles& p, uint32_t i, uint32_t tri) {
+  for (size_t t = 0; t < mesh.triangles.size(); ++t)
+    if (mesh.source_ids[t] == tri)
+      return std::sqrt(point_triangle_dist2(Vec3d{p.x[i], p.y[i], p.z[i]}, mesh.corner(t, 0), mesh.corner(t, 1),
+                                            mesh.corner(t, 2)));
+  ADD_FAILURE() << "no triangle with id " << tri;
+  return 0;
+}
+
+// The accuracy contract: the same contact set as the reference, except pairs
+// whose exact distance is within tol of the radius; distances to float precision.
+void expect_same_contacts(const TriangleMesh& mesh, const Particles& p, const DetectResult& ref,
+                          const DetectResult& got, double r_max, const std::string& what) {
+  const double tol = 1e-5 * r_max;
+  std::map<std::pair<uint32_t, uint32_t>, double> a, b;
+  for (const auto& c : ref.contacts) a[{c.particle, c.triangle}] = c.distance;
+  for (const auto& c : got.contacts) b[{c.particle, c.triangle}] = c.distance;
+  int missed = 0, invented = 0, borderline = 0;
+  for (const auto& [key, d] : a) {
+    auto it = b.find(key);
+    if (it == b.end()) {
+      if (std::fabs(d - p.r[key.first]) <= tol) {
+        ++borderline;
+      } else if (++missed <= 5) {
+        ADD_FAILURE() << what << ": missed particle " << key.first << " triangle " << key.second << " d=" << d
+                      << " r=" << p.r[key.first];
+      }
+    } else {
+      EXPECT_NEAR(it->second, d, 2e-5 * std::max(1.0, r_max)) << what;
+    }
+  }
+  for (const auto& [key, d] : b) {
+    if (a.count(key)) continue;
+    const double exact = exact_distance(mesh, p, key.first, key.second);
+    if (std::fabs(exact - p.r[key.first]) <= tol) {
+      ++borderline;
+    } else if (++invented <= 5) {
+      ADD_FAILURE() << what << ": invented particle " << key.first << " triangle " << key.second
+                    << " exact d=" << exact << " r=" << p.r[key.first];
+    }
+  }
+  EXPECT_EQ(missed, 0) << what;
+  EXPECT_EQ(invented, 0) << what;
+  // Counts per particle agree with the contact list.
+  std::vector<uint32_t> counts(p.size(), 0);
+  for (const auto& c : got.contacts) ++counts[c.particle];
+  if (borderline == 0) {
+    EXPECT_EQ(counts, got.counts) << what;
+  }
+  EXPECT_EQ(got.contact_count, got.contacts.size()) << what;
+  // Sorted by particle, then triangle, no duplicates.
+  for (size_t k = 1; k < got.contacts.size(); ++k) {
+    const auto& u = got.contacts[k - 1];
+    const auto& v = got.contacts[k];
+    ASSERT_TRUE(u.particle < v.particle || (u.particle == v.particle && u.triangle < v.triangle)) << what;
+  }
+}
+
+// Particles near the surface (within 2 r of a random surface point) and uniform in the box.
+Particles scene_near(const TriangleMesh& mesh, size_t n, double r_lo, double r_hi, uint64_t seed) {
+  SplitMix64 rng(seed);
+  Bounds3d box = mesh_bounds(mesh);
+  Particles p;
+  p.resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    Vec3d c;
+    const double r = rng.uniform(r_lo, r_hi);
+    if (i % 2) {
+      c = {rng.uniform(box.lo.x, box.hi.x), rng.uniform(box.lo.y, box.hi.y), rng.uniform(box.lo.z, box.hi.z)};
+    } else {
+      const size_t t = rng.next() % mesh.triangles.size();
+      double u = rng.uniform(), v = rng.uniform();
+      if (u + v > 1) u = 1 - u, v = 1 - v;
+      const Vec3d a = mesh.corner(t, 0), b = mesh.corner(t, 1), cc = mesh.corner(t, 2);
+      const Vec3d on = a + (b - a) * u + (cc - a) * v;
+      Vec3d dir{rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-1, 1)};
+      dir = dir * (1.0 / std::max(1e-9, length(dir)));
+      c = on + dir * rng.uniform(0, 2 * r);
+    }
+    p.x[i] = c.x, p.y[i] = c.y, p.z[i] = c.z, p.r[i] = r;
+  }
+  return p;
+}
+
+void check_all_methods(const TriangleMesh& mesh, const Particles& p, const std::string& what,
+                       uint64_t max_dense_cells = 1ull << 24, double grid_length = 0) {
+  DetectConfig cfg;
+  cfg.r_max = max_radius(p);
+  cfg.max_dense_cells = max_dense_cells;
+  cfg.grid_length = grid_length;
+  DetectConfig rc = cfg;
+  rc.method = Method::kReference;
+  const DetectResult ref = run(mesh, p, rc);
+  ASSERT_EQ(ref.contact_count, ref.contacts.size());
+  for (const Combo& c : kCombos) {
+    DetectConfig mc = cfg;
+    mc.method = c.method;
+    mc.traversal = c.traversal;
+    const std::string label = what + " " + to_string(c.method) + "/" + to_string(c.traversal);
+    const DetectResult got = run(mesh, p, mc);
+    expect_same_contacts(mesh, p, ref, got, cfg.r_max, label);
+    // Counting alone gives the same counts as collecting.
+    mc.collect_contacts = false;
+    const DetectResult counted = run(mesh, p, mc);
+    EXPECT_EQ(counted.counts, got.counts) << label;
+  }
+}
+
+TEST(Detect, TwentyRandomScenesMatchTheReference) {
+  auto teapot = load_stl(kData + "/meshes/teapot_trimesh.stl");
+  ASSERT_TRUE(teapot);
+  const TriangleMesh walls[] = {make_cylinder(50, 100, 40), make_wall2(), make_sphere(10, 2),
+                                make_box(20, 30, 10), *teapot};
+  const double radius_hi[] = {3, 4, 1, 1.5, 0.4};
+  int scenes = 0;
+  for (int w = 0; w < 5; ++w) {
+    for (int k = 0; k < 4; ++k) {
+      const double hi = radius_hi[w] * (k % 2 ? 1.0 : 0.5);
+      const double lo = k < 2 ? hi : hi * 0.3;
+      Particles p = scene_near(walls[w], 1500, lo, hi, 100 + 10 * w + k);
+      check_all_methods(walls[w], p, "wall " + std::to_string(w) + " scene " + std::to_string(k));
+      ++scenes;
+    }
+  }
+  EXPECT_EQ(scenes, 20);
+}
+
+// Particles centred on vertices and edges shared by several triangles, and at
+// r (1 +- 1e-6) from faces, edges and corners.
+TEST(Detect, AdversarialPlacementsMatchTheReference) {
+  const TriangleMesh wall = make_cylinder(10, 20, 16);  // fan caps: one vertex shared by 14+ triangles
+  Particles p;
+  auto add = [&](Vec3d c, double r) {
+    p.x.push_back(c.x), p.y.push_back(c.y), p.z.push_back(c.z), p.r.push_back(r);
+  };
+  for (const Vec3d& v : wall.vertices) add(v, 1.0);
+  for (size_t t = 0; t < wall.triangles.size(); ++t) {
+    const Vec3d a = wall.corner(t, 0), b = wall.corner(t, 1), c = wall.corner(t, 2);
+    add((a + b) * 0.5, 0.7);
+    const Vec3d n = cross(b - a, c - a) * (1.0 / length(cross(b - a, c - a)));
+    const Vec3d centroid = (a + b + c) * (1.0 / 3.0);
+    for (double s : {1 - 1e-6, 1 + 1e-6, 1 - 1e-4, 1 + 1e-4}) {
+      add(centroid + n * s, 1.0);   // face, outside
+      add(centroid - n * s, 1.0);   // face, inside
+      const Vec3d out_of_edge = (a + b) * 0.5 + (((a + b) * 0.5 - c) * (1.0 / length((a + b) * 0.5 - c))) * s;
+      add(out_of_edge, 1.0);
+      const Vec3d beyond_corner = a + ((a - centroid) * (1.0 / length(a - centroid))) * s;
+      add(beyond_corner, 1.0);
+    }
+  }
+  check_all_methods(wall, p, "adversarial");
+  // Exactly-on-vertex particles touch every triangle around the vertex: one contact each.
+  DetectConfig rc;
+  rc.method = Method::kReference;
+  rc.r_max = 1.0;
+  const DetectResult ref = run(wall, p, rc);
+  EXPECT_GE(ref.counts[0], 3u);
+}
+
+TEST(Detect, SliversAndZeroAreaTrianglesInTheInput) {
+  // A fan of needles (slivers) plus degenerate triangles that loading drops.
+  std::vector<std::array<Vec3d, 3>> soup;
+  for (int i = 0; i < 40; ++i) {
+    const double a0 = 1e-3 * i, a1 = 1e-3 * (i + 1);
+    soup.push_back({Vec3d{0, 0, 0}, Vec3d{30 * std::cos(a0), 30 * std::sin(a0), 0},
+                    Vec3d{30 * std::cos(a1), 30 * std::sin(a1), 0}});
+    if (i % 10 == 0) soup.push_back({Vec3d{1, 1, 1}, Vec3d{2, 2, 2}, Vec3d{3, 3, 3}});  // collinear
+  }
+  MeshReport rep;
+  const TriangleMesh mesh = weld_soup(soup, {}, 0.0, &rep);
+  EXPECT_EQ(rep.dropped_zero_area, 4u);
+  EXPECT_EQ(mesh.triangles.size(), 40u);
+  Particles p = scene_near(mesh, 800, 0.2, 0.5, 5);
+  check_all_methods(mesh, p, "slivers");
+  // Contacts name the input file's triangle indices, which skip the dropped ones.
+  DetectConfig cfg;
+  cfg.r_max = max_radius(p);
+  const DetectResult r = run(mesh, p, cfg);
+  for (const auto& c : r.contacts) EXPECT_NE(c.triangle % 11, 1u) << "a dropped triangle's id was reported";
+}
+
+TEST(Detect, FarFromTheOrigin) {
+  TriangleMesh wall = make_cylinder(10, 20, 24);
+  translate(wall, {1e4, -1e4, 1e4});
+  Particles p = scene_near(wall, 3000, 1.0, 1.0, 9);
+  check_all_methods(wall, p, "far");
+}
+
+TEST(Detect, HashedGridGivesTheSameContacts) {
+  const TriangleMesh wall = make_wall2();
+  Particles p = scene_near(wall, 3000, 1, 2, 21);
+  check_all_methods(wall, p, "hashed", /*max_dense_cells=*/1);
+}
+
+TEST(Detect, OtherGridLengthsStayExact) {
+  const TriangleMesh wall = make_sphere(10, 2);
+  Particles p = scene_near(wall, 2000, 0.5, 1, 33);
+  check_all_methods(wall, p, "grid 0.7", 1ull << 24, 0.7);  // smaller than 2 r_max: wider neighbourhoods
+  check_all_methods(wall, p, "grid 5", 1ull << 24, 5.0);
+}
+
+TEST(Detect, ParticlesOutsideTheGridAndEmptyFrames) {
+  const TriangleMesh wall = make_box(10, 10, 10);
+  Particles p;
+  for (double x : {-1e6, 0.0, 1e6}) p.x.push_back(x), p.y.push_back(0), p.z.push_back(0), p.r.push_back(1);
+  check_all_methods(wall, p, "outside");
+  DetectConfig cfg;
+  cfg.r_max = 1;
+  auto det = Detector::create(wall, cfg, 10);
+  ASSERT_TRUE(det);
+  DetectResult r;
+  ASSERT_TRUE((*det)->set_particles(Particles{}));
+  ASSERT_TRUE((*det)->detect(&r));
+  EXPECT_EQ(r.contact_count, 0u);
+}
+
+TEST(Detect, BadInputsAreClearErrors) {
+  const TriangleMesh wall = make_box(10, 10, 10);
+  DetectConfig cfg;
+  cfg.r_max = 0;
+  EXPECT_FALSE(Detector::create(wall, cfg, 10));
+  cfg.r_max = 1;
+  EXPECT_FALSE(Detector::create(TriangleMesh{}, cfg, 10));
+  cfg.grid_length = 1e-9;
+  auto tiny = Detector::create(wall, cfg, 10);
+  ASSERT_FALSE(tiny);
+  EXPECT_NE(tiny.status().message().find("grid length"), std::string::npos);
+  cfg.grid_length = 0;
+  auto det = Detector::create(wall, cfg, 2);
+  ASSERT_TRUE(det);
+  Particles big;
+  big.x = {0}, big.y = {0}, big.z = {0}, big.r = {2};
+  Status s = (*det)->set_particles(big);
+  ASSERT_FALSE(s);
+  EXPECT_NE(s.message().find("r_max"), std::string::npos);
+  Particles many = random_particles(3, mesh_bounds(wall), 0.5, 0.5, 1);
+  EXPECT_FALSE((*det)->set_particles(many));
+  // Division that would explode is refused, not attempted.
+  DetectConfig huge;
+  huge.method = Method::kGravity;
+  huge.r_max = 1e-4;
+  auto refused = Detector::create(make_cylinder(50, 100, 40), huge, 10);
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.status().message().find("bin"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace collido::sim
