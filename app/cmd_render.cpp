@@ -119,16 +119,6 @@ void fill_particles(const sim::Snapshot& s, sim::Vec3d origin, render::Snapshot*
 // Top of the colour map: the largest 99.5th-percentile speed over up to 16
 // frames spread through the run, so a few outliers do not wash out the rest
 // and the scale stays the same in every frame of the video.
-// The next round number at or above v (1, 1.5, 2, 2.5, 3, 4, 5, 6, 8 x 10^k),
-// so the legend's top tick is a number people read at a glance.
-float round_up_nicely(float v) {
-  if (!(v > 0)) return 1.f;
-  const double p10 = std::pow(10.0, std::floor(std::log10(double(v))));
-  for (double f : {1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0})
-    if (f * p10 >= double(v) * (1 - 1e-6)) return float(f * p10);
-  return float(10 * p10);
-}
-
 float estimate_speed_max(const std::vector<FrameFile>& frames) {
   const size_t samples = std::min<size_t>(16, frames.size());
   float best = 0;
@@ -145,7 +135,7 @@ float estimate_speed_max(const std::vector<FrameFile>& frames) {
     std::nth_element(speed.begin(), speed.begin() + q, speed.end());
     best = std::max(best, speed[q]);
   }
-  return round_up_nicely(best);
+  return render::round_up_nicely(best);
 }
 
 std::string frame_png_name(uint64_t index) {
@@ -488,6 +478,7 @@ const std::vector<FlagSpec> kBenchFlags = {
     {"encode-frames", true, "frames encoded per codec (default 90)"},
     {"msaa", true, "multisample anti-aliasing samples (default 0, as `render`)"},
     {"seed", true, "random seed (default 1)"},
+    {"save", true, "also write the last frame of each count to DIR/bench_N.png"},
     {"help", false, "show this help"},
 };
 
@@ -588,7 +579,7 @@ int bench_render(const Args& args) {
 
   ro.camera = render::CameraPreset::kOrbit;
   ro.color_min = 0;
-  ro.color_max = 4.8f;
+  ro.color_max = 5.f;
   render::Status st;
   auto renderer = render::Renderer::create(ro, &st);
   if (!renderer) {
@@ -636,6 +627,11 @@ int bench_render(const Args& args) {
                 sum.draw_ms * k, sum.readback_ms * k, sum.overlay_ms * k,
                 1e3 / (sum.total_ms() * k));
     std::fflush(stdout);
+    if (p->has("save")) {
+      const std::string path = p->get("save") + "/bench_" + std::to_string(n) + ".png";
+      if (!(st = render::write_png(path, image)))
+        std::fprintf(stderr, "collidoscope bench render: %s\n", st.message().c_str());
+    }
     if (n == clip_count) {
       // 30 different frames (a slow orbit) so the encoders see real motion.
       for (int f = 0; f < 30; ++f) {

@@ -19,6 +19,6 @@ const std::array<Rgb8, 256>& viridis_table();
 
 // Colours of the contact mode: particles touching the wall, and the others.
 inline constexpr Rgb8 kContactColor{242, 110, 34};
-inline constexpr Rgb8 kFreeColor{150, 170, 200};
+inline constexpr Rgb8 kFreeColor{86, 146, 230};
 
 }  // namespace collido::render

@@ -36,6 +36,10 @@ bool parse_camera(const std::string& s, CameraPreset* out);
 bool parse_color_mode(const std::string& s, ColorMode* out);
 bool parse_wall_style(const std::string& s, WallStyle* out);
 
+// The next round number at or above v (1, 1.5, 2, 2.5, 3, 4, 5, 6 or 8 times a
+// power of ten), for colour-map ranges whose top legend tick reads at a glance.
+float round_up_nicely(float v);
+
 inline constexpr const char* kDefaultFont = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
 
 struct RenderOptions {

@@ -54,6 +54,14 @@ bool parse_wall_style(const std::string& s, WallStyle* out) {
   return true;
 }
 
+float round_up_nicely(float v) {
+  if (!(v > 0) || !std::isfinite(v)) return 1.f;
+  const double p10 = std::pow(10.0, std::floor(std::log10(double(v))));
+  for (double f : {1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0})
+    if (f * p10 >= double(v) * (1 - 1e-6)) return float(f * p10);
+  return float(10 * p10);
+}
+
 namespace {
 
 using Clock = std::chrono::steady_clock;
@@ -533,6 +541,8 @@ Status Renderer::Impl::render(const Snapshot& s, Image* image) {
     for (float v : s.scalar)
       if (std::isfinite(v)) lo = std::min(lo, v), hi = std::max(hi, v);
     if (!(hi > lo)) hi = (std::isfinite(lo) ? lo : 0) + 1, lo = hi - 1;
+    // Speeds start at zero; a round top keeps the legend readable.
+    if (lo >= 0) lo = 0, hi = round_up_nicely(hi);
   }
 
   gl.BindFramebuffer(GL_FRAMEBUFFER, fbo);

@@ -145,7 +145,12 @@ inline constexpr const char* kEdgeVs = R"(#version 330 core
 layout(location = 0) in vec3 a_pos;
 uniform mat4 u_view;
 uniform mat4 u_proj;
-void main() { gl_Position = u_proj * u_view * vec4(a_pos, 1.0); }
+void main() {
+  gl_Position = u_proj * u_view * vec4(a_pos, 1.0);
+  // Lines lie exactly on the wall's edges; pull them a hair toward the camera
+  // so they do not fight with the faces they bound (seen as dashed rims).
+  gl_Position.z -= 4e-4 * gl_Position.w;
+}
 )";
 inline constexpr const char* kEdgeFs = R"(#version 330 core
 uniform vec4 u_color;
