@@ -47,6 +47,7 @@ const std::vector<FlagSpec> kRenderFlags = {
     {"video", true, "mp4,webm | mp4 | webm | none (default mp4,webm)"},
     {"msaa", true, "multisample anti-aliasing of the wall edges: 0 (default) or 2..16"},
     {"no-overlay", false, "no time/frame text and no legend"},
+    {"no-cull", false, "draw every particle (the occlusion test never changes the image)"},
     {"help", false, "show this help"},
 };
 
@@ -294,6 +295,7 @@ int cmd_render(const Args& args) {
   if (!render::parse_wall_style(p->get("wall", "glass"), &ro.wall))
     return usage_error("render", "--wall must be glass, cutaway or hidden");
   ro.overlay = !p->has("no-overlay");
+  ro.cull_hidden = !p->has("no-cull");
   bool want_mp4 = false, want_webm = false;
   {
     const std::string v = p->get("video", "mp4,webm");
@@ -479,6 +481,7 @@ const std::vector<FlagSpec> kBenchFlags = {
     {"msaa", true, "multisample anti-aliasing samples (default 0, as `render`)"},
     {"seed", true, "random seed (default 1)"},
     {"save", true, "also write the last frame of each count to DIR/bench_N.png"},
+    {"no-cull", false, "draw every particle, to measure what occlusion culling saves"},
     {"help", false, "show this help"},
 };
 
@@ -578,6 +581,7 @@ int bench_render(const Args& args) {
   }
 
   ro.camera = render::CameraPreset::kOrbit;
+  ro.cull_hidden = !p->has("no-cull");
   ro.color_min = 0;
   ro.color_max = 5.f;
   render::Status st;

@@ -211,13 +211,25 @@ std::vector<std::pair<double, std::string>> legend_ticks(double lo, double hi) {
   std::vector<std::pair<double, std::string>> ticks;
   const double range = hi - lo;
   if (!(range > 0) || !std::isfinite(range)) return ticks;
+  // Prefer a step that lands on both ends (0..5 by 1, 0..150 by 50), else
+  // the round step nearest a quarter of the range.
   const double raw = range / 4, p10 = std::pow(10.0, std::floor(std::log10(raw)));
-  double step = 5 * p10;
-  for (double f : {1.0, 2.0, 2.5, 5.0})
-    if (f * p10 >= raw) {
-      step = f * p10;
-      break;
+  double step = 0;
+  for (double scale : {p10 * 10, p10, p10 / 10})
+    for (double f : {5.0, 2.5, 2.0, 1.0}) {
+      const double q = range / (f * scale);
+      if (!step && q >= 2 - 1e-9 && q <= 6 + 1e-9 && std::fabs(q - std::round(q)) < 1e-6 &&
+          std::fabs(lo / (f * scale) - std::round(lo / (f * scale))) < 1e-6)
+        step = f * scale;
     }
+  if (!step) {
+    step = 5 * p10;
+    for (double f : {1.0, 2.0, 2.5, 5.0})
+      if (f * p10 >= raw) {
+        step = f * p10;
+        break;
+      }
+  }
   const double mag = std::max(std::fabs(lo), std::fabs(hi));
   const bool sci = mag >= 1e5 || (mag > 0 && step < 1e-3);
   int decimals = 0;  // as many as the step needs: 0.25 -> 2, 50 -> 0

@@ -89,7 +89,10 @@ void main() {
   }
   vec3 n = vec3(p, z);
   float diffuse = max(dot(n, u_light), 0.0);
-  float spec = pow(max(dot(n, u_half), 0.0), 48.0);
+  // x^48 by squaring: llvmpipe turns pow() into exp2/log2 polynomials.
+  float s1 = max(dot(n, u_half), 0.0);
+  float s2 = s1 * s1, s4 = s2 * s2, s8 = s4 * s4, s16 = s8 * s8;
+  float spec = s16 * s16 * s16;
   // Darken toward the silhouette a little so touching balls stay apart.
   float rim = 0.75 + 0.25 * z;
   vec3 c = v_color.rgb * (0.3 + 0.75 * diffuse) * rim + vec3(0.45) * spec;
@@ -132,9 +135,11 @@ void main() {
   float ndv = clamp(dot(n, v), 0.0, 1.0);
   float diffuse = max(dot(n, u_light), 0.0);
   vec3 h = normalize(u_light + v);
-  float spec = pow(max(dot(n, h), 0.0), 32.0);
+  float s1 = max(dot(n, h), 0.0);
+  float s2 = s1 * s1, s4 = s2 * s2, s8 = s4 * s4, s16 = s8 * s8;
+  float spec = s16 * s16;
   vec3 c = u_color * (0.35 + 0.65 * diffuse) + vec3(0.5) * spec;
-  float edge = pow(1.0 - ndv, 3.0);
+  float edge = (1.0 - ndv) * (1.0 - ndv) * (1.0 - ndv);
   float a = clamp(u_opacity + u_fresnel * edge + 0.6 * spec * u_fresnel, 0.0, 1.0);
   o_color = vec4(c, a);
 }
