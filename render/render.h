@@ -1,7 +1,8 @@
 // The renderer's entry header: snapshots in, images out, then PNG and video.
 // Free of GL, FFmpeg and FreeType types; every call reports errors through
 // Status, never by exceptions. One Renderer uses one offscreen GL context bound
-// to the thread that created it: call it from that thread only.
+// to the calling thread on each render(): never use one Renderer from two
+// threads at once.
 #pragma once
 
 #include <array>
@@ -18,8 +19,8 @@ namespace collido::render {
 
 // Where the camera looks from. The world's up axis is +z.
 enum class CameraPreset {
-  kFront,  // from -y, level
-  kIso,    // from the front-left, 30 degrees above
+  kFront,  // from -y, 8 degrees above the horizon
+  kIso,    // from the front-left (35 degrees round), 28 degrees above
   kTop,    // straight down
   kOrbit,  // like kIso, turning around the vertical axis (see RenderOptions::orbit_deg)
 };
@@ -51,7 +52,9 @@ struct RenderOptions {
   double fov_deg = 30;        // vertical field of view, degrees
   ColorMode color = ColorMode::kSpeed;
   // Speed mapped to the ends of the colour map (world units/s). When
-  // color_max <= color_min the range is taken from each frame (min..max).
+  // color_max <= color_min the range is taken from each frame: its min..max,
+  // or 0..max rounded up (round_up_nicely) when no value is negative. A run
+  // should pass a fixed range so colours mean the same in every frame.
   float color_min = 0;
   float color_max = 0;
   std::string color_label = "speed";  // legend title
