@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "sim/parallel.h"
+#include "sim/status.h"
 
 namespace collido::sim {
 
@@ -35,6 +36,7 @@ class CpuBackend {
   void to_device(void* dst, const void* src, size_t bytes) { std::memcpy(dst, src, bytes); }
   void to_host(void* dst, const void* src, size_t bytes) { std::memcpy(dst, src, bytes); }
   void sync() {}
+  Status status() const { return Status::ok(); }
 
   // In-place exclusive prefix sum; returns the total.
   uint64_t exclusive_scan(uint32_t* d, size_t n) {

@@ -98,15 +98,7 @@ class GridDetector final : public Detector {
   Status detect(DetectResult* out) override {
     *out = DetectResult{};
     const auto t_frame = clock();
-    auto t = clock();
-    auto lap = [&](double& slot) {
-      if (cfg_.time_stages) {
-        backend_.sync();
-        auto now = clock();
-        slot += ms(t, now);
-        t = now;
-      }
-    };
+    lap_start_ = t_frame;
     const bool bin = cfg_.method == Method::kBin;
     const bool wall = cfg_.traversal == Traversal::kWall;
     if (bin && !wall) {
@@ -120,7 +112,7 @@ class GridDetector final : public Detector {
       }
       lap(out->times.traverse_ms);
     } else {
-      hash_and_sort(out, lap);
+      hash_and_sort(out);
       for (bool fits = false; !fits; fits = pairs_fit()) {
         reset_pairs();
         if (bin)
@@ -143,23 +135,34 @@ class GridDetector final : public Detector {
     }
     backend_.sync();
     out->times.frame_ms = ms(t_frame, clock());
+    if (Status e = backend_.status(); !e) return e;
     // Results for the caller: outside the frame's time.
-    t = clock();
+    const auto t = clock();
     download(unique, out);
     out->times.download_ms = ms(t, clock());
-    return Status::ok();
+    return backend_.status();
   }
 
  private:
   GridDetector(const DetectConfig& cfg, size_t cap) : cfg_(cfg), capacity_(cap) {}
 
   using Clock = std::chrono::steady_clock;
+  // Adds the time since the previous lap to `slot` (with a device sync) when stages are timed.
+  void lap(double& slot) {
+    if (!cfg_.time_stages) return;
+    backend_.sync();
+    const auto now = clock();
+    slot += ms(lap_start_, now);
+    lap_start_ = now;
+  }
+  Clock::time_point lap_start_;
   static Clock::time_point clock() { return Clock::now(); }
   static double ms(Clock::time_point a, Clock::time_point b) {
     return std::chrono::duration<double, std::milli>(b - a).count();
   }
 
   // --- preparation -------------------------------------------------------------------------
+ public:
 
   Status prepare(const TriangleMesh& mesh) {
     const auto t0 = clock();
@@ -199,6 +202,7 @@ class GridDetector final : public Detector {
     grow_pairs(std::max<size_t>(capacity_ / 4, 4096));
     backend_.resize(pair_counter_, 1);
     backend_.sync();
+    if (Status e = backend_.status(); !e) return e;
     info_.prepare_ms = ms(t0, clock());
     info_.device_bytes = backend_.bytes_held();
     return Status::ok();
@@ -238,7 +242,7 @@ class GridDetector final : public Detector {
     for (size_t i = 0; i < m; ++i) {
       const auto& p = dv.pieces[i];
       tris[i] = make_planar(p[0], p[1], p[2], origin_);
-      int x, y, z;
+      int x = 0, y = 0, z = 0;
       Vec3f c = cast3<float>(dv.sphere_centre[i] - origin_);
       if (!grid_.cell_of(c, x, y, z)) return Status(ErrorCode::kBackend, "piece centre outside its grid");
       cellkey[i] = grid_.linear(x, y, z);
@@ -354,15 +358,17 @@ class GridDetector final : public Detector {
   }
 
   // --- frame stages -------------------------------------------------------------------------
+  // Public only because nvcc's extended (host/device) lambdas may not live in
+  // private member functions; nothing outside this class calls them.
+ public:
 
-  template <class Lap>
-  void hash_and_sort(DetectResult* out, Lap& lap) {
+  void hash_and_sort(DetectResult* out) {
     const GridSpec g = grid_;
     const PackedParticle* P = particles_.data();
     uint32_t* key = p_key_.data();
     uint32_t* idx = p_idx_.data();
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
-      int x, y, z;
+      int x = 0, y = 0, z = 0;
       key[i] = g.cell_of(position(P[i]), x, y, z) ? g.bucket(g.linear(x, y, z)) : kInvalidBucket;
       idx[i] = i;
     });
@@ -439,7 +445,7 @@ class GridDetector final : public Detector {
     const PairSink out = sink();
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
       const PackedParticle p = P[i];
-      int x, y, z;
+      int x = 0, y = 0, z = 0;
       uint32_t n = 0;
       if (g.cell_of(position(p), x, y, z)) {
         const uint64_t l = g.linear(x, y, z);
@@ -479,7 +485,7 @@ class GridDetector final : public Detector {
       for (uint32_t j = pstart[b], e = pend[b]; j < e; ++j) {
         const PackedParticle p = SP[j];
         if (g.hashed) {
-          int x, y, z;
+          int x = 0, y = 0, z = 0;
           g.cell_of(position(p), x, y, z);
           if (g.linear(x, y, z) != l) continue;
         }
@@ -512,7 +518,7 @@ class GridDetector final : public Detector {
       const PackedParticle p = SP[j];
       const Vec3f c = position(p);
       const float r2 = p.r * p.r;
-      int cx, cy, cz;
+      int cx = 0, cy = 0, cz = 0;
       g.cell_of(c, cx, cy, cz);
       for (int dz = -reach; dz <= reach; ++dz)
         for (int dy = -reach; dy <= reach; ++dy)
@@ -547,7 +553,7 @@ class GridDetector final : public Detector {
     backend_.parallel_for(info_.triangles_used, [=] COLLIDO_HD(uint32_t k) {
       const PlanarTriangle& tr = T[k];
       const uint32_t o = orig[k];
-      int cx, cy, cz;
+      int cx = 0, cy = 0, cz = 0;
       g.unlinear(tcell[k], cx, cy, cz);
       for (int dz = -reach; dz <= reach; ++dz)
         for (int dy = -reach; dy <= reach; ++dy)
@@ -559,7 +565,7 @@ class GridDetector final : public Detector {
             for (uint32_t j = pstart[b], e = pend[b]; j < e; ++j) {
               const PackedParticle p = SP[j];
               if (g.hashed) {
-                int px, py, pz;
+                int px = 0, py = 0, pz = 0;
                 g.cell_of(position(p), px, py, pz);
                 if (g.linear(px, py, pz) != l) continue;
               }
