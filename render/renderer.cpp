@@ -292,6 +292,8 @@ struct Renderer::Impl {
     if (gl.DeleteFramebuffers) {
       GLuint f[] = {fbo, resolve_fbo};
       gl.DeleteFramebuffers(2, f);
+    }
+    if (gl.DeleteRenderbuffers) {
       GLuint r[] = {color_rb, depth_rb, resolve_rb};
       gl.DeleteRenderbuffers(3, r);
     }
