@@ -15,3 +15,10 @@ bool cuda_device_usable(std::string* why);
 #endif
 
 }  // namespace collido::sim
+
+namespace collido::sim {
+// Device name and the measured device-to-device copy bandwidth (GB/s, bytes
+// read plus written), the ceiling for memory-bound frames. 0 without CUDA.
+std::string cuda_device_name();
+double cuda_copy_bandwidth_gbs();
+}  // namespace collido::sim
