@@ -1,4 +1,5 @@
 // `collidoscope detect`: one detection frame on a wall and a particle set.
+#include <cerrno>
 #include <cstdio>
 #include <fstream>
 #include <sstream>
@@ -6,6 +7,9 @@
 #include "app/cli.h"
 #include "app/commands.h"
 #include "app/detect_setup.h"
+#include "sim/snapshot.h"
+
+#include <sys/stat.h>
 
 namespace collido::app {
 
@@ -24,8 +28,28 @@ const std::vector<FlagSpec> kFlags = {
     {"threads", true, "CPU threads (default: all cores)"},
     {"out", true, "write contacts to this CSV: particle,triangle,distance"},
     {"json", false, "print a machine-readable summary"},
+    {"snapshot", true, "write DIR/wall.stl and DIR/frames/frame_000000.snap (contact flags) for `render`"},
     {"help", false, "show this help"},
 };
+
+// One frame as a run directory: the wall and the particles with their contact flags.
+sim::Status write_detect_snapshot(const std::string& dir, const DetectSetup& setup, const sim::DetectResult& result) {
+  for (const std::string& d : {dir, dir + "/frames"})
+    if (::mkdir(d.c_str(), 0755) != 0 && errno != EEXIST) return sim::io_error(d + ": cannot create directory");
+  if (sim::Status s = sim::save_stl(setup.wall, dir + "/wall.stl"); !s) return s;
+  sim::Snapshot snap;
+  const sim::Vec3d origin = sim::mesh_bounds(setup.wall).center();
+  snap.origin = origin;
+  snap.resize(setup.particles.size());
+  for (size_t i = 0; i < setup.particles.size(); ++i) {
+    snap.x[i] = static_cast<float>(setup.particles.x[i] - origin.x);
+    snap.y[i] = static_cast<float>(setup.particles.y[i] - origin.y);
+    snap.z[i] = static_cast<float>(setup.particles.z[i] - origin.z);
+    snap.r[i] = static_cast<float>(setup.particles.r[i]);
+    snap.contact[i] = result.counts[i] != 0;
+  }
+  return sim::write_snapshot(sim::snapshot_path(dir, 0), snap);
+}
 
 }  // namespace
 
@@ -75,6 +99,13 @@ int cmd_detect(const Args& args) {
     }
     if (std::rename(tmp.c_str(), path.c_str()) != 0) {
       std::fprintf(stderr, "collidoscope detect: %s: cannot rename into place\n", path.c_str());
+      return kExitFailure;
+    }
+  }
+
+  if (parsed->has("snapshot")) {
+    if (sim::Status w = write_detect_snapshot(parsed->get("snapshot"), setup, result); !w) {
+      std::fprintf(stderr, "collidoscope detect: %s\n", w.message().c_str());
       return kExitFailure;
     }
   }
