@@ -68,7 +68,7 @@ int build_detect_setup(const ParsedArgs& args, const std::string& command, Detec
   }
   if (!(r_lo > 0) || !(r_hi >= r_lo) || !std::isfinite(r_hi))
     return usage_error(command, "radii must satisfy 0 < A <= B");
-  const bool is_count = pspec.find_first_not_of("0123456789e+.") == std::string::npos;
+  const bool is_count = pspec.find_first_not_of("0123456789eE+-.") == std::string::npos;
   if (is_count) {
     const int64_t n = args.get_int("particles", 0, &err);
     if (!err.empty()) return usage_error(command, err);
