@@ -254,156 +254,132 @@ bool moov_before_mdat(const std::string& path) {
   return result;
 }
 
+// An opened video stream and its decoder, closed on destruction. probe_video
+// and read_video_frame share it: both open, then walk the decoded frames.
+struct Decoder {
+  std::string path;
+  AVFormatContext* fmt = nullptr;
+  AVCodecContext* dec = nullptr;
+  AVPacket* pkt = nullptr;
+  AVFrame* frame = nullptr;
+  int stream = -1;
+
+  ~Decoder() {
+    av_frame_free(&frame);
+    av_packet_free(&pkt);
+    avcodec_free_context(&dec);
+    avformat_close_input(&fmt);
+  }
+
+  Status open(const std::string& p) {
+    quiet_libav_logs();
+    path = p;
+    int rc = avformat_open_input(&fmt, path.c_str(), nullptr, nullptr);
+    if (rc < 0) return Status::error("cannot open video " + path + ": " + av_error(rc));
+    if ((rc = avformat_find_stream_info(fmt, nullptr)) < 0)
+      return Status::error(path + ": no stream info: " + av_error(rc));
+    const AVCodec* decoder = nullptr;
+    stream = av_find_best_stream(fmt, AVMEDIA_TYPE_VIDEO, -1, -1, &decoder, 0);
+    if (stream < 0 || !decoder) return Status::error(path + ": no decodable video stream");
+    dec = avcodec_alloc_context3(decoder);
+    avcodec_parameters_to_context(dec, fmt->streams[stream]->codecpar);
+    if ((rc = avcodec_open2(dec, decoder, nullptr)) < 0)
+      return Status::error(path + ": cannot open decoder: " + av_error(rc));
+    pkt = av_packet_alloc();
+    frame = av_frame_alloc();
+    return Status::ok();
+  }
+
+  // Decodes frames in order, calling on_frame(frame) until it returns false or
+  // the stream ends (the decoder is flushed at the end).
+  template <class F>
+  Status for_each_frame(F&& on_frame) {
+    bool flushing = false;
+    for (;;) {
+      int rc = avcodec_receive_frame(dec, frame);
+      if (rc == 0) {
+        if (!on_frame(frame)) return Status::ok();
+        continue;
+      }
+      if (rc == AVERROR_EOF) return Status::ok();
+      if (rc != AVERROR(EAGAIN)) return Status::error(path + ": decoding failed: " + av_error(rc));
+      if (flushing) return Status::ok();
+      // The decoder wants input: the next packet of our stream, or a flush.
+      for (;;) {
+        rc = av_read_frame(fmt, pkt);
+        if (rc < 0) {
+          avcodec_send_packet(dec, nullptr);
+          flushing = true;
+          break;
+        }
+        const bool ours = pkt->stream_index == stream;
+        if (ours) rc = avcodec_send_packet(dec, pkt);
+        av_packet_unref(pkt);
+        if (ours) {
+          if (rc < 0 && rc != AVERROR(EAGAIN)) return Status::error(path + ": corrupt packet: " + av_error(rc));
+          break;
+        }
+      }
+    }
+  }
+};
+
 }  // namespace
 
 Status probe_video(const std::string& path, VideoInfo* info) {
-  quiet_libav_logs();
-  AVFormatContext* fmt = nullptr;
-  int rc = avformat_open_input(&fmt, path.c_str(), nullptr, nullptr);
-  if (rc < 0) return Status::error("cannot open video " + path + ": " + av_error(rc));
-  struct Cleanup {
-    AVFormatContext** fmt;
-    AVCodecContext* dec = nullptr;
-    AVPacket* pkt = nullptr;
-    AVFrame* frame = nullptr;
-    ~Cleanup() {
-      av_frame_free(&frame);
-      av_packet_free(&pkt);
-      avcodec_free_context(&dec);
-      avformat_close_input(fmt);
-    }
-  } cleanup{&fmt};
-
-  rc = avformat_find_stream_info(fmt, nullptr);
-  if (rc < 0) return Status::error(path + ": no stream info: " + av_error(rc));
-  const AVCodec* decoder = nullptr;
-  const int si = av_find_best_stream(fmt, AVMEDIA_TYPE_VIDEO, -1, -1, &decoder, 0);
-  if (si < 0 || !decoder) return Status::error(path + ": no decodable video stream");
-  AVStream* st = fmt->streams[si];
-  cleanup.dec = avcodec_alloc_context3(decoder);
-  avcodec_parameters_to_context(cleanup.dec, st->codecpar);
-  rc = avcodec_open2(cleanup.dec, decoder, nullptr);
-  if (rc < 0) return Status::error(path + ": cannot open decoder: " + av_error(rc));
-
+  Decoder d;
+  if (Status s = d.open(path); !s) return s;
+  const AVStream* st = d.fmt->streams[d.stream];
   VideoInfo out;
-  out.container = fmt->iformat->name;
+  out.container = d.fmt->iformat->name;
   out.codec = avcodec_get_name(st->codecpar->codec_id);
   out.width = st->codecpar->width;
   out.height = st->codecpar->height;
   if (const char* pf = av_get_pix_fmt_name(AVPixelFormat(st->codecpar->format)))
     out.pixel_format = pf;
-  if (fmt->duration > 0)
-    out.duration_s = double(fmt->duration) / AV_TIME_BASE;
+  if (d.fmt->duration > 0)
+    out.duration_s = double(d.fmt->duration) / AV_TIME_BASE;
   else if (st->duration > 0)
     out.duration_s = st->duration * av_q2d(st->time_base);
   if (st->avg_frame_rate.den) out.fps = av_q2d(st->avg_frame_rate);
-
-  cleanup.pkt = av_packet_alloc();
-  cleanup.frame = av_frame_alloc();
-  auto receive_all = [&]() -> Status {
-    for (;;) {
-      int r = avcodec_receive_frame(cleanup.dec, cleanup.frame);
-      if (r == AVERROR(EAGAIN) || r == AVERROR_EOF) return Status::ok();
-      if (r < 0) return Status::error(path + ": decoding failed: " + av_error(r));
-      ++out.frames;
-    }
-  };
-  while ((rc = av_read_frame(fmt, cleanup.pkt)) >= 0) {
-    if (cleanup.pkt->stream_index == si) {
-      rc = avcodec_send_packet(cleanup.dec, cleanup.pkt);
-      if (rc < 0 && rc != AVERROR(EAGAIN)) {
-        av_packet_unref(cleanup.pkt);
-        return Status::error(path + ": corrupt packet: " + av_error(rc));
-      }
-      if (Status s = receive_all(); !s) {
-        av_packet_unref(cleanup.pkt);
-        return s;
-      }
-    }
-    av_packet_unref(cleanup.pkt);
-  }
-  avcodec_send_packet(cleanup.dec, nullptr);
-  if (Status s = receive_all(); !s) return s;
+  if (Status s = d.for_each_frame([&](AVFrame*) { return ++out.frames, true; }); !s) return s;
   if (out.container.find("mp4") != std::string::npos) out.index_at_front = moov_before_mdat(path);
   *info = out;
   return Status::ok();
 }
 
 Status read_video_frame(const std::string& path, int index, Image* image) {
-  quiet_libav_logs();
-  AVFormatContext* fmt = nullptr;
-  int rc = avformat_open_input(&fmt, path.c_str(), nullptr, nullptr);
-  if (rc < 0) return Status::error("cannot open video " + path + ": " + av_error(rc));
-  struct Cleanup {
-    AVFormatContext** fmt;
-    AVCodecContext* dec = nullptr;
-    AVPacket* pkt = nullptr;
-    AVFrame* frame = nullptr;
-    SwsContext* sws = nullptr;
-    ~Cleanup() {
-      sws_freeContext(sws);
-      av_frame_free(&frame);
-      av_packet_free(&pkt);
-      avcodec_free_context(&dec);
-      avformat_close_input(fmt);
-    }
-  } c{&fmt};
-  if ((rc = avformat_find_stream_info(fmt, nullptr)) < 0)
-    return Status::error(path + ": no stream info: " + av_error(rc));
-  const AVCodec* decoder = nullptr;
-  const int si = av_find_best_stream(fmt, AVMEDIA_TYPE_VIDEO, -1, -1, &decoder, 0);
-  if (si < 0 || !decoder) return Status::error(path + ": no decodable video stream");
-  c.dec = avcodec_alloc_context3(decoder);
-  avcodec_parameters_to_context(c.dec, fmt->streams[si]->codecpar);
-  if ((rc = avcodec_open2(c.dec, decoder, nullptr)) < 0)
-    return Status::error(path + ": cannot open decoder: " + av_error(rc));
-  c.pkt = av_packet_alloc();
-  c.frame = av_frame_alloc();
+  Decoder d;
+  if (Status s = d.open(path); !s) return s;
   int seen = 0;
-  bool flushing = false;
-  for (;;) {
-    rc = avcodec_receive_frame(c.dec, c.frame);
-    if (rc == 0) {
-      if (seen++ < index) continue;
-      AVFrame* f = c.frame;
-      c.sws = sws_getContext(f->width, f->height, AVPixelFormat(f->format), f->width, f->height,
-                             AV_PIX_FMT_RGB24, SWS_BILINEAR, nullptr, nullptr, nullptr);
-      if (!c.sws) return Status::error(path + ": cannot convert the frame to RGB");
-      const int space = f->colorspace == AVCOL_SPC_BT709 ? SWS_CS_ITU709 : SWS_CS_ITU601;
-      const int* coeffs = sws_getCoefficients(space);
-      sws_setColorspaceDetails(c.sws, coeffs, f->color_range == AVCOL_RANGE_JPEG, coeffs, 1, 0,
-                               1 << 16, 1 << 16);
-      Image out;
-      out.resize(f->width, f->height);
-      uint8_t* dst[1] = {out.rgb.data()};
-      const int stride[1] = {f->width * 3};
-      sws_scale(c.sws, f->data, f->linesize, 0, f->height, dst, stride);
-      *image = std::move(out);
-      return Status::ok();
+  bool found = false;
+  Status convert = Status::ok();
+  Status walked = d.for_each_frame([&](AVFrame* f) {
+    if (seen++ < index) return true;
+    found = true;
+    SwsContext* sws = sws_getContext(f->width, f->height, AVPixelFormat(f->format), f->width, f->height,
+                                     AV_PIX_FMT_RGB24, SWS_BILINEAR, nullptr, nullptr, nullptr);
+    if (!sws) {
+      convert = Status::error(path + ": cannot convert the frame to RGB");
+      return false;
     }
-    if (rc == AVERROR_EOF) break;
-    if (rc != AVERROR(EAGAIN)) return Status::error(path + ": decoding failed: " + av_error(rc));
-    if (flushing) break;
-    // The decoder wants input: the next packet of our stream, or a flush.
-    for (;;) {
-      rc = av_read_frame(fmt, c.pkt);
-      if (rc < 0) {
-        avcodec_send_packet(c.dec, nullptr);
-        flushing = true;
-        break;
-      }
-      const bool ours = c.pkt->stream_index == si;
-      if (ours) rc = avcodec_send_packet(c.dec, c.pkt);
-      av_packet_unref(c.pkt);
-      if (ours) {
-        if (rc < 0 && rc != AVERROR(EAGAIN))
-          return Status::error(path + ": corrupt packet: " + av_error(rc));
-        break;
-      }
-    }
-  }
-  return Status::error(path + ": has " + std::to_string(seen) + " frames, no frame " +
-                       std::to_string(index));
+    const int space = f->colorspace == AVCOL_SPC_BT709 ? SWS_CS_ITU709 : SWS_CS_ITU601;
+    const int* coeffs = sws_getCoefficients(space);
+    sws_setColorspaceDetails(sws, coeffs, f->color_range == AVCOL_RANGE_JPEG, coeffs, 1, 0, 1 << 16, 1 << 16);
+    Image out;
+    out.resize(f->width, f->height);
+    uint8_t* dst[1] = {out.rgb.data()};
+    const int stride[1] = {f->width * 3};
+    sws_scale(sws, f->data, f->linesize, 0, f->height, dst, stride);
+    sws_freeContext(sws);
+    *image = std::move(out);
+    return false;
+  });
+  if (!walked) return walked;
+  if (!convert) return convert;
+  if (!found)
+    return Status::error(path + ": has " + std::to_string(seen) + " frames, no frame " + std::to_string(index));
+  return Status::ok();
 }
 
 }  // namespace collido::render
