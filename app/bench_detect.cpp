@@ -236,23 +236,19 @@ int bench_detect(const Args& args) {
             (*ref)->detect(&rr);
             ref_pairs[si] = std::move(rr.contacts);
           }
-          sim::DetectConfig cc = cfg;
-          cc.collect_contacts = true;
-          auto col = sim::Detector::create(base.wall, cc, sizes[si]);
           sim::DetectResult got;
-          (*col)->set_particles(scenes[si]);
-          (*col)->detect(&got);
+          (*det)->set_frame_options(/*collect_contacts=*/true, /*time_stages=*/false);
+          (*det)->detect(&got);
+          (*det)->set_frame_options(false, false);
           const sim::ContactDiff d = sim::compare_contacts(base.wall, scenes[si], ref_pairs[si], got.contacts, 1e-5 * r_hi);
           borderline += d.borderline, missed += d.missed, invented += d.invented;
         }
         if (si + 1 == sizes.size()) {
-          sim::DetectConfig staged = cfg;
-          staged.time_stages = true;
-          auto d2 = sim::Detector::create(base.wall, staged, sizes.back());
           sim::DetectResult sr;
-          (*d2)->set_particles(scenes[si]);
-          (*d2)->detect(&sr);
-          (*d2)->detect(&sr);
+          (*det)->set_frame_options(false, /*time_stages=*/true);
+          (*det)->detect(&sr);
+          (*det)->detect(&sr);
+          (*det)->set_frame_options(false, false);
           breakdowns.push_back({std::string(sim::to_string(m)) + " / " + sim::to_string(tr), sr.times, sr.contact_count});
         }
       }

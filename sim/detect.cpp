@@ -63,6 +63,10 @@ class ReferenceDetector final : public Detector {
     }
     info_.prepare_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   }
+  void set_frame_options(bool collect_contacts, bool time_stages) override {
+    cfg_.collect_contacts = collect_contacts;
+    cfg_.time_stages = time_stages;
+  }
   const PrepareInfo& info() const override { return info_; }
   const DetectConfig& config() const override { return cfg_; }
   Status set_particles(const Particles& p) override {

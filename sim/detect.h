@@ -99,6 +99,9 @@ class Detector {
   virtual Status set_particles(const Particles& particles) = 0;
   // Runs one detection frame over the particles last set.
   virtual Status detect(DetectResult* out) = 0;
+  // Per-frame choices that need no new preparation: collect the contact list
+  // (else counts only) and time each stage (a sync between stages).
+  virtual void set_frame_options(bool collect_contacts, bool time_stages) = 0;
   virtual const PrepareInfo& info() const = 0;
   virtual const DetectConfig& config() const = 0;
 };

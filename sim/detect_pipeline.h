@@ -73,6 +73,10 @@ class GridDetector final : public Detector {
     return std::unique_ptr<Detector>(std::move(d));
   }
 
+  void set_frame_options(bool collect_contacts, bool time_stages) override {
+    cfg_.collect_contacts = collect_contacts;
+    cfg_.time_stages = time_stages;
+  }
   const PrepareInfo& info() const override { return info_; }
   const DetectConfig& config() const override { return cfg_; }
 
@@ -81,7 +85,8 @@ class GridDetector final : public Detector {
     if (n > capacity_)
       return invalid_argument("frame has " + std::to_string(n) + " particles, detector was made for " +
                               std::to_string(capacity_));
-    std::vector<PackedParticle> host(n);
+    std::vector<PackedParticle>& host = staging_;
+    host.resize(n);
     const float rmax = static_cast<float>(cfg_.r_max);
     for (size_t i = 0; i < n; ++i) {
       host[i] = {static_cast<float>(p.x[i] - origin_.x), static_cast<float>(p.y[i] - origin_.y),
@@ -484,11 +489,7 @@ class GridDetector final : public Detector {
       const PlanarTriangle tr = T[t];
       for (uint32_t j = pstart[b], e = pend[b]; j < e; ++j) {
         const PackedParticle p = SP[j];
-        if (g.hashed) {
-          int x = 0, y = 0, z = 0;
-          g.cell_of(position(p), x, y, z);
-          if (g.linear(x, y, z) != l) continue;
-        }
+        if (g.hashed && !g.holds(position(p), l)) continue;
         const float d2 = point_triangle_dist2(position(p), tr);
         if (d2 < p.r * p.r) out.push(sidx[j], t, sqrtf(d2));
       }
@@ -520,19 +521,13 @@ class GridDetector final : public Detector {
       const float r2 = p.r * p.r;
       int cx = 0, cy = 0, cz = 0;
       g.cell_of(c, cx, cy, cz);
-      for (int dz = -reach; dz <= reach; ++dz)
-        for (int dy = -reach; dy <= reach; ++dy)
-          for (int dx = -reach; dx <= reach; ++dx) {
-            const int x = cx + dx, y = cy + dy, z = cz + dz;
-            if (!g.inside(x, y, z)) continue;
-            const uint64_t l = g.linear(x, y, z);
-            const uint32_t b = g.bucket(l);
-            for (uint32_t k = tstart[b], e = tend[b]; k < e; ++k) {
-              if (g.hashed && tcell[k] != l) continue;
-              const float d2 = point_triangle_dist2(c, T[k]);
-              if (d2 < r2) out.push(i, orig[k], sqrtf(d2));
-            }
-          }
+      g.for_each_neighbour(cx, cy, cz, reach, [&](uint64_t l, uint32_t b) {
+        for (uint32_t k = tstart[b], e = tend[b]; k < e; ++k) {
+          if (g.hashed && tcell[k] != l) continue;
+          const float d2 = point_triangle_dist2(c, T[k]);
+          if (d2 < r2) out.push(i, orig[k], sqrtf(d2));
+        }
+      });
     });
   }
 
@@ -555,24 +550,14 @@ class GridDetector final : public Detector {
       const uint32_t o = orig[k];
       int cx = 0, cy = 0, cz = 0;
       g.unlinear(tcell[k], cx, cy, cz);
-      for (int dz = -reach; dz <= reach; ++dz)
-        for (int dy = -reach; dy <= reach; ++dy)
-          for (int dx = -reach; dx <= reach; ++dx) {
-            const int x = cx + dx, y = cy + dy, z = cz + dz;
-            if (!g.inside(x, y, z)) continue;
-            const uint64_t l = g.linear(x, y, z);
-            const uint32_t b = g.bucket(l);
-            for (uint32_t j = pstart[b], e = pend[b]; j < e; ++j) {
-              const PackedParticle p = SP[j];
-              if (g.hashed) {
-                int px = 0, py = 0, pz = 0;
-                g.cell_of(position(p), px, py, pz);
-                if (g.linear(px, py, pz) != l) continue;
-              }
-              const float d2 = point_triangle_dist2(position(p), tr);
-              if (d2 < p.r * p.r) out.push(sidx[j], o, sqrtf(d2));
-            }
-          }
+      g.for_each_neighbour(cx, cy, cz, reach, [&](uint64_t l, uint32_t b) {
+        for (uint32_t j = pstart[b], e = pend[b]; j < e; ++j) {
+          const PackedParticle p = SP[j];
+          if (g.hashed && !g.holds(position(p), l)) continue;
+          const float d2 = point_triangle_dist2(position(p), tr);
+          if (d2 < p.r * p.r) out.push(sidx[j], o, sqrtf(d2));
+        }
+      });
     });
   }
 
@@ -613,6 +598,7 @@ class GridDetector final : public Detector {
   size_t capacity_ = 0, n_ = 0;
   Vec3d origin_{0, 0, 0};
   std::vector<uint32_t> source_ids_;
+  std::vector<PackedParticle> staging_;  // host copy of a frame's particles, reused
   GridSpec grid_;
   int reach_ = 1;
 

@@ -53,6 +53,22 @@ struct GridSpec {
     y = int(l % uint64_t(ny));
     z = int(l / uint64_t(ny));
   }
+  // Calls f(cell number, bucket) for each cell within `reach` cells of (cx, cy, cz) inside the grid.
+  template <class F>
+  COLLIDO_HD COLLIDO_FORCEINLINE void for_each_neighbour(int cx, int cy, int cz, int reach, F&& f) const {
+    for (int z = cz - reach; z <= cz + reach; ++z)
+      for (int y = cy - reach; y <= cy + reach; ++y)
+        for (int x = cx - reach; x <= cx + reach; ++x) {
+          if (!inside(x, y, z)) continue;
+          const uint64_t l = linear(x, y, z);
+          f(l, bucket(l));
+        }
+  }
+  // True when p lies in cell l: a hashed bucket holds several cells, so lookups filter with it.
+  COLLIDO_HD COLLIDO_FORCEINLINE bool holds(Vec3f p, uint64_t l) const {
+    int x = 0, y = 0, z = 0;
+    return cell_of(p, x, y, z) && linear(x, y, z) == l;
+  }
   COLLIDO_HD COLLIDO_FORCEINLINE uint32_t bucket(uint64_t l) const {
     if (!hashed) return uint32_t(l);
     l ^= l >> 33;  // murmur finaliser: neighbouring cells land far apart

@@ -142,7 +142,9 @@ TEST(Stl, MultiSolidAsciiAndRealFiles) {
     EXPECT_EQ(rep.format, c.format) << c.file;
     EXPECT_EQ(m->triangles.size() + rep.dropped_zero_area, c.triangles) << c.file;
     // Closed or connected meshes share corners; the two-solid file's triangles are apart.
-    if (c.triangles > 2) EXPECT_LT(rep.vertices_after_weld, rep.vertices_before_weld) << c.file;
+    if (c.triangles > 2) {
+      EXPECT_LT(rep.vertices_after_weld, rep.vertices_before_weld) << c.file;
+    }
   }
 }
 
