@@ -49,6 +49,10 @@ class CpuBackend {
     return sum;
   }
 
+  // Sum and maximum of n doubles (0 when n == 0); per-frame statistics and the time step.
+  double reduce_sum(const double* d, size_t n) { return std::accumulate(d, d + n, 0.0); }
+  double reduce_max(const double* d, size_t n) { return n ? *std::max_element(d, d + n) : 0.0; }
+
   // Stable LSD radix sort of (key, value) pairs into kout/vout, 8 bits a pass;
   // passes whose byte is the same for every key are skipped.
   void sort_pairs(const uint32_t* kin, const uint32_t* vin, uint32_t* kout, uint32_t* vout, size_t n) {

@@ -17,47 +17,9 @@
 #include <vector>
 
 #include "sim/detect.h"
-#include "sim/divide.h"
-#include "sim/grid.h"
-#include "sim/narrow_phase.h"
+#include "sim/wall_index.h"
 
 namespace collido::sim {
-
-// Neighbour cells a particle traversal visits: reach cells in each direction.
-inline int neighbour_reach(double search_radius, double cell) {
-  // Contacts need centre distances strictly below search_radius; a distance
-  // of exactly one cell still lands in the adjacent cell, hence the slack.
-  int k = static_cast<int>(std::ceil(search_radius / cell - 1e-6));
-  return std::max(k, 1);
-}
-
-// Local-frame grid over [lo, hi] with the given cell edge; hashed when too many cells.
-inline GridSpec make_grid(Vec3d lo, Vec3d hi, double cell, uint64_t max_dense_cells,
-                          uint64_t elements, uint64_t* cells_out) {
-  GridSpec g;
-  g.origin = cast3<float>(lo);
-  g.cell = static_cast<float>(cell);
-  g.inv_cell = static_cast<float>(1.0 / cell);
-  const Vec3d ext = hi - lo;
-  auto dim = [&](double e) {
-    double n = std::floor(e / cell) + 1;
-    return static_cast<int>(std::min(n, 1e9));
-  };
-  g.nx = dim(ext.x), g.ny = dim(ext.y), g.nz = dim(ext.z);
-  const uint64_t cells = uint64_t(g.nx) * uint64_t(g.ny) * uint64_t(g.nz);
-  *cells_out = cells;
-  if (cells <= max_dense_cells) {
-    g.buckets = static_cast<uint32_t>(cells);
-    g.hashed = 0;
-  } else {
-    uint64_t want = std::max<uint64_t>(2 * elements, 1u << 16);
-    uint64_t b = 1;
-    while (b < want && b < (1ull << 31)) b <<= 1;
-    g.buckets = static_cast<uint32_t>(b);
-    g.hashed = 1;
-  }
-  return g;
-}
 
 template <class B>
 class GridDetector final : public Detector {
@@ -177,11 +139,7 @@ class GridDetector final : public Detector {
     if (cfg_.grid_length < 0 || !std::isfinite(cfg_.grid_length))
       return invalid_argument("grid length must be positive, got " + std::to_string(cfg_.grid_length));
     const Bounds3d box = mesh_bounds(mesh);
-    // The local frame's origin at the wall's centre keeps float precision for
-    // walls far from the world origin (coordinates near 1e4 with r = 1).
-    origin_ = box.center();
     source_ids_ = mesh.source_ids;
-    info_.triangles_original = mesh.triangles.size();
     const double cell = cfg_.grid_length > 0 ? cfg_.grid_length : 2 * cfg_.r_max;
     info_.grid_length = cell;
     const double extent = length(box.extent());
@@ -191,8 +149,11 @@ class GridDetector final : public Detector {
 
     backend_.resize(particles_, capacity_);
     backend_.resize(counts_, std::max<size_t>(capacity_, 1));
-    Status s = cfg_.method == Method::kBin ? prepare_bin(mesh, box, cell) : prepare_pieces(mesh, cell);
+    Status s = wall_.prepare(backend_, mesh, cfg_.method, cfg_.r_max, cell, cfg_.max_dense_cells, capacity_, &info_);
     if (!s) return s;
+    grid_ = wall_.grid;
+    reach_ = wall_.reach;
+    origin_ = wall_.origin;
     if (cfg_.traversal == Traversal::kWall || cfg_.method != Method::kBin) {
       backend_.resize(p_key_, capacity_);
       backend_.resize(p_idx_, capacity_);
@@ -211,155 +172,6 @@ class GridDetector final : public Detector {
     info_.prepare_ms = ms(t0, clock());
     info_.device_bytes = backend_.bytes_held();
     return Status::ok();
-  }
-
-  Status prepare_pieces(const TriangleMesh& mesh, double cell) {
-    const DivisionMethod dm = cfg_.method == Method::kGravity        ? DivisionMethod::kGravity
-                              : cfg_.method == Method::kCircumcircle ? DivisionMethod::kCircumcircle
-                                                                     : DivisionMethod::kMidpoint4;
-    // Division is bounded by area / r_max^2; refuse absurd requests before allocating.
-    const double estimate = 8 * mesh_area(mesh) / (cfg_.r_max * cfg_.r_max) + mesh.triangles.size();
-    if (estimate > 4e8)
-      return invalid_argument("dividing this wall for r_max = " + std::to_string(cfg_.r_max) +
-                              " would make about " + std::to_string(estimate) + " triangles; use --method bin");
-    DividedMesh dv = divide(mesh, dm, cfg_.r_max);
-    info_.triangles_used = dv.pieces.size();
-    info_.max_sphere_radius = dv.max_sphere_radius;
-    info_.area_error = division_area_error(mesh, dv);
-    const size_t m = dv.pieces.size();
-    // Pad the reach for float rounding of centres and positions.
-    const double search = (cfg_.r_max + dv.max_sphere_radius) * (1 + 1e-6) + 1e-6 * cfg_.r_max;
-    reach_ = neighbour_reach(search, cell);
-    info_.reach = reach_;
-
-    Bounds3d cb;
-    for (const auto& c : dv.sphere_centre) cb.grow(c - origin_);
-    const double pad = (reach_ + 1) * cell;
-    grid_ = make_grid(cb.lo - Vec3d{pad, pad, pad}, cb.hi + Vec3d{pad, pad, pad}, cell,
-                      cfg_.max_dense_cells, m + capacity_, &info_.cells);
-    info_.buckets = grid_.buckets;
-    info_.hashed = grid_.hashed != 0;
-
-    // Hash the pieces by bounding-sphere centre and sort them by cell (paper Table 2).
-    std::vector<PlanarTriangle> tris(m);
-    std::vector<uint32_t> orig(m), key(m), idx(m);
-    std::vector<uint64_t> cellkey(m);
-    for (size_t i = 0; i < m; ++i) {
-      const auto& p = dv.pieces[i];
-      tris[i] = make_planar(p[0], p[1], p[2], origin_);
-      int x = 0, y = 0, z = 0;
-      Vec3f c = cast3<float>(dv.sphere_centre[i] - origin_);
-      if (!grid_.cell_of(c, x, y, z)) return Status(ErrorCode::kBackend, "piece centre outside its grid");
-      cellkey[i] = grid_.linear(x, y, z);
-      key[i] = grid_.bucket(cellkey[i]);
-      idx[i] = static_cast<uint32_t>(i);
-    }
-    std::stable_sort(idx.begin(), idx.end(), [&](uint32_t a, uint32_t b) { return key[a] < key[b]; });
-    std::vector<PlanarTriangle> tris_sorted(m);
-    std::vector<uint32_t> orig_sorted(m);
-    std::vector<uint64_t> cell_sorted(m);
-    std::vector<uint32_t> start(grid_.buckets, 0), end(grid_.buckets, 0);
-    for (size_t j = 0; j < m; ++j) {
-      tris_sorted[j] = tris[idx[j]];
-      orig_sorted[j] = dv.original[idx[j]];
-      cell_sorted[j] = cellkey[idx[j]];
-      const uint32_t k = key[idx[j]];
-      if (j == 0 || key[idx[j - 1]] != k) start[k] = static_cast<uint32_t>(j);
-      end[k] = static_cast<uint32_t>(j + 1);
-    }
-    upload(tris_, tris_sorted);
-    upload(tri_original_, orig_sorted);
-    upload(tri_cell_, cell_sorted);
-    upload(tri_start_, start);
-    upload(tri_end_, end);
-    return Status::ok();
-  }
-
-  Status prepare_bin(const TriangleMesh& mesh, const Bounds3d& box, double cell) {
-    const size_t m = mesh.triangles.size();
-    info_.triangles_used = m;
-    reach_ = 0;
-    // A particle in a cell can touch a triangle only if the triangle meets the
-    // cell grown by r_max; pad for float rounding so no contact is ever missed.
-    const double grow = cfg_.r_max * (1 + 1e-5) + 1e-6 * cell;
-    const Vec3d pad{grow + cell, grow + cell, grow + cell};
-    grid_ = make_grid(box.lo - origin_ - pad, box.hi - origin_ + pad, cell, cfg_.max_dense_cells,
-                      4 * m + capacity_, &info_.cells);
-    info_.buckets = grid_.buckets;
-    info_.hashed = grid_.hashed != 0;
-
-    std::vector<TriangleF> corners(m);
-    std::vector<PlanarTriangle> tris(m);
-    for (size_t t = 0; t < m; ++t) {
-      corners[t] = {cast3<float>(mesh.corner(t, 0) - origin_), cast3<float>(mesh.corner(t, 1) - origin_),
-                    cast3<float>(mesh.corner(t, 2) - origin_)};
-      tris[t] = make_planar(mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2), origin_);
-    }
-    upload(tris_, tris);
-    upload(corners_, corners);
-
-    // CSR build on the backend: count (cell, triangle) overlaps, scan, fill.
-    Buf<uint32_t> bin_count;
-    backend_.resize(bin_count, size_t(grid_.buckets) + 1);
-    backend_.fill(bin_count.data(), size_t(grid_.buckets) + 1, 0u);
-    const GridSpec g = grid_;
-    const TriangleF* T = corners_.data();
-    const float fgrow = static_cast<float>(grow);
-    uint32_t* count = bin_count.data();
-    backend_.parallel_for(m, [=] COLLIDO_HD(uint32_t t) {
-      for_each_bin_cell(g, T[t], fgrow, [&](uint64_t l) { atomic_add_u32(&count[g.bucket(l)], 1u); });
-    });
-    const uint64_t total = backend_.exclusive_scan(count, size_t(grid_.buckets) + 1);
-    if (total > (1ull << 31))
-      return invalid_argument("the bin method would store " + std::to_string(total) +
-                              " (cell, triangle) pairs; raise --grid-length");
-    info_.bin_entries = total;
-    backend_.resize(bin_start_, size_t(grid_.buckets) + 1);
-    backend_.copy(bin_start_.data(), count, (size_t(grid_.buckets) + 1) * sizeof(uint32_t));
-    backend_.resize(bin_tri_, std::max<uint64_t>(total, 1));
-    backend_.resize(bin_cell_, std::max<uint64_t>(total, 1));
-    uint32_t* cursor = count;  // reuse the scanned counts as fill cursors
-    uint32_t* bt = bin_tri_.data();
-    uint64_t* bc = bin_cell_.data();
-    backend_.parallel_for(m, [=] COLLIDO_HD(uint32_t t) {
-      for_each_bin_cell(g, T[t], fgrow, [&](uint64_t l) {
-        const uint32_t slot = atomic_add_u32(&cursor[g.bucket(l)], 1u);
-        bt[slot] = t;
-        bc[slot] = l;
-      });
-    });
-    // Fixed order inside each cell (by triangle) makes runs repeatable.
-    backend_.sort_segments(bin_tri_.data(), bin_cell_.data(), bin_start_.data(), grid_.buckets, total);
-    return Status::ok();
-  }
-
-  // Calls f(linear cell) for each cell whose box grown by `grow` overlaps the triangle.
-  template <class F>
-  COLLIDO_HD static void for_each_bin_cell(const GridSpec& g, const TriangleF& t, float grow, F&& f) {
-    const float lox = fminf(t.a.x, fminf(t.b.x, t.c.x)) - grow, hix = fmaxf(t.a.x, fmaxf(t.b.x, t.c.x)) + grow;
-    const float loy = fminf(t.a.y, fminf(t.b.y, t.c.y)) - grow, hiy = fmaxf(t.a.y, fmaxf(t.b.y, t.c.y)) + grow;
-    const float loz = fminf(t.a.z, fminf(t.b.z, t.c.z)) - grow, hiz = fmaxf(t.a.z, fmaxf(t.b.z, t.c.z)) + grow;
-    auto clampi = [](int v, int n) { return v < 0 ? 0 : (v >= n ? n - 1 : v); };
-    const int x0 = clampi(int(floorf((lox - g.origin.x) * g.inv_cell)), g.nx),
-              x1 = clampi(int(floorf((hix - g.origin.x) * g.inv_cell)), g.nx);
-    const int y0 = clampi(int(floorf((loy - g.origin.y) * g.inv_cell)), g.ny),
-              y1 = clampi(int(floorf((hiy - g.origin.y) * g.inv_cell)), g.ny);
-    const int z0 = clampi(int(floorf((loz - g.origin.z) * g.inv_cell)), g.nz),
-              z1 = clampi(int(floorf((hiz - g.origin.z) * g.inv_cell)), g.nz);
-    const float h = 0.5f * g.cell + grow;
-    for (int z = z0; z <= z1; ++z)
-      for (int y = y0; y <= y1; ++y)
-        for (int x = x0; x <= x1; ++x) {
-          const Vec3f centre{g.origin.x + (x + 0.5f) * g.cell, g.origin.y + (y + 0.5f) * g.cell,
-                             g.origin.z + (z + 0.5f) * g.cell};
-          if (triangle_box_overlap(t.a, t.b, t.c, centre, Vec3f{h, h, h})) f(g.linear(x, y, z));
-        }
-  }
-
-  template <class T>
-  void upload(Buf<T>& dst, const std::vector<T>& src) {
-    backend_.resize(dst, std::max<size_t>(src.size(), 1));
-    if (!src.empty()) backend_.to_device(dst.data(), src.data(), src.size() * sizeof(T));
   }
 
   // --- frame stages -------------------------------------------------------------------------
@@ -442,10 +254,10 @@ class GridDetector final : public Detector {
   void bin_particle_traversal(bool collect) {
     const GridSpec g = grid_;
     const PackedParticle* P = particles_.data();
-    const PlanarTriangle* T = tris_.data();
-    const uint32_t* start = bin_start_.data();
-    const uint32_t* tri = bin_tri_.data();
-    const uint64_t* cellk = bin_cell_.data();
+    const PlanarTriangle* T = wall_.tris.data();
+    const uint32_t* start = wall_.bin_start.data();
+    const uint32_t* tri = wall_.bin_tri.data();
+    const uint64_t* cellk = wall_.bin_cell.data();
     uint32_t* counts = counts_.data();
     const PairSink out = sink();
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
@@ -476,9 +288,9 @@ class GridDetector final : public Detector {
     const GridSpec g = grid_;
     const PackedParticle* SP = sorted_particles_.data();
     const uint32_t* sidx = p_idx_sorted_.data();
-    const PlanarTriangle* T = tris_.data();
-    const uint32_t* tri = bin_tri_.data();
-    const uint64_t* cellk = bin_cell_.data();
+    const PlanarTriangle* T = wall_.tris.data();
+    const uint32_t* tri = wall_.bin_tri.data();
+    const uint64_t* cellk = wall_.bin_cell.data();
     const uint32_t* pstart = p_cell_start_.data();
     const uint32_t* pend = p_cell_end_.data();
     const PairSink out = sink();
@@ -507,11 +319,11 @@ class GridDetector final : public Detector {
     const PackedParticle* SP = sorted_particles_.data();
     const uint32_t* skey = p_key_sorted_.data();
     const uint32_t* sidx = p_idx_sorted_.data();
-    const PlanarTriangle* T = tris_.data();
-    const uint32_t* orig = tri_original_.data();
-    const uint64_t* tcell = tri_cell_.data();
-    const uint32_t* tstart = tri_start_.data();
-    const uint32_t* tend = tri_end_.data();
+    const PlanarTriangle* T = wall_.tris.data();
+    const uint32_t* orig = wall_.tri_original.data();
+    const uint64_t* tcell = wall_.tri_cell.data();
+    const uint32_t* tstart = wall_.tri_start.data();
+    const uint32_t* tend = wall_.tri_end.data();
     const PairSink out = sink();
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t j) {
       if (skey[j] == kInvalidBucket) return;
@@ -539,9 +351,9 @@ class GridDetector final : public Detector {
     const int reach = reach_;
     const PackedParticle* SP = sorted_particles_.data();
     const uint32_t* sidx = p_idx_sorted_.data();
-    const PlanarTriangle* T = tris_.data();
-    const uint32_t* orig = tri_original_.data();
-    const uint64_t* tcell = tri_cell_.data();
+    const PlanarTriangle* T = wall_.tris.data();
+    const uint32_t* orig = wall_.tri_original.data();
+    const uint64_t* tcell = wall_.tri_cell.data();
     const uint32_t* pstart = p_cell_start_.data();
     const uint32_t* pend = p_cell_end_.data();
     const PairSink out = sink();
@@ -602,12 +414,7 @@ class GridDetector final : public Detector {
   GridSpec grid_;
   int reach_ = 1;
 
-  Buf<PlanarTriangle> tris_;  // narrow-phase form
-  Buf<TriangleF> corners_;    // bin preparation only
-  Buf<uint32_t> tri_original_, tri_start_, tri_end_;
-  Buf<uint64_t> tri_cell_;
-  Buf<uint32_t> bin_start_, bin_tri_;
-  Buf<uint64_t> bin_cell_;
+  WallIndex<B> wall_;
 
   Buf<PackedParticle> particles_, sorted_particles_;
   Buf<uint32_t> p_key_, p_idx_, p_key_sorted_, p_idx_sorted_, p_cell_start_, p_cell_end_, counts_;

@@ -1,0 +1,204 @@
+// CUDA backend shared by the engine's pipelines (detection, dynamics): device
+// buffers that grow but never shrink, a generic kernel for parallel_for, and CUB
+// for scan, radix sort, segmented sort and reductions. No geometry lives here.
+// Include only from .cu files.
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <cub/device/device_radix_sort.cuh>
+#include <cub/device/device_reduce.cuh>
+#include <cub/device/device_scan.cuh>
+#include <cub/device/device_segmented_sort.cuh>
+#include <string>
+
+#include "sim/status.h"
+
+namespace collido::sim {
+
+namespace cuda_detail {
+
+struct MinOp {
+  __device__ float operator()(float a, float b) const { return b < a ? b : a; }
+};
+
+template <class F>
+__global__ void for_each_kernel(uint32_t n, F f) {
+  const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i < n) f(i);
+}
+
+}  // namespace cuda_detail
+
+class CudaBackend {
+ public:
+  // Device memory that grows but never shrinks, so frames reuse it.
+  template <class T>
+  class Buffer {
+   public:
+    Buffer() = default;
+    Buffer(const Buffer&) = delete;
+    Buffer& operator=(const Buffer&) = delete;
+    ~Buffer() {
+      if (ptr_) cudaFree(ptr_);
+    }
+    T* data() const { return ptr_; }
+    size_t size() const { return size_; }
+
+   private:
+    friend class CudaBackend;
+    T* ptr_ = nullptr;
+    size_t size_ = 0, capacity_ = 0;
+  };
+
+  ~CudaBackend() {
+    if (temp_) cudaFree(temp_);
+  }
+
+  template <class T>
+  void resize(Buffer<T>& b, size_t n) {
+    if (n <= b.capacity_) {
+      b.size_ = n;
+      return;
+    }
+    if (b.ptr_) {
+      cudaFree(b.ptr_);
+      bytes_ -= b.capacity_ * sizeof(T);
+    }
+    b.ptr_ = nullptr;
+    b.size_ = b.capacity_ = 0;
+    if (n == 0) return;
+    if (check(cudaMalloc(&b.ptr_, n * sizeof(T)), "cudaMalloc")) {
+      b.size_ = b.capacity_ = n;
+      bytes_ += n * sizeof(T);
+    } else {
+      b.ptr_ = nullptr;
+    }
+  }
+  uint64_t bytes_held() const { return bytes_ + temp_bytes_; }
+
+  template <class F>
+  void parallel_for(size_t n, F f) {
+    if (n == 0 || !ok_) return;
+    constexpr uint32_t kBlock = 256;
+    const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
+    cuda_detail::for_each_kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f);
+    check(cudaGetLastError(), "kernel launch");
+  }
+  template <class T>
+  void fill(T* p, size_t n, T v) {
+    parallel_for(n, [=] __device__(uint32_t i) { p[i] = v; });
+  }
+  void copy(void* dst, const void* src, size_t bytes) {
+    check(cudaMemcpyAsync(dst, src, bytes, cudaMemcpyDeviceToDevice), "cudaMemcpy D2D");
+  }
+  void to_device(void* dst, const void* src, size_t bytes) {
+    check(cudaMemcpy(dst, src, bytes, cudaMemcpyHostToDevice), "cudaMemcpy H2D");
+  }
+  void to_host(void* dst, const void* src, size_t bytes) {
+    check(cudaMemcpy(dst, src, bytes, cudaMemcpyDeviceToHost), "cudaMemcpy D2H");
+  }
+  void sync() { check(cudaDeviceSynchronize(), "kernel"); }
+  Status status() const { return ok_ ? Status::ok() : Status(ErrorCode::kBackend, error_); }
+
+  uint64_t exclusive_scan(uint32_t* d, size_t n) {
+    resize(scan_out_, n);
+    size_t bytes = 0;
+    cub::DeviceScan::ExclusiveSum(nullptr, bytes, d, scan_out_.data(), static_cast<int>(n));
+    cub::DeviceScan::ExclusiveSum(temp(bytes), bytes, d, scan_out_.data(), static_cast<int>(n));
+    uint32_t last_in = 0, last_out = 0;
+    to_host(&last_in, d + n - 1, sizeof last_in);
+    to_host(&last_out, scan_out_.data() + n - 1, sizeof last_out);
+    copy(d, scan_out_.data(), n * sizeof(uint32_t));
+    return uint64_t(last_out) + last_in;
+  }
+
+  // Sum and maximum of n doubles (0 when n == 0); one small read-back each.
+  double reduce_sum(const double* d, size_t n) {
+    if (n == 0) return 0;
+    resize(scalar_, 1);
+    size_t bytes = 0;
+    cub::DeviceReduce::Sum(nullptr, bytes, d, scalar_.data(), static_cast<int>(n));
+    check(cub::DeviceReduce::Sum(temp(bytes), bytes, d, scalar_.data(), static_cast<int>(n)), "reduce");
+    double v = 0;
+    to_host(&v, scalar_.data(), sizeof v);
+    return v;
+  }
+  double reduce_max(const double* d, size_t n) {
+    if (n == 0) return 0;
+    resize(scalar_, 1);
+    size_t bytes = 0;
+    cub::DeviceReduce::Max(nullptr, bytes, d, scalar_.data(), static_cast<int>(n));
+    check(cub::DeviceReduce::Max(temp(bytes), bytes, d, scalar_.data(), static_cast<int>(n)), "reduce");
+    double v = 0;
+    to_host(&v, scalar_.data(), sizeof v);
+    return v;
+  }
+
+  void sort_pairs(const uint32_t* kin, const uint32_t* vin, uint32_t* kout, uint32_t* vout, size_t n) {
+    size_t bytes = 0;
+    cub::DeviceRadixSort::SortPairs(nullptr, bytes, kin, kout, vin, vout, static_cast<int>(n));
+    check(cub::DeviceRadixSort::SortPairs(temp(bytes), bytes, kin, kout, vin, vout, static_cast<int>(n)), "sort");
+  }
+
+  uint32_t dedup_min(uint64_t* key, float* dist, size_t n, uint64_t* kout, float* dout) {
+    if (n == 0) return 0;
+    size_t bytes = 0;
+    cub::DeviceRadixSort::SortPairs(nullptr, bytes, key, kout, dist, dout, static_cast<int>(n));
+    check(cub::DeviceRadixSort::SortPairs(temp(bytes), bytes, key, kout, dist, dout, static_cast<int>(n)), "sort");
+    resize(runs_, 1);
+    bytes = 0;
+    cub::DeviceReduce::ReduceByKey(nullptr, bytes, kout, key, dout, dist, runs_.data(), cuda_detail::MinOp(), static_cast<int>(n));
+    check(cub::DeviceReduce::ReduceByKey(temp(bytes), bytes, kout, key, dout, dist, runs_.data(), cuda_detail::MinOp(),
+                                         static_cast<int>(n)),
+          "reduce_by_key");
+    uint32_t runs = 0;
+    to_host(&runs, runs_.data(), sizeof runs);
+    copy(kout, key, runs * sizeof(uint64_t));
+    copy(dout, dist, runs * sizeof(float));
+    return runs;
+  }
+
+  void sort_segments(uint32_t* tri, uint64_t* cell, const uint32_t* start, uint32_t buckets, uint64_t total) {
+    if (total == 0) return;
+    resize(seg_tri_, total);
+    resize(seg_cell_, total);
+    size_t bytes = 0;
+    cub::DeviceSegmentedSort::SortPairs(nullptr, bytes, tri, seg_tri_.data(), cell, seg_cell_.data(),
+                                        static_cast<int>(total), static_cast<int>(buckets), start, start + 1);
+    check(cub::DeviceSegmentedSort::SortPairs(temp(bytes), bytes, tri, seg_tri_.data(), cell, seg_cell_.data(),
+                                              static_cast<int>(total), static_cast<int>(buckets), start, start + 1),
+          "segmented sort");
+    copy(tri, seg_tri_.data(), total * sizeof(uint32_t));
+    copy(cell, seg_cell_.data(), total * sizeof(uint64_t));
+  }
+
+ private:
+  bool check(cudaError_t e, const char* what) {
+    if (e == cudaSuccess) return true;
+    if (ok_) error_ = std::string("CUDA ") + what + ": " + cudaGetErrorString(e);
+    ok_ = false;
+    return false;
+  }
+  // CUB's scratch space, grown on demand and kept for later frames.
+  void* temp(size_t bytes) {
+    if (bytes > temp_bytes_) {
+      if (temp_) cudaFree(temp_);
+      temp_ = nullptr;
+      temp_bytes_ = 0;
+      if (check(cudaMalloc(&temp_, bytes), "cudaMalloc (scratch)")) temp_bytes_ = bytes;
+    }
+    return temp_;
+  }
+
+  bool ok_ = true;
+  std::string error_;
+  uint64_t bytes_ = 0;
+  void* temp_ = nullptr;
+  size_t temp_bytes_ = 0;
+  Buffer<uint32_t> scan_out_, runs_, seg_tri_;
+  Buffer<uint64_t> seg_cell_;
+  Buffer<double> scalar_;
+};
+
+}  // namespace collido::sim

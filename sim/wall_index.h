@@ -1,0 +1,300 @@
+// The wall as the engine's traversals read it, prepared once per run and
+// shared by detection (sim/detect_pipeline.h) and dynamics
+// (sim/dynamics_pipeline.h): either the ORIGINAL triangles binned into every
+// grid cell they come within r_max of (`bin`), or the paper's divided pieces
+// hashed by bounding-sphere centre and sorted by cell (Table 2).
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include "sim/detect.h"
+#include "sim/divide.h"
+#include "sim/grid.h"
+#include "sim/narrow_phase.h"
+
+namespace collido::sim {
+
+// Neighbour cells a particle traversal visits: reach cells in each direction.
+inline int neighbour_reach(double search_radius, double cell) {
+  // Contacts need centre distances strictly below search_radius; a distance
+  // of exactly one cell still lands in the adjacent cell, hence the slack.
+  int k = static_cast<int>(std::ceil(search_radius / cell - 1e-6));
+  return std::max(k, 1);
+}
+
+// Local-frame grid over [lo, hi] with the given cell edge; hashed when too many cells.
+inline GridSpec make_grid(Vec3d lo, Vec3d hi, double cell, uint64_t max_dense_cells,
+                          uint64_t elements, uint64_t* cells_out) {
+  GridSpec g;
+  g.origin = cast3<float>(lo);
+  g.cell = static_cast<float>(cell);
+  g.inv_cell = static_cast<float>(1.0 / cell);
+  const Vec3d ext = hi - lo;
+  auto dim = [&](double e) {
+    double n = std::floor(e / cell) + 1;
+    return static_cast<int>(std::min(n, 1e9));
+  };
+  g.nx = dim(ext.x), g.ny = dim(ext.y), g.nz = dim(ext.z);
+  const uint64_t cells = uint64_t(g.nx) * uint64_t(g.ny) * uint64_t(g.nz);
+  *cells_out = cells;
+  if (cells <= max_dense_cells) {
+    g.buckets = static_cast<uint32_t>(cells);
+    g.hashed = 0;
+  } else {
+    uint64_t want = std::max<uint64_t>(2 * elements, 1u << 16);
+    uint64_t b = 1;
+    while (b < want && b < (1ull << 31)) b <<= 1;
+    g.buckets = static_cast<uint32_t>(b);
+    g.hashed = 1;
+  }
+  return g;
+}
+
+// What a kernel needs to walk the wall near a point; plain pointers, copied by value.
+struct WallView {
+  GridSpec g;
+  int reach = 0;
+  bool bin = true;
+  const PlanarTriangle* tris = nullptr;
+  const uint32_t* original = nullptr;  // pieces: original triangle (mesh index) of each piece
+  const uint64_t* tri_cell = nullptr;  // pieces: cell of each piece
+  const uint32_t* tri_start = nullptr;
+  const uint32_t* tri_end = nullptr;
+  const uint32_t* bin_start = nullptr;  // bin: CSR over buckets
+  const uint32_t* bin_tri = nullptr;
+  const uint64_t* bin_cell = nullptr;
+
+  // Calls f(triangle, original mesh index) for every triangle or piece that
+  // may lie within r_max of p (a superset of the contacts; the caller tests distance).
+  template <class F>
+  COLLIDO_HD COLLIDO_FORCEINLINE void for_each_candidate(Vec3f p, F&& f) const {
+    int x = 0, y = 0, z = 0;
+    if (!g.cell_of(p, x, y, z)) return;
+    if (bin) {
+      const uint64_t l = g.linear(x, y, z);
+      const uint32_t b = g.bucket(l);
+      for (uint32_t k = bin_start[b], e = bin_start[b + 1]; k < e; ++k) {
+        if (g.hashed && bin_cell[k] != l) continue;
+        const uint32_t t = bin_tri[k];
+        f(tris[t], t);
+      }
+      return;
+    }
+    g.for_each_neighbour(x, y, z, reach, [&](uint64_t l, uint32_t b) {
+      for (uint32_t k = tri_start[b], e = tri_end[b]; k < e; ++k) {
+        if (g.hashed && tri_cell[k] != l) continue;
+        f(tris[k], original[k]);
+      }
+    });
+  }
+};
+
+template <class B>
+class WallIndex {
+  template <class T>
+  using Buf = typename B::template Buffer<T>;
+
+ public:
+  // Prepares `mesh` for particles of radius <= r_max with cells of edge `cell`
+  // (world units); `particles` sizes a hashed table. Fills the wall part of *info.
+  Status prepare(B& backend, const TriangleMesh& mesh, Method method, double r_max, double cell,
+                 uint64_t max_dense_cells, size_t particles, PrepareInfo* info) {
+    method_ = method;
+    r_max_ = r_max;
+    max_dense_cells_ = max_dense_cells;
+    particles_ = particles;
+    const Bounds3d box = mesh_bounds(mesh);
+    // The local frame's origin at the wall's centre keeps float precision for
+    // walls far from the world origin (coordinates near 1e4 with r = 1).
+    origin = box.center();
+    info->triangles_original = mesh.triangles.size();
+    return method == Method::kBin ? prepare_bin(backend, mesh, box, cell, info)
+                                  : prepare_pieces(backend, mesh, cell, info);
+  }
+
+  WallView view() const {
+    WallView v;
+    v.g = grid;
+    v.reach = reach;
+    v.bin = method_ == Method::kBin;
+    v.tris = tris.data();
+    if (v.bin) {
+      v.bin_start = bin_start.data(), v.bin_tri = bin_tri.data(), v.bin_cell = bin_cell.data();
+    } else {
+      v.original = tri_original.data(), v.tri_cell = tri_cell.data();
+      v.tri_start = tri_start.data(), v.tri_end = tri_end.data();
+    }
+    return v;
+  }
+
+  // nvcc's extended lambdas may not live in private member functions, so the
+  // preparation steps are public; callers use prepare() and view().
+  Status prepare_pieces(B& backend, const TriangleMesh& mesh, double cell, PrepareInfo* info) {
+    const DivisionMethod dm = method_ == Method::kGravity        ? DivisionMethod::kGravity
+                              : method_ == Method::kCircumcircle ? DivisionMethod::kCircumcircle
+                                                                     : DivisionMethod::kMidpoint4;
+    // Division is bounded by area / r_max^2; refuse absurd requests before allocating.
+    const double estimate = 8 * mesh_area(mesh) / (r_max_ * r_max_) + mesh.triangles.size();
+    if (estimate > 4e8)
+      return invalid_argument("dividing this wall for r_max = " + std::to_string(r_max_) +
+                              " would make about " + std::to_string(estimate) + " triangles; use --method bin");
+    DividedMesh dv = divide(mesh, dm, r_max_);
+    info->triangles_used = dv.pieces.size();
+    info->max_sphere_radius = dv.max_sphere_radius;
+    info->area_error = division_area_error(mesh, dv);
+    const size_t m = dv.pieces.size();
+    // Pad the reach for float rounding of centres and positions.
+    const double search = (r_max_ + dv.max_sphere_radius) * (1 + 1e-6) + 1e-6 * r_max_;
+    reach = neighbour_reach(search, cell);
+    info->reach = reach;
+
+    Bounds3d cb;
+    for (const auto& c : dv.sphere_centre) cb.grow(c - origin);
+    const double pad = (reach + 1) * cell;
+    grid = make_grid(cb.lo - Vec3d{pad, pad, pad}, cb.hi + Vec3d{pad, pad, pad}, cell,
+                     max_dense_cells_, m + particles_, &info->cells);
+    info->buckets = grid.buckets;
+    info->hashed = grid.hashed != 0;
+
+    // Hash the pieces by bounding-sphere centre and sort them by cell (paper Table 2).
+    std::vector<PlanarTriangle> host_tris(m);
+    std::vector<uint32_t> key(m), idx(m);
+    std::vector<uint64_t> cellkey(m);
+    for (size_t i = 0; i < m; ++i) {
+      const auto& p = dv.pieces[i];
+      host_tris[i] = make_planar(p[0], p[1], p[2], origin);
+      int x = 0, y = 0, z = 0;
+      Vec3f c = cast3<float>(dv.sphere_centre[i] - origin);
+      if (!grid.cell_of(c, x, y, z)) return Status(ErrorCode::kBackend, "piece centre outside its grid");
+      cellkey[i] = grid.linear(x, y, z);
+      key[i] = grid.bucket(cellkey[i]);
+      idx[i] = static_cast<uint32_t>(i);
+    }
+    std::stable_sort(idx.begin(), idx.end(), [&](uint32_t a, uint32_t b) { return key[a] < key[b]; });
+    std::vector<PlanarTriangle> tris_sorted(m);
+    std::vector<uint32_t> orig_sorted(m);
+    std::vector<uint64_t> cell_sorted(m);
+    std::vector<uint32_t> start(grid.buckets, 0), end(grid.buckets, 0);
+    for (size_t j = 0; j < m; ++j) {
+      tris_sorted[j] = host_tris[idx[j]];
+      orig_sorted[j] = dv.original[idx[j]];
+      cell_sorted[j] = cellkey[idx[j]];
+      const uint32_t k = key[idx[j]];
+      if (j == 0 || key[idx[j - 1]] != k) start[k] = static_cast<uint32_t>(j);
+      end[k] = static_cast<uint32_t>(j + 1);
+    }
+    upload(backend, tris, tris_sorted);
+    upload(backend, tri_original, orig_sorted);
+    upload(backend, tri_cell, cell_sorted);
+    upload(backend, tri_start, start);
+    upload(backend, tri_end, end);
+    return Status::ok();
+  }
+
+  Status prepare_bin(B& backend, const TriangleMesh& mesh, const Bounds3d& box, double cell, PrepareInfo* info) {
+    const size_t m = mesh.triangles.size();
+    info->triangles_used = m;
+    reach = 0;
+    // A particle in a cell can touch a triangle only if the triangle meets the
+    // cell grown by r_max; pad for float rounding so no contact is ever missed.
+    const double grow = r_max_ * (1 + 1e-5) + 1e-6 * cell;
+    const Vec3d pad{grow + cell, grow + cell, grow + cell};
+    grid = make_grid(box.lo - origin - pad, box.hi - origin + pad, cell, max_dense_cells_,
+                     4 * m + particles_, &info->cells);
+    info->buckets = grid.buckets;
+    info->hashed = grid.hashed != 0;
+
+    std::vector<TriangleF> host_corners(m);
+    std::vector<PlanarTriangle> host_tris(m);
+    for (size_t t = 0; t < m; ++t) {
+      host_corners[t] = {cast3<float>(mesh.corner(t, 0) - origin), cast3<float>(mesh.corner(t, 1) - origin),
+                    cast3<float>(mesh.corner(t, 2) - origin)};
+      host_tris[t] = make_planar(mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2), origin);
+    }
+    upload(backend, tris, host_tris);
+    upload(backend, corners, host_corners);
+
+    // CSR build on the backend: count (cell, triangle) overlaps, scan, fill.
+    Buf<uint32_t> bin_count;
+    backend.resize(bin_count, size_t(grid.buckets) + 1);
+    backend.fill(bin_count.data(), size_t(grid.buckets) + 1, 0u);
+    const GridSpec g = grid;
+    const TriangleF* T = corners.data();
+    const float fgrow = static_cast<float>(grow);
+    uint32_t* count = bin_count.data();
+    backend.parallel_for(m, [=] COLLIDO_HD(uint32_t t) {
+      for_each_bin_cell(g, T[t], fgrow, [&](uint64_t l) { atomic_add_u32(&count[g.bucket(l)], 1u); });
+    });
+    const uint64_t total = backend.exclusive_scan(count, size_t(grid.buckets) + 1);
+    if (total > (1ull << 31))
+      return invalid_argument("the bin method would store " + std::to_string(total) +
+                              " (cell, triangle) pairs; raise --grid-length");
+    info->bin_entries = total;
+    backend.resize(bin_start, size_t(grid.buckets) + 1);
+    backend.copy(bin_start.data(), count, (size_t(grid.buckets) + 1) * sizeof(uint32_t));
+    backend.resize(bin_tri, std::max<uint64_t>(total, 1));
+    backend.resize(bin_cell, std::max<uint64_t>(total, 1));
+    uint32_t* cursor = count;  // reuse the scanned counts as fill cursors
+    uint32_t* bt = bin_tri.data();
+    uint64_t* bc = bin_cell.data();
+    backend.parallel_for(m, [=] COLLIDO_HD(uint32_t t) {
+      for_each_bin_cell(g, T[t], fgrow, [&](uint64_t l) {
+        const uint32_t slot = atomic_add_u32(&cursor[g.bucket(l)], 1u);
+        bt[slot] = t;
+        bc[slot] = l;
+      });
+    });
+    // Fixed order inside each cell (by triangle) makes runs repeatable.
+    backend.sort_segments(bin_tri.data(), bin_cell.data(), bin_start.data(), grid.buckets, total);
+    return Status::ok();
+  }
+
+  // Calls f(linear cell) for each cell whose box grown by `grow` overlaps the triangle.
+  template <class F>
+  COLLIDO_HD static void for_each_bin_cell(const GridSpec& g, const TriangleF& t, float grow, F&& f) {
+    const float lox = fminf(t.a.x, fminf(t.b.x, t.c.x)) - grow, hix = fmaxf(t.a.x, fmaxf(t.b.x, t.c.x)) + grow;
+    const float loy = fminf(t.a.y, fminf(t.b.y, t.c.y)) - grow, hiy = fmaxf(t.a.y, fmaxf(t.b.y, t.c.y)) + grow;
+    const float loz = fminf(t.a.z, fminf(t.b.z, t.c.z)) - grow, hiz = fmaxf(t.a.z, fmaxf(t.b.z, t.c.z)) + grow;
+    auto clampi = [](int v, int n) { return v < 0 ? 0 : (v >= n ? n - 1 : v); };
+    const int x0 = clampi(int(floorf((lox - g.origin.x) * g.inv_cell)), g.nx),
+              x1 = clampi(int(floorf((hix - g.origin.x) * g.inv_cell)), g.nx);
+    const int y0 = clampi(int(floorf((loy - g.origin.y) * g.inv_cell)), g.ny),
+              y1 = clampi(int(floorf((hiy - g.origin.y) * g.inv_cell)), g.ny);
+    const int z0 = clampi(int(floorf((loz - g.origin.z) * g.inv_cell)), g.nz),
+              z1 = clampi(int(floorf((hiz - g.origin.z) * g.inv_cell)), g.nz);
+    const float h = 0.5f * g.cell + grow;
+    for (int z = z0; z <= z1; ++z)
+      for (int y = y0; y <= y1; ++y)
+        for (int x = x0; x <= x1; ++x) {
+          const Vec3f centre{g.origin.x + (x + 0.5f) * g.cell, g.origin.y + (y + 0.5f) * g.cell,
+                             g.origin.z + (z + 0.5f) * g.cell};
+          if (triangle_box_overlap(t.a, t.b, t.c, centre, Vec3f{h, h, h})) f(g.linear(x, y, z));
+        }
+  }
+
+  template <class T>
+  static void upload(B& backend, Buf<T>& dst, const std::vector<T>& src) {
+    backend.resize(dst, std::max<size_t>(src.size(), 1));
+    if (!src.empty()) backend.to_device(dst.data(), src.data(), src.size() * sizeof(T));
+  }
+
+  GridSpec grid;
+  int reach = 1;
+  Vec3d origin{0, 0, 0};
+  Buf<PlanarTriangle> tris;  // narrow-phase form
+  Buf<TriangleF> corners;    // bin preparation only
+  Buf<uint32_t> tri_original, tri_start, tri_end;
+  Buf<uint64_t> tri_cell;
+  Buf<uint32_t> bin_start, bin_tri;
+  Buf<uint64_t> bin_cell;
+
+ private:
+  Method method_ = Method::kBin;
+  double r_max_ = 0;
+  uint64_t max_dense_cells_ = 0;
+  size_t particles_ = 0;
+};
+
+}  // namespace collido::sim
