@@ -5,6 +5,7 @@
 #include <string>
 
 #include "sim/detect.h"
+#include "sim/dynamics.h"
 
 namespace collido::sim {
 
@@ -12,6 +13,10 @@ namespace collido::sim {
 Expected<std::unique_ptr<Detector>> make_cuda_detector(const TriangleMesh& mesh, const DetectConfig& cfg,
                                                        size_t max_particles);
 bool cuda_device_usable(std::string* why);
+// The dynamics on the GPU (sim/dynamics_cuda.cu); arguments as DynamicsPipeline::make.
+Expected<std::unique_ptr<Simulation>> make_cuda_simulation(const TriangleMesh& mesh, const DynamicsConfig& cfg,
+                                                           const ParticleSet& particles, const TimeStepInfo& ts,
+                                                           Vec3d domain_lo, Vec3d domain_hi);
 #endif
 
 }  // namespace collido::sim

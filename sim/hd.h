@@ -60,6 +60,9 @@ COLLIDO_HD COLLIDO_FORCEINLINE T hd_max(T a, T b) { return a < b ? b : a; }
 template <class T>
 COLLIDO_HD COLLIDO_FORCEINLINE T hd_abs(T a) { return a < T(0) ? -a : a; }
 
+// False for NaN and infinities (x - x is 0 only for finite x); works the same in device code.
+COLLIDO_HD COLLIDO_FORCEINLINE bool hd_finite(double v) { return v - v == 0.0; }
+
 template <class T>
 COLLIDO_HD COLLIDO_FORCEINLINE T length(Vec3T<T> a) {
   return hd_sqrt(dot(a, a));

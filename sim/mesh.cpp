@@ -1,6 +1,7 @@
 #include "sim/mesh.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <map>
 #include <unordered_map>
@@ -160,6 +161,19 @@ double signed_volume(const TriangleMesh& mesh) {
   for (size_t t = 0; t < mesh.triangles.size(); ++t)
     v += dot(mesh.corner(t, 0), cross(mesh.corner(t, 1), mesh.corner(t, 2)));
   return v / 6.0;
+}
+
+double winding_number(const TriangleMesh& mesh, Vec3d p) {
+  // Van Oosterom and Strackee's solid angle of each triangle seen from p.
+  double sum = 0;
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+    const Vec3d a = mesh.corner(t, 0) - p, b = mesh.corner(t, 1) - p, c = mesh.corner(t, 2) - p;
+    const double la = length(a), lb = length(b), lc = length(c);
+    const double num = dot(a, cross(b, c));
+    const double den = la * lb * lc + dot(a, b) * lc + dot(b, c) * la + dot(c, a) * lb;
+    sum += 2 * std::atan2(num, den);
+  }
+  return sum / (4 * M_PI);
 }
 
 }  // namespace collido::sim

@@ -70,5 +70,8 @@ void append_mesh(TriangleMesh& a, const TriangleMesh& b);
 bool is_closed_manifold(const TriangleMesh& mesh);
 // Signed volume (positive when normals point outward), cubic world units.
 double signed_volume(const TriangleMesh& mesh);
+// Generalised winding number of p (sum of the triangles' signed solid angles
+// over 4 pi): 1 inside a closed outward mesh, 0 outside, fractional near holes.
+double winding_number(const TriangleMesh& mesh, Vec3d p);
 
 }  // namespace collido::sim

@@ -12,6 +12,7 @@
 #include "sim/detect.h"
 #include "sim/divide.h"
 #include "sim/grid.h"
+#include "sim/contact_force.h"
 #include "sim/narrow_phase.h"
 
 namespace collido::sim {
@@ -66,8 +67,9 @@ struct WallView {
   const uint32_t* bin_tri = nullptr;
   const uint64_t* bin_cell = nullptr;
 
-  // Calls f(triangle, original mesh index) for every triangle or piece that
-  // may lie within r_max of p (a superset of the contacts; the caller tests distance).
+  // Calls f(k, original mesh index) for every triangle or piece k (an index
+  // into the prepared arrays) that may lie within r_max of p: a superset of
+  // the contacts, the caller tests distance.
   template <class F>
   COLLIDO_HD COLLIDO_FORCEINLINE void for_each_candidate(Vec3f p, F&& f) const {
     int x = 0, y = 0, z = 0;
@@ -78,14 +80,14 @@ struct WallView {
       for (uint32_t k = bin_start[b], e = bin_start[b + 1]; k < e; ++k) {
         if (g.hashed && bin_cell[k] != l) continue;
         const uint32_t t = bin_tri[k];
-        f(tris[t], t);
+        f(t, t);
       }
       return;
     }
     g.for_each_neighbour(x, y, z, reach, [&](uint64_t l, uint32_t b) {
       for (uint32_t k = tri_start[b], e = tri_end[b]; k < e; ++k) {
         if (g.hashed && tri_cell[k] != l) continue;
-        f(tris[k], original[k]);
+        f(k, original[k]);
       }
     });
   }
@@ -99,8 +101,10 @@ class WallIndex {
  public:
   // Prepares `mesh` for particles of radius <= r_max with cells of edge `cell`
   // (world units); `particles` sizes a hashed table. Fills the wall part of *info.
+  // double_triangles: also keep the triangles in double (tris_d) for contact forces.
   Status prepare(B& backend, const TriangleMesh& mesh, Method method, double r_max, double cell,
-                 uint64_t max_dense_cells, size_t particles, PrepareInfo* info) {
+                 uint64_t max_dense_cells, size_t particles, PrepareInfo* info, bool double_triangles = false) {
+    double_ = double_triangles;
     method_ = method;
     r_max_ = r_max;
     max_dense_cells_ = max_dense_cells;
@@ -160,11 +164,13 @@ class WallIndex {
 
     // Hash the pieces by bounding-sphere centre and sort them by cell (paper Table 2).
     std::vector<PlanarTriangle> host_tris(m);
+    std::vector<PlanarTriangleD> host_tris_d(double_ ? m : 0);
     std::vector<uint32_t> key(m), idx(m);
     std::vector<uint64_t> cellkey(m);
     for (size_t i = 0; i < m; ++i) {
       const auto& p = dv.pieces[i];
       host_tris[i] = make_planar(p[0], p[1], p[2], origin);
+      if (double_) host_tris_d[i] = make_planar_d(p[0], p[1], p[2], origin);
       int x = 0, y = 0, z = 0;
       Vec3f c = cast3<float>(dv.sphere_centre[i] - origin);
       if (!grid.cell_of(c, x, y, z)) return Status(ErrorCode::kBackend, "piece centre outside its grid");
@@ -174,11 +180,13 @@ class WallIndex {
     }
     std::stable_sort(idx.begin(), idx.end(), [&](uint32_t a, uint32_t b) { return key[a] < key[b]; });
     std::vector<PlanarTriangle> tris_sorted(m);
+    std::vector<PlanarTriangleD> tris_d_sorted(double_ ? m : 0);
     std::vector<uint32_t> orig_sorted(m);
     std::vector<uint64_t> cell_sorted(m);
     std::vector<uint32_t> start(grid.buckets, 0), end(grid.buckets, 0);
     for (size_t j = 0; j < m; ++j) {
       tris_sorted[j] = host_tris[idx[j]];
+      if (double_) tris_d_sorted[j] = host_tris_d[idx[j]];
       orig_sorted[j] = dv.original[idx[j]];
       cell_sorted[j] = cellkey[idx[j]];
       const uint32_t k = key[idx[j]];
@@ -186,6 +194,7 @@ class WallIndex {
       end[k] = static_cast<uint32_t>(j + 1);
     }
     upload(backend, tris, tris_sorted);
+    if (double_) upload(backend, tris_d, tris_d_sorted);
     upload(backend, tri_original, orig_sorted);
     upload(backend, tri_cell, cell_sorted);
     upload(backend, tri_start, start);
@@ -208,12 +217,15 @@ class WallIndex {
 
     std::vector<TriangleF> host_corners(m);
     std::vector<PlanarTriangle> host_tris(m);
+    std::vector<PlanarTriangleD> host_tris_d(double_ ? m : 0);
     for (size_t t = 0; t < m; ++t) {
       host_corners[t] = {cast3<float>(mesh.corner(t, 0) - origin), cast3<float>(mesh.corner(t, 1) - origin),
                     cast3<float>(mesh.corner(t, 2) - origin)};
       host_tris[t] = make_planar(mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2), origin);
+      if (double_) host_tris_d[t] = make_planar_d(mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2), origin);
     }
     upload(backend, tris, host_tris);
+    if (double_) upload(backend, tris_d, host_tris_d);
     upload(backend, corners, host_corners);
 
     // CSR build on the backend: count (cell, triangle) overlaps, scan, fill.
@@ -284,6 +296,7 @@ class WallIndex {
   int reach = 1;
   Vec3d origin{0, 0, 0};
   Buf<PlanarTriangle> tris;  // narrow-phase form
+  Buf<PlanarTriangleD> tris_d;  // the same in double, for contact forces (when asked for)
   Buf<TriangleF> corners;    // bin preparation only
   Buf<uint32_t> tri_original, tri_start, tri_end;
   Buf<uint64_t> tri_cell;
@@ -292,6 +305,7 @@ class WallIndex {
 
  private:
   Method method_ = Method::kBin;
+  bool double_ = false;
   double r_max_ = 0;
   uint64_t max_dense_cells_ = 0;
   size_t particles_ = 0;

@@ -1,0 +1,203 @@
+// Per-contact math of the dynamics, written once for both backends: the
+// closest point on a prepared triangle, the choice of one contact per touched
+// wall feature, and the spring-dashpot force with optional Coulomb friction.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+
+#include "sim/grid.h"
+#include "sim/hd.h"
+#include "sim/narrow_phase.h"
+
+namespace collido::sim {
+
+// A triangle prepared for the dynamics' contact geometry, in double: corner
+// a, unit edge direction e1 (along ab), unit normal n, and b = (b1, 0),
+// c = (c1, c2) in the (e1, n x e1) frame, as PlanarTriangle for detection.
+// Forces need more than detection: a float closest point carries the
+// rounding of the coordinates (about 1e-7 of them) into the push's
+// direction, a sideways force that walks a resting particle across a floor.
+struct PlanarTriangleD {
+  Vec3d a, e1, n;
+  double b1, c1, c2;  // c2 == 0: degenerate (a segment)
+};
+
+inline PlanarTriangleD make_planar_d(Vec3d a, Vec3d b, Vec3d c, Vec3d origin) {
+  a = a - origin, b = b - origin, c = c - origin;
+  const double lab = norm2(b - a), lbc = norm2(c - b), lca = norm2(a - c);
+  if (lbc >= lab && lbc >= lca) {
+    Vec3d t = a;
+    a = b, b = c, c = t;
+  } else if (lca >= lab && lca >= lbc) {
+    Vec3d t = a;
+    a = c, c = b, b = t;
+  }
+  PlanarTriangleD out;
+  const Vec3d ab = b - a, ac = c - a;
+  const double len = length(ab);
+  out.e1 = len > 0 ? ab * (1.0 / len) : Vec3d{1, 0, 0};
+  Vec3d n = cross(ab, ac);
+  const double nl = length(n);
+  out.c2 = 0;
+  if (nl > 1e-300 && nl > 1e-14 * len * len) {
+    n = n * (1.0 / nl);
+    out.c2 = hd_max(dot(ac, cross(n, out.e1)), 0.0);
+  } else {
+    Vec3d t = std::fabs(out.e1.x) < 0.9 ? Vec3d{1, 0, 0} : Vec3d{0, 1, 0};
+    n = cross(out.e1, t);
+    n = n * (1.0 / length(n));
+  }
+  out.a = a;
+  out.n = n;
+  out.b1 = len;
+  out.c1 = dot(ac, out.e1);
+  return out;
+}
+
+// Closest point on a 2D segment (s, e) to (u, v); writes the point, returns the squared distance.
+COLLIDO_HD COLLIDO_FORCEINLINE double segment_closest_2d(double u, double v, double su, double sv, double eu,
+                                                         double ev, double& qu, double& qv) {
+  const double du = eu - su, dv = ev - sv;
+  const double len2 = du * du + dv * dv;
+  double t = len2 > 0 ? ((u - su) * du + (v - sv) * dv) / len2 : 0;
+  t = t < 0 ? 0 : (t > 1 ? 1 : t);
+  qu = su + t * du, qv = sv + t * dv;
+  const double x = u - qu, y = v - qv;
+  return x * x + y * y;
+}
+
+// Squared distance from p to the triangle, the closest point *q, p's signed
+// height *h over the plane, and whether the closest point is inside the face
+// (then the push is along +-n exactly).
+COLLIDO_HD COLLIDO_FORCEINLINE double closest_point_planar(Vec3d p, const PlanarTriangleD& t, Vec3d* q, double* h,
+                                                           bool* face) {
+  const Vec3d ap = p - t.a;
+  const Vec3d e2 = cross(t.n, t.e1);
+  const double u = dot(ap, t.e1), v = dot(ap, e2), hh = dot(ap, t.n);
+  double qu = u, qv = v, d = 0;
+  const bool inside = t.c2 > 0 && v >= 0 && (t.c1 - t.b1) * v - t.c2 * (u - t.b1) >= 0 && t.c2 * u - t.c1 * v >= 0;
+  if (!inside) {
+    double au, av, bu, bv, cu, cv;
+    const double d0 = segment_closest_2d(u, v, 0, 0, t.b1, 0, au, av);
+    const double d1 = segment_closest_2d(u, v, t.b1, 0, t.c1, t.c2, bu, bv);
+    const double d2 = segment_closest_2d(u, v, t.c1, t.c2, 0, 0, cu, cv);
+    d = d0, qu = au, qv = av;
+    if (d1 < d) d = d1, qu = bu, qv = bv;
+    if (d2 < d) d = d2, qu = cu, qv = cv;
+  }
+  *q = t.a + t.e1 * qu + e2 * qv;
+  *h = hh;
+  *face = inside;
+  return d + hh * hh;
+}
+
+// One wall contact of a particle: the closest point q on the wall, the unit
+// normal n from q towards the centre, and the centre's distance.
+struct WallContact {
+  Vec3d q, n;
+  double dist;
+  uint32_t triangle;  // original (mesh) index, the friction history key
+};
+
+// The wall contacts of one particle, one per touched feature. A candidate
+// whose closest point lies on or behind the tangent plane of another contact
+// (the plane through that contact's point, normal n) is the same support seen
+// again: the shared vertex of six floor triangles, the shared edge of two, the
+// neighbour of the face the sphere sits on, a piece of the same divided
+// triangle. Such points are always farther from the centre than the contact
+// that shadows them, so keeping the unshadowed ones keeps the deepest of each
+// support, in any order of arrival. Concave corners (floor meets side) give
+// points in front of each other's planes and keep both contacts.
+template <int K>
+struct WallContactSet {
+  WallContact c[K];
+  int n = 0;
+  uint32_t dropped = 0;  // unshadowed contacts beyond K (deepest kept)
+
+  COLLIDO_HD COLLIDO_FORCEINLINE void offer(const WallContact& w, double tol) {
+    for (int k = 0; k < n; ++k)
+      if (dot(w.q - c[k].q, c[k].n) <= tol) return;  // behind an existing contact's plane
+    int m = 0;
+    for (int k = 0; k < n; ++k)
+      if (!(dot(c[k].q - w.q, w.n) <= tol)) c[m++] = c[k];  // keep those the new one does not shadow
+    n = m;
+    if (n < K) {
+      c[n++] = w;
+      return;
+    }
+    // Full: replace the shallowest if the new one is deeper.
+    int s = 0;
+    for (int k = 1; k < n; ++k)
+      if (c[k].dist > c[s].dist) s = k;
+    ++dropped;
+    if (w.dist < c[s].dist) c[s] = w;
+  }
+};
+
+// Constants of the contact law shared by every pair.
+struct ContactLaw {
+  double k = 0;        // normal stiffness, N/m
+  double zeta = 0;     // damping ratio; gamma = 2 zeta sqrt(m_eff k)
+  double kt = 0;       // tangential stiffness, N/m (2/7 k)
+  double mu = 0;       // Coulomb coefficient (0: no friction)
+};
+
+// Tangential spring state of one contact, kept between steps.
+struct FrictionSlot {
+  uint32_t key;  // partner: particle index, or kWallKeyBit | original triangle
+  float sx, sy, sz;
+};
+inline constexpr uint32_t kWallKeyBit = 0x80000000u;
+inline constexpr uint32_t kNoKey = 0xFFFFFFFFu;
+
+// Result of one contact on the particle it belongs to.
+struct ContactForce {
+  Vec3d f;       // force on the particle, N
+  Vec3d torque;  // about its centre, N m
+  double elastic; // J stored in the normal and tangential springs
+};
+
+// Force of one contact on particle i. n: unit normal towards i; overlap > 0;
+// vrel: velocity of i's surface point relative to the partner's at the contact
+// (translation and rotation); m_eff: reduced mass; lever: distance from i's
+// centre to the contact point. *spring is the tangential spring (in: last
+// step's, out: this step's); dt is the step.
+COLLIDO_HD COLLIDO_FORCEINLINE ContactForce contact_force(const ContactLaw& law, Vec3d n, double overlap, Vec3d vrel,
+                                                          double m_eff, double lever, Vec3d* spring, double dt) {
+  ContactForce out;
+  const double gamma = 2.0 * law.zeta * hd_sqrt(m_eff * law.k);
+  const double vn = dot(vrel, n);
+  // Not clamped at zero: the dashpot may pull briefly as a pair separates.
+  // That keeps the restitution exactly the one the damping was derived
+  // from (clamping ends the contact early and gives e = 0.4 for a nominal 0.3).
+  const double fn = law.k * overlap - gamma * vn;
+  out.f = n * fn;
+  out.elastic = 0.5 * law.k * overlap * overlap;
+  out.torque = Vec3d{0, 0, 0};
+  if (law.mu > 0) {
+    const Vec3d vt = vrel - n * vn;
+    // Carry the spring into the current tangent plane, keeping its length.
+    Vec3d s = *spring;
+    const double len = length(s);
+    s = s - n * dot(s, n);
+    const double len2 = length(s);
+    if (len2 > 0) s = s * (len / len2);
+    s = s + vt * dt;
+    const double gt = gamma;  // same damping as the normal direction
+    Vec3d ft = s * (-law.kt) - vt * gt;
+    const double ftn = length(ft), limit = law.mu * (fn > 0 ? fn : 0);
+    if (ftn > limit) {
+      // Sliding: cap at the Coulomb limit, and reset the spring to what that force implies.
+      ft = ftn > 0 ? ft * (limit / ftn) : Vec3d{0, 0, 0};
+      s = (ft + vt * gt) * (-1.0 / law.kt);
+    }
+    *spring = s;
+    out.f = out.f + ft;
+    out.torque = cross(n * (-lever), ft);
+    out.elastic += 0.5 * law.kt * dot(s, s);
+  }
+  return out;
+}
+
+}  // namespace collido::sim

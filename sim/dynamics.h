@@ -1,0 +1,134 @@
+// Particle dynamics: the collision frames of a run. Each step detects wall
+// contacts through the engine's prepared wall (bin or divided pieces), adds
+// particle-particle contacts through a grid only when the scene asks for them,
+// computes linear spring-dashpot forces (optional Coulomb friction with a
+// tangential spring) and integrates with gravity. The time step comes from the
+// physics: a fraction of the contact spring's critical step and a bound on how
+// far a particle may move in one step.
+//
+// Units are SI throughout (m, kg, s); wall and particle coordinates are world units = metres.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "sim/detect.h"
+#include "sim/hd.h"
+#include "sim/mesh.h"
+#include "sim/status.h"
+
+namespace collido::sim {
+
+enum class Integrator {
+  kSymplecticEuler,  // v += a dt, x += v dt: one force evaluation, first order
+  kVelocityVerlet,   // half kick, drift, force, half kick: second order, same cost
+};
+const char* to_string(Integrator i);
+bool parse_integrator(const std::string& s, Integrator* out);
+
+struct Material {
+  double density = 2500;       // particle density, kg/m^3
+  double stiffness = 0;        // normal contact spring, N/m; 0 = from youngs_modulus, else automatic
+  double youngs_modulus = 0;   // Pa; when set (and stiffness is 0), stiffness = E * mean radius
+  double restitution = 0.5;    // normal coefficient of restitution, (0, 1]
+  double friction = 0;         // Coulomb coefficient; 0 = frictionless, no tangential state kept
+};
+
+struct DynamicsConfig {
+  Method method = Method::kBin;  // how the wall is prepared (bin or a division method)
+  Backend backend = Backend::kCpu;
+  Integrator integrator = Integrator::kVelocityVerlet;
+  Material material;
+  Vec3d gravity{0, 0, -9.81};    // m/s^2
+  bool particle_contacts = false;
+  double time_step = 0;          // s; 0 = automatic (re-evaluated as speeds change)
+  double step_fraction = 0.1;    // automatic: share of the critical step of the stiffest contact
+  double motion_fraction = 0.1;  // automatic: largest travel per step, in smallest radii
+  // Speed used to size the automatic stiffness (m/s): the fastest impact the
+  // scene expects; 0 = estimated from the initial speeds and a fall across the wall's box.
+  double impact_speed = 0;
+  double grid_length = 0;        // wall cells, m; 0 = 2 r_max
+  double domain_margin = -1;     // escape distance outside the wall's box, m; < 0 = automatic
+  uint64_t max_dense_cells = 1ull << 24;
+};
+
+// Particles at the start of a run (world units, SI). A particle takes part
+// from its release time on (pour and jet placements release over time).
+struct ParticleSet {
+  std::vector<double> x, y, z, vx, vy, vz, r, release;
+  size_t size() const { return x.size(); }
+  void resize(size_t n);
+};
+
+// Per-particle state in download()'s flags: the low two bits.
+enum ParticleState : uint8_t {
+  kWaiting = 0,  // not released yet
+  kActive = 1,
+  kEscaped = 2,  // left the domain (the wall's box grown by the margin); frozen and counted
+  kInvalid = 3,  // a non-finite position or velocity appeared; frozen and counted
+};
+inline constexpr uint8_t kStateMask = 3;
+inline constexpr uint8_t kFlagWallContact = 4;      // touches the wall in the last step
+inline constexpr uint8_t kFlagParticleContact = 8;  // touches another particle in the last step
+
+// How the time step was chosen: printed by the CLI and written with the run.
+struct TimeStepInfo {
+  double stiffness = 0;       // N/m, as used
+  double damping_ratio = 0;   // from the restitution
+  double critical_step = 0;   // s: explicit stability bound of the stiffest contact
+  double spring_step = 0;     // s: step_fraction * critical_step
+  double explicit_step = 0;   // s: the scene's fixed step (0 = automatic)
+  bool beyond_stable = false; // the fixed step exceeds the critical one
+  double r_min = 0, r_max = 0, m_min = 0;
+};
+
+// What one frame ended with, for the stats file and the progress line.
+struct FrameStats {
+  uint64_t frame = 0;
+  double time = 0;             // s
+  uint64_t substeps = 0;       // steps taken in this frame
+  double dt_min = 0, dt_max = 0;  // s, over the frame's steps
+  uint64_t waiting = 0, active = 0, escaped = 0, invalid = 0;
+  uint64_t wall_contacts = 0;      // one per touched wall feature
+  uint64_t particle_contacts = 0;  // pairs
+  uint64_t touching_wall = 0;      // particles with at least one wall contact
+  double kinetic = 0;          // J, translation and rotation
+  double potential = 0;        // J, gravity, relative to the wall's centre
+  double elastic = 0;          // J, stored in the contact springs
+  double max_speed = 0;        // m/s
+  double max_overlap = 0;      // deepest overlap as a share of that particle's radius
+  uint64_t history_overflow = 0;  // friction contacts beyond the per-particle slots (no memory kept)
+  double total_energy() const { return kinetic + potential + elastic; }
+};
+
+class Simulation {
+ public:
+  virtual ~Simulation() = default;
+  // Prepares the wall and loads the particles. Errors name the bad setting.
+  static Expected<std::unique_ptr<Simulation>> create(const TriangleMesh& wall, const DynamicsConfig& config,
+                                                      const ParticleSet& particles);
+
+  // Advances the state by `duration` seconds in steps of the automatic (or the
+  // fixed) size and measures the end state into *stats (frame and time set).
+  virtual Status advance(double duration, FrameStats* stats) = 0;
+  // Exactly `steps` steps of `dt` seconds, no step control (tests, benchmarks).
+  virtual Status step(uint64_t steps, double dt) = 0;
+  // Measures the current state.
+  virtual Status measure(FrameStats* stats) = 0;
+  // Copies the state back: positions and velocities in world units (release
+  // kept from the input) and per-particle flags (ParticleState | contact bits).
+  virtual Status download(ParticleSet* state, std::vector<uint8_t>* flags) = 0;
+
+  virtual const TimeStepInfo& time_step_info() const = 0;
+  virtual const PrepareInfo& wall_info() const = 0;
+  virtual double time() const = 0;            // s
+  virtual uint64_t steps_taken() const = 0;
+  virtual uint64_t device_bytes() const = 0;  // memory held by the backend
+};
+
+// Linear spring-dashpot damping ratio for a restitution e in (0, 1].
+double damping_ratio(double restitution);
+
+}  // namespace collido::sim

@@ -1,0 +1,547 @@
+// The dynamics, written once and instantiated for each backend
+// (sim/dynamics.cpp for the CPU, sim/dynamics_cuda.cu for the GPU). Every loop
+// body is a COLLIDO_HD lambda; the state stays on the backend for the whole
+// run and only per-frame statistics (a few reductions) come back.
+//
+// A step: release waiting particles -> (Verlet) half kick and drift ->
+// particle grid (only with particle-particle contacts) -> forces (wall
+// contacts one per feature, particle pairs, gravity) -> kick (and, for
+// symplectic Euler, drift) -> finite and domain checks.
+#pragma once
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <vector>
+
+#include "sim/contact_force.h"
+#include "sim/dynamics.h"
+#include "sim/wall_index.h"
+
+namespace collido::sim {
+
+// Wall contacts kept per particle per step (a sphere in the corner of a box touches three).
+inline constexpr int kMaxWallContacts = 4;
+// Friction springs remembered per particle (wall features and neighbours together).
+inline constexpr int kFrictionSlots = 8;
+// Steps between re-evaluations of the motion bound (the fastest speed).
+inline constexpr int kSpeedCheckInterval = 8;
+
+// Per-particle statistics columns filled by a measuring pass, reduced per frame.
+enum StatColumn : int {
+  kStatElastic, kStatOverlap, kStatWallContacts, kStatPairContacts, kStatTouching, kStatKinetic,
+  kStatPotential, kStatSpeed, kStatWaiting, kStatActive, kStatEscaped, kStatInvalid, kStatOverflow, kStatColumns
+};
+
+template <class B>
+class DynamicsPipeline final : public Simulation {
+  template <class T>
+  using Buf = typename B::template Buffer<T>;
+
+ public:
+  static Expected<std::unique_ptr<Simulation>> make(const TriangleMesh& mesh, const DynamicsConfig& cfg,
+                                                    const ParticleSet& particles, const TimeStepInfo& ts,
+                                                    Vec3d domain_lo, Vec3d domain_hi) {
+    auto s = std::unique_ptr<DynamicsPipeline>(new DynamicsPipeline(cfg, ts));
+    if (Status e = s->init(mesh, particles, domain_lo, domain_hi); !e) return e;
+    return std::unique_ptr<Simulation>(std::move(s));
+  }
+
+  const TimeStepInfo& time_step_info() const override { return ts_; }
+  const PrepareInfo& wall_info() const override { return info_; }
+  double time() const override { return time_; }
+  uint64_t steps_taken() const override { return steps_; }
+  uint64_t device_bytes() const override { return backend_.bytes_held(); }
+
+  Status step(uint64_t steps, double dt) override {
+    if (!(dt > 0) || !std::isfinite(dt)) return invalid_argument("time step must be positive, got " + std::to_string(dt));
+    for (uint64_t k = 0; k < steps; ++k) one_step(dt);
+    backend_.sync();
+    return backend_.status();
+  }
+
+  Status advance(double duration, FrameStats* stats) override {
+    if (!(duration > 0) || !std::isfinite(duration))
+      return invalid_argument("frame duration must be positive, got " + std::to_string(duration));
+    const double end = time_ + duration;
+    uint64_t substeps = 0;
+    double dt_min = 1e300, dt_max = 0, dt = 0;
+    int since_check = kSpeedCheckInterval;
+    while (time_ < end * (1 - 1e-15) && end - time_ > 1e-300) {
+      const double remaining = end - time_;
+      if (ts_.explicit_step > 0) {
+        dt = ts_.explicit_step;
+      } else if (since_check >= kSpeedCheckInterval) {
+        dt = automatic_step();
+        since_check = 0;
+      }
+      // Land exactly on the frame's end: split what remains into equal steps.
+      const double steps_left = std::ceil(remaining / dt * (1 - 1e-12));
+      const double h = steps_left <= 1 ? remaining : remaining / steps_left;
+      one_step(h);
+      ++since_check;
+      ++substeps;
+      dt_min = std::min(dt_min, h), dt_max = std::max(dt_max, h);
+      if (Status e = backend_.status(); !e) return e;
+    }
+    if (Status e = measure(stats); !e) return e;
+    stats->substeps = substeps;
+    stats->dt_min = substeps ? dt_min : 0;
+    stats->dt_max = dt_max;
+    return Status::ok();
+  }
+
+  Status measure(FrameStats* st) override {
+    *st = FrameStats{};
+    st->time = time_;
+    if (n_ == 0) return backend_.status();
+    forces(0.0, /*measure=*/true);
+    kinematics_stats();
+    double col[kStatColumns];
+    for (int c = 0; c < kStatColumns; ++c)
+      col[c] = c == kStatOverlap || c == kStatSpeed ? backend_.reduce_max(scratch_.data() + size_t(c) * n_, n_)
+                                                    : backend_.reduce_sum(scratch_.data() + size_t(c) * n_, n_);
+    st->elastic = col[kStatElastic];
+    st->max_overlap = col[kStatOverlap];
+    st->wall_contacts = static_cast<uint64_t>(col[kStatWallContacts] + 0.5);
+    st->particle_contacts = static_cast<uint64_t>(col[kStatPairContacts] * 0.5 + 0.5);  // each pair seen twice
+    st->touching_wall = static_cast<uint64_t>(col[kStatTouching] + 0.5);
+    st->kinetic = col[kStatKinetic];
+    st->potential = col[kStatPotential];
+    st->max_speed = col[kStatSpeed];
+    st->waiting = static_cast<uint64_t>(col[kStatWaiting] + 0.5);
+    st->active = static_cast<uint64_t>(col[kStatActive] + 0.5);
+    st->escaped = static_cast<uint64_t>(col[kStatEscaped] + 0.5);
+    st->invalid = static_cast<uint64_t>(col[kStatInvalid] + 0.5);
+    st->history_overflow = static_cast<uint64_t>(col[kStatOverflow] + 0.5);
+    return backend_.status();
+  }
+
+  Status download(ParticleSet* out, std::vector<uint8_t>* flags) override {
+    std::vector<Vec3d> p(n_), v(n_);
+    if (n_) {
+      backend_.to_host(p.data(), pos_.data(), n_ * sizeof(Vec3d));
+      backend_.to_host(v.data(), vel_.data(), n_ * sizeof(Vec3d));
+    }
+    out->resize(n_);
+    for (size_t i = 0; i < n_; ++i) {
+      out->x[i] = p[i].x + origin_.x, out->y[i] = p[i].y + origin_.y, out->z[i] = p[i].z + origin_.z;
+      out->vx[i] = v[i].x, out->vy[i] = v[i].y, out->vz[i] = v[i].z;
+      out->r[i] = radius_host_[i];
+      out->release[i] = release_host_[i];
+    }
+    if (flags) {
+      flags->resize(n_);
+      if (n_) backend_.to_host(flags->data(), flags_.data(), n_);
+    }
+    return backend_.status();
+  }
+
+ private:
+  DynamicsPipeline(const DynamicsConfig& cfg, const TimeStepInfo& ts) : cfg_(cfg), ts_(ts) {}
+
+  // --- set-up ---------------------------------------------------------------------------------
+ public:  // nvcc's extended lambdas may not live in private member functions
+  Status init(const TriangleMesh& mesh, const ParticleSet& ps, Vec3d domain_lo, Vec3d domain_hi) {
+    n_ = ps.size();
+    const double cell = cfg_.grid_length > 0 ? cfg_.grid_length : 2 * ts_.r_max;
+    info_.grid_length = cell;
+    if (Status e = wall_.prepare(backend_, mesh, cfg_.method, ts_.r_max, cell, cfg_.max_dense_cells, n_, &info_,
+                                 /*double_triangles=*/true);
+        !e)
+      return e;
+    origin_ = wall_.origin;
+    lo_ = domain_lo - origin_, hi_ = domain_hi - origin_;
+    law_.k = ts_.stiffness;
+    law_.zeta = ts_.damping_ratio;
+    law_.kt = 2.0 / 7.0 * ts_.stiffness;
+    law_.mu = cfg_.material.friction;
+
+    radius_host_ = ps.r;
+    release_host_ = ps.release;
+    std::vector<Vec3d> p(n_), v(n_);
+    std::vector<double> inv_mass(n_);
+    std::vector<uint8_t> state(n_);
+    for (size_t i = 0; i < n_; ++i) {
+      p[i] = Vec3d{ps.x[i], ps.y[i], ps.z[i]} - origin_;
+      v[i] = {ps.vx[i], ps.vy[i], ps.vz[i]};
+      inv_mass[i] = 1.0 / (cfg_.material.density * 4.0 / 3.0 * M_PI * ps.r[i] * ps.r[i] * ps.r[i]);
+      state[i] = ps.release[i] > 0 ? kWaiting : kActive;
+    }
+    upload(pos_, p);
+    upload(vel_, v);
+    upload(radius_, ps.r);
+    upload(inv_mass_, inv_mass);
+    upload(release_, ps.release);
+    upload(state_, state);
+    backend_.resize(flags_, std::max<size_t>(n_, 1));
+    backend_.fill(flags_.data(), n_, uint8_t(0));
+    backend_.resize(acc_, std::max<size_t>(n_, 1));
+    backend_.fill(acc_.data(), n_, Vec3d{0, 0, 0});
+    backend_.resize(speed_, std::max<size_t>(n_, 1));
+    backend_.resize(scratch_, std::max<size_t>(n_ * kStatColumns, 1));
+    if (law_.mu > 0) {
+      backend_.resize(omega_, std::max<size_t>(n_, 1));
+      backend_.resize(alpha_, std::max<size_t>(n_, 1));
+      backend_.fill(omega_.data(), n_, Vec3d{0, 0, 0});
+      backend_.fill(alpha_.data(), n_, Vec3d{0, 0, 0});
+      for (auto& h : hist_) {
+        backend_.resize(h, std::max<size_t>(n_ * kFrictionSlots, 1));
+        backend_.fill(h.data(), n_ * kFrictionSlots, FrictionSlot{kNoKey, 0, 0, 0});
+      }
+    }
+    if (cfg_.particle_contacts) {
+      uint64_t cells = 0;
+      pgrid_ = make_grid(lo_, hi_, 2 * ts_.r_max, cfg_.max_dense_cells, n_, &cells);
+      backend_.resize(p_key_, std::max<size_t>(n_, 1));
+      backend_.resize(p_idx_, std::max<size_t>(n_, 1));
+      backend_.resize(p_key_sorted_, std::max<size_t>(n_, 1));
+      backend_.resize(p_idx_sorted_, std::max<size_t>(n_, 1));
+      backend_.resize(cell_start_, pgrid_.buckets);
+      backend_.resize(cell_end_, pgrid_.buckets);
+    }
+    // Forces of the initial state, so the first Verlet half kick has them.
+    release(0.0);
+    if (cfg_.particle_contacts) build_particle_grid();
+    forces(0.0, false);
+    if (law_.mu > 0) swap_history();
+    speeds();
+    backend_.sync();
+    return backend_.status();
+  }
+
+  template <class T>
+  void upload(Buf<T>& dst, const std::vector<T>& src) {
+    backend_.resize(dst, std::max<size_t>(src.size(), 1));
+    if (!src.empty()) backend_.to_device(dst.data(), src.data(), src.size() * sizeof(T));
+  }
+
+  // --- one step -------------------------------------------------------------------------------
+  void one_step(double dt) {
+    release(time_);
+    const bool verlet = cfg_.integrator == Integrator::kVelocityVerlet;
+    if (verlet) kick_drift(dt);
+    if (cfg_.particle_contacts) build_particle_grid();
+    forces(dt, false);
+    if (law_.mu > 0) swap_history();
+    finish_step(dt, verlet);
+    time_ += dt;
+    ++steps_;
+  }
+
+  double automatic_step() {
+    const double vmax = backend_.reduce_max(speed_.data(), n_);
+    // Speed may grow under gravity before the next check; bound it.
+    const double g = length(cfg_.gravity);
+    const double vb = vmax + g * ts_.spring_step * kSpeedCheckInterval;
+    double dt = ts_.spring_step;
+    if (vb > 0) dt = std::min(dt, cfg_.motion_fraction * ts_.r_min / vb);
+    // A runaway speed must not stall the run: never below a thousandth of the spring step.
+    return std::max(dt, ts_.spring_step * 1e-3);
+  }
+
+  void release(double t) {
+    uint8_t* state = state_.data();
+    const double* rel = release_.data();
+    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+      if (state[i] == kWaiting && rel[i] <= t) state[i] = kActive;
+    });
+  }
+
+  void kick_drift(double dt) {
+    Vec3d* x = pos_.data();
+    Vec3d* v = vel_.data();
+    const Vec3d* a = acc_.data();
+    Vec3d* w = omega_.data();
+    const Vec3d* al = alpha_.data();
+    const uint8_t* state = state_.data();
+    const bool rot = law_.mu > 0;
+    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+      if (state[i] != kActive) return;
+      v[i] = v[i] + a[i] * (0.5 * dt);
+      x[i] = x[i] + v[i] * dt;
+      if (rot) w[i] = w[i] + al[i] * (0.5 * dt);
+    });
+  }
+
+  void finish_step(double dt, bool verlet) {
+    Vec3d* x = pos_.data();
+    Vec3d* v = vel_.data();
+    const Vec3d* a = acc_.data();
+    Vec3d* w = omega_.data();
+    const Vec3d* al = alpha_.data();
+    uint8_t* state = state_.data();
+    uint8_t* flags = flags_.data();
+    double* speed = speed_.data();
+    const bool rot = law_.mu > 0;
+    const Vec3d lo = lo_, hi = hi_;
+    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+      if (state[i] != kActive) {
+        speed[i] = 0;
+        return;
+      }
+      Vec3d vi = v[i], xi = x[i];
+      if (verlet) {
+        vi = vi + a[i] * (0.5 * dt);
+        if (rot) w[i] = w[i] + al[i] * (0.5 * dt);
+      } else {
+        vi = vi + a[i] * dt;
+        xi = xi + vi * dt;
+        if (rot) w[i] = w[i] + al[i] * dt;
+      }
+      const double s2 = dot(vi, vi);
+      const bool finite = hd_finite(s2) && hd_finite(xi.x) && hd_finite(xi.y) && hd_finite(xi.z);
+      if (!finite) {
+        // Frozen where it last was finite, counted, never written as NaN.
+        state[i] = kInvalid;
+        flags[i] = kInvalid;
+        v[i] = Vec3d{0, 0, 0};
+        speed[i] = 0;
+        return;
+      }
+      v[i] = vi;
+      x[i] = xi;
+      speed[i] = sqrt(s2);
+      if (xi.x < lo.x || xi.y < lo.y || xi.z < lo.z || xi.x > hi.x || xi.y > hi.y || xi.z > hi.z) {
+        state[i] = kEscaped;
+        flags[i] = kEscaped;
+        speed[i] = 0;
+      }
+    });
+  }
+
+  void speeds() {
+    const Vec3d* v = vel_.data();
+    const uint8_t* state = state_.data();
+    double* speed = speed_.data();
+    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) { speed[i] = state[i] == kActive ? length(v[i]) : 0.0; });
+  }
+
+  void swap_history() { hist_in_ ^= 1; }
+
+  void build_particle_grid() {
+    const GridSpec g = pgrid_;
+    const Vec3d* x = pos_.data();
+    const uint8_t* state = state_.data();
+    uint32_t* key = p_key_.data();
+    uint32_t* idx = p_idx_.data();
+    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+      int cx = 0, cy = 0, cz = 0;
+      key[i] = state[i] == kActive && g.cell_of(cast3<float>(x[i]), cx, cy, cz) ? g.bucket(g.linear(cx, cy, cz))
+                                                                               : kInvalidBucket;
+      idx[i] = i;
+    });
+    backend_.sort_pairs(key, idx, p_key_sorted_.data(), p_idx_sorted_.data(), n_);
+    uint32_t* start = cell_start_.data();
+    uint32_t* end = cell_end_.data();
+    const uint32_t* skey = p_key_sorted_.data();
+    const uint32_t n = static_cast<uint32_t>(n_);
+    backend_.fill(start, pgrid_.buckets, 0u);
+    backend_.fill(end, pgrid_.buckets, 0u);
+    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t j) {
+      const uint32_t k = skey[j];
+      if (k == kInvalidBucket) return;
+      if (j == 0 || skey[j - 1] != k) start[k] = j;
+      if (j + 1 == n || skey[j + 1] != k) end[k] = j + 1;
+    });
+  }
+
+  // Forces on every active particle. measure: write statistics only (no
+  // accelerations, no friction memory), so measuring never changes the run.
+  void forces(double dt, bool measure) {
+    const WallView wall = wall_.view();
+    const PlanarTriangleD* tris_d = wall_.tris_d.data();
+    const GridSpec pg = pgrid_;
+    const bool pairs = cfg_.particle_contacts;
+    const ContactLaw law = law_;
+    const Vec3d grav = cfg_.gravity;
+    const Vec3d* x = pos_.data();
+    const Vec3d* v = vel_.data();
+    const Vec3d* w = omega_.data();
+    const double* rad = radius_.data();
+    const double* inv_mass = inv_mass_.data();
+    const uint8_t* state = state_.data();
+    uint8_t* flags = flags_.data();
+    Vec3d* acc = acc_.data();
+    Vec3d* alpha = alpha_.data();
+    const FrictionSlot* hin = hist_[hist_in_].data();
+    FrictionSlot* hout = hist_[hist_in_ ^ 1].data();
+    const uint32_t* start = cell_start_.data();
+    const uint32_t* end = cell_end_.data();
+    const uint32_t* sidx = p_idx_sorted_.data();
+    double* stats = scratch_.data();
+    const size_t n = n_;
+    const bool friction = law.mu > 0;
+    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+      const uint8_t st = state[i];
+      if (st != kActive) {
+        if (measure)
+          for (int c = kStatElastic; c <= kStatTouching; ++c) stats[size_t(c) * n + i] = 0;
+        else
+          acc[i] = Vec3d{0, 0, 0};
+        return;
+      }
+      const Vec3d xi = x[i], vi = v[i];
+      const Vec3d wi = friction ? w[i] : Vec3d{0, 0, 0};
+      const double r = rad[i], m = 1.0 / inv_mass[i];
+      Vec3d f = grav * m, torque{0, 0, 0};
+      double elastic = 0, overlap_max = 0;
+      uint32_t nwall = 0, npair = 0, slots = 0, overflow = 0;
+      const FrictionSlot* old_slots = hin + size_t(i) * kFrictionSlots;
+      FrictionSlot* new_slots = hout + size_t(i) * kFrictionSlots;
+      // One contact: find last step's spring by key, apply the law, keep the new spring.
+      auto apply = [&](uint32_t key, Vec3d nrm, double overlap, Vec3d vrel, double m_eff, double share) {
+        Vec3d spring{0, 0, 0};
+        if (friction)
+          for (int s = 0; s < kFrictionSlots; ++s)
+            if (old_slots[s].key == key) {
+              spring = Vec3d{old_slots[s].sx, old_slots[s].sy, old_slots[s].sz};
+              break;
+            }
+        const ContactForce cf = contact_force(law, nrm, overlap, vrel, m_eff, r, &spring, dt);
+        f = f + cf.f;
+        torque = torque + cf.torque;
+        elastic += share * cf.elastic;
+        overlap_max = hd_max(overlap_max, overlap / r);
+        if (friction && !measure) {
+          if (slots < kFrictionSlots)
+            new_slots[slots++] = FrictionSlot{key, float(spring.x), float(spring.y), float(spring.z)};
+          else
+            ++overflow;
+        }
+      };
+
+      // Wall: one contact per touched feature.
+      WallContactSet<kMaxWallContacts> set;
+      const double r2 = r * r, tol = 1e-9 * r;
+      wall.for_each_candidate(cast3<float>(xi), [&](uint32_t k, uint32_t orig) {
+        const PlanarTriangleD& t = tris_d[k];
+        Vec3d q;
+        double h = 0;
+        bool face = false;
+        const double d2 = closest_point_planar(xi, t, &q, &h, &face);
+        if (!(d2 < r2)) return;
+        double d = sqrt(d2);
+        Vec3d nrm;
+        if (face || !(d > 1e-9 * r)) {
+          // Face contact (or the centre on an edge): the plane's own normal, towards the centre.
+          nrm = h >= 0 ? t.n : t.n * -1.0;
+          d = hd_abs(h);
+        } else {
+          nrm = (xi - q) * (1.0 / d);
+        }
+        set.offer(WallContact{q, nrm, d, orig}, tol);
+      });
+      for (int k = 0; k < set.n; ++k) {
+        const Vec3d nrm = set.c[k].n;
+        const double overlap = r - set.c[k].dist;
+        const Vec3d vrel = friction ? vi + cross(wi, nrm * (-r)) : vi;
+        apply(kWallKeyBit | set.c[k].triangle, nrm, overlap, vrel, m, 1.0);
+        ++nwall;
+      }
+      overflow += set.dropped;
+
+      // Particle pairs, through the grid, only when the scene asks for them.
+      if (pairs) {
+        int cx = 0, cy = 0, cz = 0;
+        if (pg.cell_of(cast3<float>(xi), cx, cy, cz)) {
+          pg.for_each_neighbour(cx, cy, cz, 1, [&](uint64_t l, uint32_t b) {
+            for (uint32_t k = start[b], e = end[b]; k < e; ++k) {
+              const uint32_t j = sidx[k];
+              if (j == i) continue;
+              const Vec3d xj = x[j];
+              if (pg.hashed && !pg.holds(cast3<float>(xj), l)) continue;
+              const Vec3d d = xi - xj;
+              const double rs = r + rad[j];
+              const double dist2 = dot(d, d);
+              if (!(dist2 < rs * rs)) continue;
+              const double dist = sqrt(dist2);
+              // Coincident centres: separate along z, opposite ways for the two.
+              const Vec3d nrm = dist > 1e-12 * rs ? d * (1.0 / dist) : Vec3d{0, 0, i < j ? 1.0 : -1.0};
+              const double mj = 1.0 / inv_mass[j];
+              Vec3d vrel = vi - v[j];
+              if (friction) vrel = vrel + cross(wi, nrm * (-r)) - cross(w[j], nrm * rad[j]);
+              apply(j, nrm, rs - dist, vrel, m * mj / (m + mj), 0.5);  // each side holds half the pair's spring
+              ++npair;
+            }
+          });
+        }
+      }
+
+      uint8_t fl = kActive;
+      if (nwall) fl |= kFlagWallContact;
+      if (npair) fl |= kFlagParticleContact;
+      flags[i] = fl;
+      if (measure) {
+        stats[size_t(kStatElastic) * n + i] = elastic;
+        stats[size_t(kStatOverlap) * n + i] = overlap_max;
+        stats[size_t(kStatWallContacts) * n + i] = nwall;
+        stats[size_t(kStatPairContacts) * n + i] = npair;
+        stats[size_t(kStatTouching) * n + i] = nwall ? 1.0 : 0.0;
+        stats[size_t(kStatOverflow) * n + i] = overflow;
+        return;
+      }
+      acc[i] = f * (1.0 / m);
+      if (friction) {
+        for (uint32_t s = slots; s < uint32_t(kFrictionSlots); ++s) new_slots[s] = FrictionSlot{kNoKey, 0, 0, 0};
+        alpha[i] = torque * (1.0 / (0.4 * m * r * r));
+      }
+    });
+  }
+
+  // Kinetic and potential energy, speed and state counts for the measuring pass.
+  void kinematics_stats() {
+    const Vec3d* x = pos_.data();
+    const Vec3d* v = vel_.data();
+    const Vec3d* w = omega_.data();
+    const double* rad = radius_.data();
+    const double* inv_mass = inv_mass_.data();
+    const uint8_t* state = state_.data();
+    double* stats = scratch_.data();
+    const size_t n = n_;
+    const bool rot = law_.mu > 0;
+    const Vec3d g = cfg_.gravity;
+    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+      const uint8_t st = state[i];
+      const bool active = st == kActive;
+      const double m = 1.0 / inv_mass[i];
+      double ke = 0, pe = 0, sp = 0;
+      if (active) {
+        ke = 0.5 * m * dot(v[i], v[i]);
+        if (rot) ke += 0.5 * 0.4 * m * rad[i] * rad[i] * dot(w[i], w[i]);
+        pe = -m * dot(g, x[i]);
+        sp = length(v[i]);
+      }
+      stats[size_t(kStatKinetic) * n + i] = ke;
+      stats[size_t(kStatPotential) * n + i] = pe;
+      stats[size_t(kStatSpeed) * n + i] = sp;
+      stats[size_t(kStatWaiting) * n + i] = st == kWaiting;
+      stats[size_t(kStatActive) * n + i] = active;
+      stats[size_t(kStatEscaped) * n + i] = st == kEscaped;
+      stats[size_t(kStatInvalid) * n + i] = st == kInvalid;
+      if (!active) stats[size_t(kStatOverflow) * n + i] = 0;
+    });
+  }
+
+  B backend_;
+  DynamicsConfig cfg_;
+  TimeStepInfo ts_;
+  PrepareInfo info_;
+  ContactLaw law_;
+  WallIndex<B> wall_;
+  GridSpec pgrid_;
+  Vec3d origin_{0, 0, 0}, lo_{0, 0, 0}, hi_{0, 0, 0};  // domain in the local frame
+  size_t n_ = 0;
+  double time_ = 0;
+  uint64_t steps_ = 0;
+  std::vector<double> radius_host_, release_host_;
+
+  Buf<Vec3d> pos_, vel_, acc_, omega_, alpha_;
+  Buf<double> radius_, inv_mass_, release_, speed_, scratch_;
+  Buf<uint8_t> state_, flags_;
+  Buf<FrictionSlot> hist_[2];  // friction springs: last step's (hist_in_) and this step's
+  int hist_in_ = 0;
+  Buf<uint32_t> p_key_, p_idx_, p_key_sorted_, p_idx_sorted_, cell_start_, cell_end_;
+};
+
+}  // namespace collido::sim

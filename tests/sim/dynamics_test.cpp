@@ -1,0 +1,398 @@
+// The dynamics where methods fail on purpose: time steps beyond the critical
+// one, particles fast enough to tunnel, shared vertices that would push twice,
+// energy over long elastic runs, pouring into the paper's wall1; and the same
+// scenes on the GPU, which must follow the CPU's trajectories.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+
+#include "sim/dynamics.h"
+#include "sim/particles.h"
+#include "sim/shapes.h"
+
+namespace collido::sim {
+namespace {
+
+Backend g_backend = Backend::kCpu;  // the backend under test (see the DynamicsCuda suite)
+
+ParticleSet particles_at(const std::vector<Vec3d>& pos, const std::vector<Vec3d>& vel, double r) {
+  ParticleSet p;
+  p.resize(pos.size());
+  for (size_t i = 0; i < pos.size(); ++i) {
+    p.x[i] = pos[i].x, p.y[i] = pos[i].y, p.z[i] = pos[i].z, p.r[i] = r;
+    if (i < vel.size()) p.vx[i] = vel[i].x, p.vy[i] = vel[i].y, p.vz[i] = vel[i].z;
+  }
+  return p;
+}
+
+// n particles on a lattice inside the box [-h, h]^2 x [z0, z0 + 2h] with random velocities of size `speed`.
+ParticleSet lattice(int per_side, double h, double z0, double r, double speed, uint64_t seed) {
+  SplitMix64 rng(seed);
+  std::vector<Vec3d> pos, vel;
+  const double step = 2 * h / per_side;
+  for (int i = 0; i < per_side; ++i)
+    for (int j = 0; j < per_side; ++j)
+      for (int k = 0; k < per_side; ++k) {
+        pos.push_back({-h + (i + 0.5) * step, -h + (j + 0.5) * step, z0 + (k + 0.5) * step});
+        Vec3d d{rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-1, 1)};
+        vel.push_back(d * (speed / length(d)));
+      }
+  return particles_at(pos, vel, r);
+}
+
+std::unique_ptr<Simulation> make_sim(const TriangleMesh& wall, DynamicsConfig cfg, const ParticleSet& p) {
+  cfg.backend = g_backend;
+  auto s = Simulation::create(wall, cfg, p);
+  EXPECT_TRUE(s.has_value()) << s.status().message();
+  return s.has_value() ? std::move(s.value()) : nullptr;
+}
+
+FrameStats measure(Simulation& s) {
+  FrameStats st;
+  EXPECT_TRUE(s.measure(&st));
+  return st;
+}
+
+// A flat square floor [-h, h]^2 at z = 0 cut into cells x cells squares of two triangles each.
+TriangleMesh floor_mesh(double h, int cells) {
+  TriangleMesh m;
+  for (int j = 0; j <= cells; ++j)
+    for (int i = 0; i <= cells; ++i) m.vertices.push_back({-h + 2 * h * i / cells, -h + 2 * h * j / cells, 0});
+  auto v = [&](int i, int j) { return uint32_t(j * (cells + 1) + i); };
+  for (int j = 0; j < cells; ++j)
+    for (int i = 0; i < cells; ++i) {
+      m.triangles.push_back({v(i, j), v(i + 1, j), v(i + 1, j + 1)});
+      m.triangles.push_back({v(i, j), v(i + 1, j + 1), v(i, j + 1)});
+    }
+  for (uint32_t t = 0; t < m.triangles.size(); ++t) m.source_ids.push_back(t);
+  return m;
+}
+
+// Elastic particles in a closed box, no gravity, no friction: the total
+// energy (kinetic + springs) may drift by at most 1 % over 10^4 steps.
+void elastic_box_energy() {
+  const TriangleMesh box = make_box(10, 10, 10);
+  const ParticleSet p = lattice(4, 4, 1, 0.5, 2.0, 11);
+  DynamicsConfig cfg;
+  cfg.gravity = {0, 0, 0};
+  cfg.material.restitution = 1;
+  cfg.particle_contacts = true;
+  auto s = make_sim(box, cfg, p);
+  ASSERT_TRUE(s);
+  const double e0 = measure(*s).total_energy();
+  double worst = 0;
+  uint64_t wall_hits = 0, pair_hits = 0;
+  while (s->steps_taken() < 10000) {
+    FrameStats st;
+    ASSERT_TRUE(s->advance(0.05, &st));
+    worst = std::max(worst, std::fabs(st.total_energy() - e0) / e0);
+    wall_hits += st.wall_contacts, pair_hits += st.particle_contacts;
+    ASSERT_EQ(st.escaped + st.invalid, 0u);
+  }
+  std::printf("elastic box: %llu steps, worst energy drift %.3g %%, frames with wall/pair contacts %llu/%llu\n",
+              (unsigned long long)s->steps_taken(), 100 * worst, (unsigned long long)wall_hits,
+              (unsigned long long)pair_hits);
+  EXPECT_GT(wall_hits, 0u);  // the particles did meet the walls and each other
+  EXPECT_GT(pair_hits, 0u);
+  EXPECT_LE(worst, 0.01);
+}
+
+// A ball resting on a floor under gravity with a fixed step: beyond the
+// critical step its energy blows up, under the automatic step it does not.
+void time_step_sweep() {
+  const TriangleMesh box = make_box(10, 10, 10);
+  DynamicsConfig cfg;
+  cfg.material.restitution = 1;
+  cfg.material.stiffness = 1e6;
+  const double r = 0.5, m = cfg.material.density * 4.0 / 3.0 * M_PI * r * r * r;
+  // Slightly off its rest height (r - m g / k), so it oscillates in contact.
+  const ParticleSet p = particles_at({{0, 0, r - 0.9 * m * 9.81 / cfg.material.stiffness}}, {}, r);
+  const double scale = m * 9.81 * r;
+  auto probe = make_sim(box, cfg, p);
+  ASSERT_TRUE(probe);
+  const double crit = probe->time_step_info().critical_step;
+  for (double factor : {0.05, 0.3, 0.9, 1.1, 1.5, 0.0}) {
+    DynamicsConfig c = cfg;
+    c.time_step = factor * crit;  // 0.0: automatic
+    auto s = make_sim(box, c, p);
+    ASSERT_TRUE(s);
+    EXPECT_EQ(s->time_step_info().beyond_stable, factor > 1);
+    const double e0 = measure(*s).total_energy();
+    double worst = 0;
+    bool lost = false;
+    // 200 fixed steps (step() takes them as given), or 2 s of automatic frames.
+    for (int f = 0; f < (factor > 0 ? 200 : 40) && !lost; ++f) {
+      FrameStats st;
+      if (factor > 0) {
+        ASSERT_TRUE(s->step(1, c.time_step));
+        ASSERT_TRUE(s->measure(&st));
+      } else {
+        ASSERT_TRUE(s->advance(0.05, &st));
+      }
+      lost = st.escaped + st.invalid > 0;
+      worst = std::max(worst, std::fabs(st.total_energy() - e0) / scale);
+    }
+    std::printf("step %.2f x critical%s: worst energy error %.3g of m g r%s\n", factor,
+                factor == 0 ? " (automatic)" : "", worst, lost ? ", particle lost" : "");
+    if (factor > 1) {
+      EXPECT_TRUE(lost || worst > 10) << "a step beyond the critical one should blow up";
+    } else if (factor == 0 || factor <= 0.05) {
+      EXPECT_FALSE(lost);
+      EXPECT_LT(worst, 0.01);
+    }
+  }
+}
+
+// Fast particles in a closed box of single-triangle walls: a coarse fixed step
+// lets some tunnel out (and they are counted); the automatic step keeps all in.
+void tunnelling() {
+  const TriangleMesh box = make_box(10, 10, 10);
+  ASSERT_TRUE(is_closed_manifold(box));
+  const ParticleSet p = lattice(3, 3, 2, 0.2, 100.0, 5);
+  DynamicsConfig cfg;
+  cfg.gravity = {0, 0, 0};
+  cfg.material.density = 1;
+  cfg.material.stiffness = 1e6;  // overlap at 100 m/s: about 9 % of the radius
+  cfg.material.restitution = 0.9;
+  for (double dt : {5e-3, 0.0}) {
+    DynamicsConfig c = cfg;
+    c.time_step = dt;
+    auto s = make_sim(box, c, p);
+    ASSERT_TRUE(s);
+    FrameStats st;
+    for (int f = 0; f < 20; ++f) ASSERT_TRUE(s->advance(0.01, &st));
+    ParticleSet out;
+    std::vector<uint8_t> flags;
+    ASSERT_TRUE(s->download(&out, &flags));
+    size_t outside = 0;
+    for (size_t i = 0; i < out.size(); ++i)
+      if ((flags[i] & kStateMask) != kActive || winding_number(box, {out.x[i], out.y[i], out.z[i]}) < 0.5) ++outside;
+    std::printf("fast particles, %s step: %zu of %zu outside (escaped %llu, non-finite %llu)\n",
+                dt > 0 ? "fixed 5 ms" : "automatic", outside, out.size(), (unsigned long long)st.escaped,
+                (unsigned long long)st.invalid);
+    if (dt > 0) {
+      EXPECT_GT(st.escaped, 0u);
+      EXPECT_GT(outside, 0u);
+    } else {
+      EXPECT_EQ(outside, 0u);
+      EXPECT_EQ(st.escaped + st.invalid, 0u);
+    }
+  }
+}
+
+// A ball settling on a finely tessellated floor rests at the height it rests
+// at on one large triangle: a shared vertex or edge pushes once, not six or two times.
+void floor_settles_once() {
+  const double r = 0.5;
+  DynamicsConfig cfg;
+  cfg.material.stiffness = 1e7;
+  cfg.material.restitution = 0.2;
+  TriangleMesh big;
+  big.vertices = {{-100, -100, 0}, {100, -100, 0}, {0, 100, 0}};
+  big.triangles = {{0, 1, 2}};
+  big.source_ids = {0};
+  const TriangleMesh fine = floor_mesh(5, 40);  // vertices every 0.25
+  const std::vector<Vec3d> spots = {{0, 0, 0.6}, {0.125, 0, 0.6}, {0.125, 0.125, 0.6}, {0.06, 0.2, 0.6}};
+  const double m = cfg.material.density * 4.0 / 3.0 * M_PI * r * r * r;
+  const double expected = r - m * 9.81 / cfg.material.stiffness;
+  for (const Vec3d& at : spots) {
+    double z[2];
+    int k = 0;
+    for (const TriangleMesh* wall : {static_cast<const TriangleMesh*>(&big), &fine}) {
+      auto s = make_sim(*wall, cfg, particles_at({at}, {}, r));
+      ASSERT_TRUE(s);
+      FrameStats st;
+      for (int f = 0; f < 30; ++f) ASSERT_TRUE(s->advance(0.1, &st));
+      ParticleSet out;
+      ASSERT_TRUE(s->download(&out, nullptr));
+      z[k++] = out.z[0];
+      EXPECT_EQ(st.wall_contacts, 1u) << "at (" << at.x << ", " << at.y << ")";
+      EXPECT_NEAR(out.x[0], at.x, 1e-6);
+      EXPECT_NEAR(out.y[0], at.y, 1e-6);
+    }
+    EXPECT_NEAR(z[0], expected, 1e-4 * r);
+    EXPECT_NEAR(z[1], z[0], 1e-5 * r) << "at (" << at.x << ", " << at.y << ")";
+  }
+}
+
+// Restitution: a ball dropped onto the floor without gravity leaves with e times its speed.
+void restitution_is_kept() {
+  const TriangleMesh box = make_box(10, 10, 10);
+  for (double e : {0.3, 0.7, 1.0}) {
+    DynamicsConfig cfg;
+    cfg.gravity = {0, 0, 0};
+    cfg.material.restitution = e;
+    cfg.material.stiffness = 1e6;
+    auto s = make_sim(box, cfg, particles_at({{0, 0, 1}}, {{0, 0, -2}}, 0.5));
+    ASSERT_TRUE(s);
+    FrameStats st;
+    ASSERT_TRUE(s->advance(1.0, &st));
+    ParticleSet out;
+    ASSERT_TRUE(s->download(&out, nullptr));
+    // The contact starts and ends between steps: a few per cent of the speed.
+    EXPECT_NEAR(out.vz[0], 2 * e, 0.03 * 2 * e) << "restitution " << e;
+  }
+}
+
+// Friction turns sliding into rolling: a ball launched along a floor ends
+// slower (5/7 of its speed for a solid sphere) and rolls on.
+void friction_makes_it_roll() {
+  const TriangleMesh floor = floor_mesh(50, 10);
+  DynamicsConfig cfg;
+  cfg.material.stiffness = 1e6;
+  cfg.material.restitution = 0.3;
+  cfg.material.friction = 0.5;
+  const double r = 0.5;
+  const double m = cfg.material.density * 4.0 / 3.0 * M_PI * r * r * r;
+  const double rest = r - m * 9.81 / 1e6;
+  auto s = make_sim(floor, cfg, particles_at({{-20, 0, rest}}, {{4, 0, 0}}, r));
+  ASSERT_TRUE(s);
+  FrameStats st;
+  for (int f = 0; f < 20; ++f) ASSERT_TRUE(s->advance(0.1, &st));
+  ParticleSet out;
+  ASSERT_TRUE(s->download(&out, nullptr));
+  EXPECT_NEAR(out.vx[0], 4.0 * 5 / 7, 0.05);
+  EXPECT_NEAR(out.vy[0], 0, 1e-6);
+  // Without friction it slides on at its launch speed.
+  cfg.material.friction = 0;
+  auto t = make_sim(floor, cfg, particles_at({{-20, 0, rest}}, {{4, 0, 0}}, r));
+  ASSERT_TRUE(t);
+  for (int f = 0; f < 20; ++f) ASSERT_TRUE(t->advance(0.1, &st));
+  ASSERT_TRUE(t->download(&out, nullptr));
+  EXPECT_NEAR(out.vx[0], 4.0, 1e-6);
+}
+
+// Particles released over time from an inlet into a cylinder settle and none escape.
+void pour_into(const TriangleMesh& wall, int per_layer_side, int layers, uint64_t min_steps) {
+  std::vector<Vec3d> pos, vel;
+  ParticleSet p;
+  const double r = 1, spacing = 2.5;
+  for (int l = 0; l < layers; ++l)
+    for (int i = 0; i < per_layer_side; ++i)
+      for (int j = 0; j < per_layer_side; ++j)
+        pos.push_back({(i - 0.5 * (per_layer_side - 1)) * spacing, (j - 0.5 * (per_layer_side - 1)) * spacing, 20});
+  // Layers leave the inlet at 10 m/s every 0.3 s: 3 m apart, clear of the one before.
+  vel.assign(pos.size(), Vec3d{0, 0, -10});
+  p = particles_at(pos, vel, r);
+  const size_t per_layer = size_t(per_layer_side) * per_layer_side;
+  for (size_t i = 0; i < p.size(); ++i) p.release[i] = 0.3 * double(i / per_layer);
+  DynamicsConfig cfg;
+  cfg.particle_contacts = true;
+  cfg.material.restitution = 0.3;
+  cfg.material.friction = 0.3;
+  cfg.impact_speed = 22;  // a 20 m drop after a 10 m/s start
+  auto s = make_sim(wall, cfg, p);
+  ASSERT_TRUE(s);
+  FrameStats st;
+  double t = 0;
+  // Settled: everything released and a mean speed below 5 cm/s (a ball may
+  // roll on over the flat bottom: nothing resists rolling, so the maximum never falls).
+  const double m = cfg.material.density * 4.0 / 3.0 * M_PI * r * r * r;
+  auto mean_speed = [&] { return std::sqrt(2 * st.kinetic / (m * double(p.size()))); };
+  while (s->steps_taken() < min_steps || st.waiting > 0 || mean_speed() > 0.05) {
+    ASSERT_TRUE(s->advance(0.1, &st));
+    t += 0.1;
+    ASSERT_EQ(st.escaped + st.invalid, 0u) << "at t = " << t;
+    ASSERT_LT(t, 30) << "did not settle: mean speed " << mean_speed();
+  }
+  ParticleSet out;
+  ASSERT_TRUE(s->download(&out, nullptr));
+  double top = 0;
+  for (size_t i = 0; i < out.size(); ++i) {
+    EXPECT_GT(winding_number(wall, {out.x[i], out.y[i], out.z[i]}), 0.5) << "particle " << i;
+    top = std::max(top, out.z[i]);
+  }
+  std::printf("poured %zu particles into the cylinder: settled after %.1f s, %llu steps, pile top z = %.2f, max overlap %.2f %%\n",
+              out.size(), t, (unsigned long long)s->steps_taken(), top, 100 * st.max_overlap);
+  EXPECT_LT(st.max_overlap, 0.05);
+}
+
+TEST(Dynamics, ElasticBoxKeepsItsEnergy) { elastic_box_energy(); }
+TEST(Dynamics, TimeStepBeyondTheCriticalOneBlowsUp) { time_step_sweep(); }
+TEST(Dynamics, FastParticlesTunnelOnlyWithACoarseFixedStep) { tunnelling(); }
+TEST(Dynamics, SharedVerticesAndEdgesPushOnce) { floor_settles_once(); }
+TEST(Dynamics, RestitutionIsKept) { restitution_is_kept(); }
+TEST(Dynamics, FrictionTurnsSlidingIntoRolling) { friction_makes_it_roll(); }
+// On the CPU a narrower wall1 (radius 8, height 40, 40 segments) and 200 particles, so
+// they pile up (the GPU suite pours the 10^4 into wall1 itself).
+TEST(Dynamics, PourIntoACylinderSettles) { pour_into(make_cylinder(8, 40, 40), 5, 8, 20000); }
+
+TEST(Dynamics, BadSettingsNameTheKey) {
+  const TriangleMesh box = make_box(10, 10, 10);
+  const ParticleSet p = particles_at({{0, 0, 2}}, {}, 0.5);
+  auto expect_error = [&](DynamicsConfig c, const ParticleSet& ps, const std::string& key) {
+    auto s = Simulation::create(box, c, ps);
+    ASSERT_FALSE(s.has_value()) << key;
+    EXPECT_NE(s.status().message().find(key), std::string::npos) << s.status().message();
+  };
+  DynamicsConfig c;
+  c.material.restitution = 0;
+  expect_error(c, p, "restitution");
+  c = {};
+  c.material.density = -1;
+  expect_error(c, p, "density");
+  c = {};
+  c.time_step = -1;
+  expect_error(c, p, "time_step");
+  c = {};
+  c.material.friction = NAN;
+  expect_error(c, p, "friction");
+  c = {};
+  c.method = Method::kReference;
+  expect_error(c, p, "method");
+  ParticleSet bad = p;
+  bad.r[0] = 0;
+  expect_error({}, bad, "radius");
+  expect_error({}, ParticleSet{}, "particle");
+}
+
+// The GPU suite: the same scenes, and trajectories that follow the CPU's.
+class DynamicsCuda : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    std::string why;
+    if (!cuda_available(&why)) GTEST_SKIP() << "no GPU: " << why;
+    g_backend = Backend::kCuda;
+  }
+  void TearDown() override { g_backend = Backend::kCpu; }
+};
+TEST_F(DynamicsCuda, ElasticBoxKeepsItsEnergy) { elastic_box_energy(); }
+TEST_F(DynamicsCuda, TimeStepBeyondTheCriticalOneBlowsUp) { time_step_sweep(); }
+TEST_F(DynamicsCuda, FastParticlesTunnelOnlyWithACoarseFixedStep) { tunnelling(); }
+TEST_F(DynamicsCuda, SharedVerticesAndEdgesPushOnce) { floor_settles_once(); }
+TEST_F(DynamicsCuda, RestitutionIsKept) { restitution_is_kept(); }
+TEST_F(DynamicsCuda, FrictionTurnsSlidingIntoRolling) { friction_makes_it_roll(); }
+// The full size: 10^4 particles, at least 10^5 steps.
+TEST_F(DynamicsCuda, PourTenThousandIntoWall1Settles) { pour_into(make_cylinder(50, 100, 40), 20, 25, 100000); }
+
+TEST_F(DynamicsCuda, TrajectoriesAgreeWithTheCpu) {
+  // A dense, frictional, colliding scene in wall1: 100 steps on each backend.
+  const TriangleMesh wall = make_cylinder(50, 100, 40);
+  ParticleSet p = lattice(12, 12.3, -0.05, 1, 5.0, 3);  // 2.05 apart: they collide at once
+  DynamicsConfig cfg;
+  cfg.particle_contacts = true;
+  cfg.material.friction = 0.4;
+  cfg.material.restitution = 0.5;
+  ParticleSet out[2];
+  for (int b = 0; b < 2; ++b) {
+    cfg.backend = b ? Backend::kCuda : Backend::kCpu;
+    auto s = Simulation::create(wall, cfg, p);
+    ASSERT_TRUE(s.has_value()) << s.status().message();
+    const double dt = s.value()->time_step_info().spring_step;
+    ASSERT_TRUE(s.value()->step(100, dt));
+    FrameStats st;
+    ASSERT_TRUE(s.value()->measure(&st));
+    EXPECT_GT(st.particle_contacts + st.wall_contacts, 0u);
+    ASSERT_TRUE(s.value()->download(&out[b], nullptr));
+  }
+  double worst = 0;
+  for (size_t i = 0; i < p.size(); ++i)
+    worst = std::max({worst, std::fabs(out[0].x[i] - out[1].x[i]), std::fabs(out[0].y[i] - out[1].y[i]),
+                      std::fabs(out[0].z[i] - out[1].z[i])});
+  std::printf("CPU vs GPU after 100 steps: largest position difference %.3g radii\n", worst / 1.0);
+  EXPECT_LE(worst, 1e-4);
+}
+
+}  // namespace
+}  // namespace collido::sim
