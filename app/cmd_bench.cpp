@@ -7,7 +7,7 @@
 namespace collido::app {
 
 int cmd_bench(const Args& args) {
-  const std::string targets = "detect"
+  const std::string targets = "detect, run"
 #ifdef COLLIDO_HAVE_RENDER
                               ", render"
 #endif
@@ -18,6 +18,7 @@ int cmd_bench(const Args& args) {
   }
   const Args rest(args.begin() + 1, args.end());
   if (args[0] == "detect") return bench_detect(rest);
+  if (args[0] == "run") return bench_run(rest);
 #ifdef COLLIDO_HAVE_RENDER
   if (args[0] == "render") return bench_render(rest);
 #endif

@@ -13,6 +13,12 @@ int cmd_detect(const Args& args);        // app/cmd_detect.cpp
 int cmd_bench(const Args& args);         // app/cmd_bench.cpp (dispatches bench targets)
 int bench_detect(const Args& args);      // app/bench_detect.cpp
 
+int bench_run(const Args& args);         // app/bench_run.cpp
+
+#ifdef COLLIDO_HAVE_RUN
+int cmd_run(const Args& args);           // app/cmd_run.cpp
+#endif
+
 #ifdef COLLIDO_HAVE_RENDER
 int cmd_render(const Args& args);        // app/cmd_render.cpp
 int bench_render(const Args& args);      // app/cmd_render.cpp

@@ -19,7 +19,10 @@ const std::vector<Command>& commands() {
   using namespace collido::app;
   static const std::vector<Command> table = {
       {"detect", cmd_detect, "particle-wall collision detection on one frame"},
-      {"bench", cmd_bench, "benchmarks: bench detect | bench render"},
+#ifdef COLLIDO_HAVE_RUN
+      {"run", cmd_run, "run a scene's collision frames (and --video render them)"},
+#endif
+      {"bench", cmd_bench, "benchmarks: bench detect | bench run | bench render"},
 #ifdef COLLIDO_HAVE_RENDER
       {"render", cmd_render, "render snapshots into PNG frames and video"},
 #endif

@@ -1,0 +1,133 @@
+// `collidoscope bench run`: steps per second of the dynamics for a range of
+// particle counts, with and without particle-particle contacts. The scene is a
+// settled-like block: particles on a lattice just touching their six
+// neighbours, standing on the floor of a box, under gravity.
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+
+#include "app/cli.h"
+#include "app/commands.h"
+#include "sim/detect_cuda.h"
+#include "sim/dynamics.h"
+#include "sim/parallel.h"
+#include "sim/shapes.h"
+
+namespace collido::app {
+
+namespace {
+
+const std::vector<FlagSpec> kFlags = {
+    {"backend", true, "cpu | cuda (default cpu; cuda falls back to cpu with a note)"},
+    {"counts", true, "particle counts, comma-separated (default 1e4,1e5,1e6)"},
+    {"pairs", true, "on | off | both: particle-particle contacts (default both)"},
+    {"friction", true, "Coulomb coefficient (default 0.3)"},
+    {"steps", true, "timed steps per configuration (default 50)"},
+    {"warmup", true, "untimed steps first (default 5)"},
+    {"threads", true, "CPU threads (default: all cores)"},
+    {"help", false, "this help"},
+};
+
+// n particles of radius 1 on a cubic lattice of spacing 1.999 (each touches its
+// neighbours) in a box whose floor they stand on.
+void block_scene(uint64_t n, sim::TriangleMesh* wall, sim::ParticleSet* p) {
+  const int side = int(std::ceil(std::cbrt(double(n))));
+  const double r = 1, s = 1.999 * r, extent = side * s;
+  *wall = sim::make_box(extent + 4 * r, extent + 4 * r, extent * 1.5 + 4 * r);
+  p->resize(n);
+  uint64_t k = 0;
+  for (int z = 0; z < side && k < n; ++z)
+    for (int y = 0; y < side && k < n; ++y)
+      for (int x = 0; x < side && k < n; ++x, ++k) {
+        p->x[k] = -0.5 * extent + (x + 0.5) * s;
+        p->y[k] = -0.5 * extent + (y + 0.5) * s;
+        p->z[k] = r * 0.999 + z * s;
+        p->r[k] = r;
+      }
+}
+
+}  // namespace
+
+int bench_run(const Args& args) {
+  std::string err;
+  auto p = parse_args(args, kFlags, &err);
+  if (!p) return usage_error("bench run", err);
+  if (p->has("help")) {
+    print_help("usage: collidoscope bench run [--backend cpu|cuda] [--counts 1e4,1e5,1e6] [--pairs both]", kFlags);
+    return kExitOk;
+  }
+  sim::Backend backend = sim::Backend::kCpu;
+  if (!sim::parse_backend(p->get("backend", "cpu"), &backend)) return usage_error("bench run", "--backend must be cpu or cuda");
+  std::string why;
+  if (backend == sim::Backend::kCuda && !sim::cuda_available(&why)) {
+    std::fprintf(stderr, "collidoscope bench run: note: no usable GPU (%s); running on the CPU\n", why.c_str());
+    backend = sim::Backend::kCpu;
+  }
+  const int64_t steps = p->get_int("steps", 50, &err), warmup = p->get_int("warmup", 5, &err);
+  const double friction = p->get_double("friction", 0.3, &err);
+  const int64_t threads = p->get_int("threads", 0, &err);
+  if (!err.empty()) return usage_error("bench run", err);
+  if (steps < 1 || warmup < 0 || !(friction >= 0 && friction <= 10))
+    return usage_error("bench run", "--steps >= 1, --warmup >= 0, --friction in [0, 10]");
+  if (threads > 0) sim::set_cpu_threads(int(threads));
+  const std::string pairs = p->get("pairs", "both");
+  std::vector<bool> pair_modes;
+  if (pairs == "both") pair_modes = {false, true};
+  else if (pairs == "on") pair_modes = {true};
+  else if (pairs == "off") pair_modes = {false};
+  else return usage_error("bench run", "--pairs must be on, off or both");
+  std::vector<uint64_t> counts;
+  {
+    std::stringstream ss(p->get("counts", "1e4,1e5,1e6"));
+    std::string item;
+    while (std::getline(ss, item, ',')) {
+      char* end = nullptr;
+      const double v = std::strtod(item.c_str(), &end);
+      if (end == item.c_str() || *end || !(v >= 1 && v <= 2e8))
+        return usage_error("bench run", "--counts expects numbers in 1..2e8, got '" + item + "'");
+      counts.push_back(uint64_t(v));
+    }
+  }
+
+  std::printf("# bench run: %s%s, friction %.2g, %lld timed steps\n", sim::to_string(backend),
+              backend == sim::Backend::kCuda ? (" (" + sim::cuda_device_name() + ")").c_str() : "", friction,
+              (long long)steps);
+  std::printf("| particles | pair contacts | ms/step | steps/s | particle-steps/s | wall contacts | pair contacts | "
+              "device MB |\n|---:|:---:|---:|---:|---:|---:|---:|---:|\n");
+  for (uint64_t n : counts) {
+    sim::TriangleMesh wall;
+    sim::ParticleSet ps;
+    block_scene(n, &wall, &ps);
+    for (bool with_pairs : pair_modes) {
+      sim::DynamicsConfig cfg;
+      cfg.backend = backend;
+      cfg.particle_contacts = with_pairs;
+      cfg.material.friction = friction;
+      cfg.material.stiffness = 1e9;
+      auto s = sim::Simulation::create(wall, cfg, ps);
+      if (!s) {
+        std::fprintf(stderr, "collidoscope bench run: %s\n", s.status().message().c_str());
+        return kExitFailure;
+      }
+      const double dt = (*s)->time_step_info().spring_step;
+      if (warmup && !(*s)->step(uint64_t(warmup), dt)) return kExitFailure;
+      const auto t0 = std::chrono::steady_clock::now();
+      if (Status e = (*s)->step(uint64_t(steps), dt); !e) {
+        std::fprintf(stderr, "collidoscope bench run: %s\n", e.message().c_str());
+        return kExitFailure;
+      }
+      const double sec = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      sim::FrameStats st;
+      (*s)->measure(&st);
+      const double ms = 1e3 * sec / double(steps);
+      std::printf("| %llu | %s | %.4g | %.4g | %.3g | %llu | %llu | %.1f |\n", (unsigned long long)n,
+                  with_pairs ? "yes" : "no", ms, 1e3 / ms, double(n) * 1e3 / ms, (unsigned long long)st.wall_contacts,
+                  (unsigned long long)st.particle_contacts, double((*s)->device_bytes()) / 1e6);
+      std::fflush(stdout);
+    }
+  }
+  return kExitOk;
+}
+
+}  // namespace collido::app

@@ -1,0 +1,39 @@
+// The scene file: one JSON document that says everything a run needs (wall,
+// particles, placement, physics, duration, method, backend). The command line
+// reads it from a file; the service will accept the same document.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "common/status.h"
+#include "sim/dynamics.h"
+#include "sim/placement.h"
+
+namespace collido::scene {
+
+struct Scene {
+  std::string wall;            // a shape spec ("wall1", "cylinder:r=..") or a file path
+  bool wall_is_file = false;
+  sim::ParticleSpec particles;
+  sim::PlacementSpec placement;
+  sim::DynamicsConfig dynamics;
+  bool backend_auto = true;    // "auto": the GPU when one is usable, else the CPU
+  double duration = 2;         // simulated seconds
+  double fps = 30;             // output frames per simulated second
+  uint64_t seed = 1;
+  bool vtp = false;            // also write VTK PolyData frames for ParaView
+
+  // Frames written after the initial one.
+  uint64_t frames() const;
+};
+
+// Parses and validates a scene document. Unknown keys, wrong types and
+// impossible values are errors that name the key ("material.restitution: ...").
+Expected<Scene> parse_scene(const std::string& json_text);
+// Reads a scene file; a wall file named in it is taken relative to the scene's folder.
+Expected<Scene> load_scene(const std::string& path);
+// The scene as a JSON document (every key, defaults filled in); parse_scene reads it back.
+std::string to_json(const Scene& scene);
+
+}  // namespace collido::scene

@@ -1,0 +1,279 @@
+#include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "scene/scene.h"
+
+namespace collido::scene {
+
+using json = nlohmann::json;
+
+uint64_t Scene::frames() const { return static_cast<uint64_t>(std::ceil(duration * fps - 1e-9)); }
+
+namespace {
+
+std::string join(const std::string& where, const std::string& key) { return where.empty() ? key : where + "." + key; }
+
+// Reads one JSON object's keys with type checks; every error names the full key.
+class ObjectReader {
+ public:
+  ObjectReader(const json& o, std::string where) : o_(o), where_(std::move(where)) {}
+
+  // An error for any key not in `known`.
+  Status only(std::initializer_list<const char*> known) const {
+    if (!o_.is_object()) return invalid_argument((where_.empty() ? "scene" : where_) + ": expected a JSON object");
+    for (auto it = o_.begin(); it != o_.end(); ++it) {
+      bool ok = false;
+      for (const char* k : known) ok = ok || it.key() == k;
+      if (!ok) return invalid_argument(join(where_, it.key()) + ": unknown key");
+    }
+    return Status::ok();
+  }
+  bool has(const char* key) const { return o_.contains(key); }
+  const json& at(const char* key) const { return o_.at(key); }
+  std::string name(const char* key) const { return join(where_, key); }
+
+  // Optional number in [lo, hi] (left unchanged when absent).
+  Status number(const char* key, double* out, double lo, double hi) const {
+    if (!has(key)) return Status::ok();
+    const json& v = o_.at(key);
+    if (!v.is_number()) return invalid_argument(name(key) + ": expected a number");
+    const double d = v.get<double>();
+    if (!std::isfinite(d) || d < lo || d > hi)
+      return invalid_argument(name(key) + ": " + v.dump() + " is outside [" + num(lo) + ", " + num(hi) + "]");
+    *out = d;
+    return Status::ok();
+  }
+  Status integer(const char* key, uint64_t* out, uint64_t lo, uint64_t hi) const {
+    if (!has(key)) return Status::ok();
+    const json& v = o_.at(key);
+    if (!v.is_number_unsigned() && !(v.is_number_integer() && v.get<int64_t>() >= 0))
+      return invalid_argument(name(key) + ": expected a whole number >= 0");
+    const uint64_t n = v.get<uint64_t>();
+    if (n < lo || n > hi)
+      return invalid_argument(name(key) + ": " + v.dump() + " is outside [" + std::to_string(lo) + ", " +
+                              std::to_string(hi) + "]");
+    *out = n;
+    return Status::ok();
+  }
+  Status boolean(const char* key, bool* out) const {
+    if (!has(key)) return Status::ok();
+    if (!o_.at(key).is_boolean()) return invalid_argument(name(key) + ": expected true or false");
+    *out = o_.at(key).get<bool>();
+    return Status::ok();
+  }
+  Status string(const char* key, std::string* out) const {
+    if (!has(key)) return Status::ok();
+    if (!o_.at(key).is_string()) return invalid_argument(name(key) + ": expected a string");
+    *out = o_.at(key).get<std::string>();
+    return Status::ok();
+  }
+  // A vector [x, y, z] of finite numbers with |component| <= limit; *set says it was given.
+  Status vec3(const char* key, sim::Vec3d* out, double limit, bool* set = nullptr) const {
+    if (!has(key)) return Status::ok();
+    const json& v = o_.at(key);
+    if (!v.is_array() || v.size() != 3) return invalid_argument(name(key) + ": expected [x, y, z]");
+    double c[3];
+    for (int i = 0; i < 3; ++i) {
+      if (!v[i].is_number()) return invalid_argument(name(key) + ": expected [x, y, z] of numbers");
+      c[i] = v[i].get<double>();
+      if (!std::isfinite(c[i]) || std::fabs(c[i]) > limit)
+        return invalid_argument(name(key) + ": components must be finite and within +-" + num(limit));
+    }
+    *out = {c[0], c[1], c[2]};
+    if (set) *set = true;
+    return Status::ok();
+  }
+
+ private:
+  static std::string num(double v) {
+    std::ostringstream s;
+    s << v;
+    return s.str();
+  }
+  const json& o_;
+  std::string where_;
+};
+
+#define COLLIDO_TRY(expr)          \
+  do {                             \
+    if (Status s_ = (expr); !s_) { \
+      return s_;                   \
+    }                              \
+  } while (0)
+
+constexpr double kMaxCoordinate = 1e7;  // m: far beyond any vessel, short of float trouble in the grid
+constexpr double kMaxSpeed = 1e5;       // m/s
+
+Status read_wall(const json& w, Scene* s) {
+  if (w.is_string()) {
+    s->wall = w.get<std::string>();
+    s->wall_is_file = false;
+  } else {
+    ObjectReader r(w, "wall");
+    COLLIDO_TRY(r.only({"shape", "file"}));
+    if (r.has("shape") == r.has("file")) return invalid_argument("wall: give either \"shape\" or \"file\"");
+    COLLIDO_TRY(r.string("shape", &s->wall));
+    COLLIDO_TRY(r.string("file", &s->wall));
+    s->wall_is_file = r.has("file");
+  }
+  if (s->wall.empty()) return invalid_argument("wall: empty");
+  return Status::ok();
+}
+
+Status read_particles(const json& p, Scene* s) {
+  ObjectReader r(p, "particles");
+  COLLIDO_TRY(r.only({"count", "radius", "density"}));
+  COLLIDO_TRY(r.integer("count", &s->particles.count, 1, uint64_t(1) << 28));
+  if (r.has("radius")) {
+    const json& v = r.at("radius");
+    if (v.is_number()) {
+      COLLIDO_TRY(r.number("radius", &s->particles.r_max, 1e-9, 1e4));
+      s->particles.r_min = s->particles.r_max;
+    } else if (v.is_array() && v.size() == 2 && v[0].is_number() && v[1].is_number()) {
+      const double a = v[0].get<double>(), b = v[1].get<double>();
+      if (!(a >= 1e-9 && b <= 1e4 && a <= b))
+        return invalid_argument("particles.radius: a range [min, max] needs 1e-9 <= min <= max <= 1e4");
+      s->particles.r_min = a, s->particles.r_max = b;
+    } else {
+      return invalid_argument("particles.radius: expected a number or [min, max]");
+    }
+  }
+  COLLIDO_TRY(r.number("density", &s->dynamics.material.density, 1e-6, 1e6));
+  return Status::ok();
+}
+
+Status read_placement(const json& p, Scene* s) {
+  ObjectReader r(p, "placement");
+  COLLIDO_TRY(r.only({"kind", "region", "inlet", "inlet_radius", "rate", "velocity"}));
+  sim::PlacementSpec& pl = s->placement;
+  std::string kind = sim::to_string(pl.kind);
+  COLLIDO_TRY(r.string("kind", &kind));
+  if (!sim::parse_placement_kind(kind, &pl.kind))
+    return invalid_argument("placement.kind: \"" + kind + "\" is not fill, pour or jet");
+  if (r.has("region")) {
+    ObjectReader g(r.at("region"), "placement.region");
+    COLLIDO_TRY(g.only({"min", "max"}));
+    if (!g.has("min") || !g.has("max")) return invalid_argument("placement.region: needs min and max");
+    COLLIDO_TRY(g.vec3("min", &pl.region_lo, kMaxCoordinate));
+    COLLIDO_TRY(g.vec3("max", &pl.region_hi, kMaxCoordinate));
+    if (!(pl.region_lo.x < pl.region_hi.x && pl.region_lo.y < pl.region_hi.y && pl.region_lo.z < pl.region_hi.z))
+      return invalid_argument("placement.region: min must lie below max on every axis");
+    pl.has_region = true;
+  }
+  COLLIDO_TRY(r.vec3("inlet", &pl.inlet, kMaxCoordinate, &pl.has_inlet));
+  COLLIDO_TRY(r.number("inlet_radius", &pl.inlet_radius, 0, kMaxCoordinate));
+  COLLIDO_TRY(r.number("rate", &pl.rate, 0, 1e12));
+  COLLIDO_TRY(r.vec3("velocity", &pl.velocity, kMaxSpeed));
+  if (pl.kind == sim::PlacementKind::kJet && !(length(pl.velocity) > 0))
+    return invalid_argument("placement.velocity: a jet needs a non-zero velocity");
+  if (pl.kind != sim::PlacementKind::kFill && pl.has_region)
+    return invalid_argument("placement.region: only a fill has a region (a " + kind + " has an inlet)");
+  return Status::ok();
+}
+
+Status read_material(const json& m, Scene* s) {
+  ObjectReader r(m, "material");
+  COLLIDO_TRY(r.only({"restitution", "friction", "stiffness", "youngs_modulus"}));
+  sim::Material& mat = s->dynamics.material;
+  COLLIDO_TRY(r.number("restitution", &mat.restitution, 1e-6, 1));
+  COLLIDO_TRY(r.number("friction", &mat.friction, 0, 10));
+  COLLIDO_TRY(r.number("stiffness", &mat.stiffness, 0, 1e15));
+  COLLIDO_TRY(r.number("youngs_modulus", &mat.youngs_modulus, 0, 1e13));
+  if (mat.stiffness > 0 && mat.youngs_modulus > 0)
+    return invalid_argument("material: give stiffness or youngs_modulus, not both");
+  return Status::ok();
+}
+
+}  // namespace
+
+Expected<Scene> parse_scene(const std::string& text) {
+  const json doc = json::parse(text, nullptr, /*allow_exceptions=*/false);
+  if (doc.is_discarded()) return parse_error("scene: not valid JSON");
+  Scene s;
+  ObjectReader r(doc, "");
+  COLLIDO_TRY(r.only({"wall", "particles", "placement", "gravity", "material", "duration", "fps", "method",
+                      "backend", "particle_contacts", "integrator", "time_step", "seed", "output"}));
+  if (!r.has("wall")) return invalid_argument("wall: missing (a shape such as \"wall1\" or {\"file\": ...})");
+  COLLIDO_TRY(read_wall(r.at("wall"), &s));
+  if (r.has("particles")) COLLIDO_TRY(read_particles(r.at("particles"), &s));
+  if (r.has("placement")) COLLIDO_TRY(read_placement(r.at("placement"), &s));
+  if (r.has("material")) COLLIDO_TRY(read_material(r.at("material"), &s));
+  COLLIDO_TRY(r.vec3("gravity", &s.dynamics.gravity, 1e4));
+  COLLIDO_TRY(r.number("duration", &s.duration, 1e-9, 1e5));
+  COLLIDO_TRY(r.number("fps", &s.fps, 1e-3, 1e4));
+  if (s.frames() > 1000000) return invalid_argument("fps: duration x fps gives more than 10^6 frames");
+  std::string method = sim::to_string(s.dynamics.method), backend = "auto",
+              integrator = sim::to_string(s.dynamics.integrator);
+  COLLIDO_TRY(r.string("method", &method));
+  if (!sim::parse_method(method, &s.dynamics.method) || s.dynamics.method == sim::Method::kReference)
+    return invalid_argument("method: \"" + method + "\" is not bin, gravity, circumcircle or midpoint4");
+  COLLIDO_TRY(r.string("backend", &backend));
+  s.backend_auto = backend == "auto";
+  if (!s.backend_auto && !sim::parse_backend(backend, &s.dynamics.backend))
+    return invalid_argument("backend: \"" + backend + "\" is not auto, cpu or cuda");
+  COLLIDO_TRY(r.boolean("particle_contacts", &s.dynamics.particle_contacts));
+  COLLIDO_TRY(r.string("integrator", &integrator));
+  if (!sim::parse_integrator(integrator, &s.dynamics.integrator))
+    return invalid_argument("integrator: \"" + integrator + "\" is not velocity_verlet or symplectic_euler");
+  COLLIDO_TRY(r.number("time_step", &s.dynamics.time_step, 0, 1e3));
+  COLLIDO_TRY(r.integer("seed", &s.seed, 0, UINT64_MAX));
+  if (r.has("output")) {
+    ObjectReader o(r.at("output"), "output");
+    COLLIDO_TRY(o.only({"vtp"}));
+    COLLIDO_TRY(o.boolean("vtp", &s.vtp));
+  }
+  return s;
+}
+
+Expected<Scene> load_scene(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return io_error(path + ": cannot open");
+  std::ostringstream text;
+  text << in.rdbuf();
+  if (text.str().size() > (size_t(16) << 20)) return invalid_argument(path + ": a scene file over 16 MiB");
+  auto scene = parse_scene(text.str());
+  if (!scene) return Status(scene.status().code(), path + ": " + scene.status().message());
+  if (scene->wall_is_file && !scene->wall.empty() && scene->wall[0] != '/') {
+    const size_t slash = path.find_last_of('/');
+    if (slash != std::string::npos) scene->wall = path.substr(0, slash + 1) + scene->wall;
+  }
+  return scene;
+}
+
+std::string to_json(const Scene& s) {
+  auto v3 = [](sim::Vec3d v) { return json::array({v.x, v.y, v.z}); };
+  json j;
+  j["wall"] = s.wall_is_file ? json{{"file", s.wall}} : json{{"shape", s.wall}};
+  j["particles"] = {{"count", s.particles.count}, {"density", s.dynamics.material.density}};
+  j["particles"]["radius"] = s.particles.r_min == s.particles.r_max ? json(s.particles.r_max)
+                                                                    : json::array({s.particles.r_min, s.particles.r_max});
+  const sim::PlacementSpec& pl = s.placement;
+  j["placement"] = {{"kind", sim::to_string(pl.kind)}, {"velocity", v3(pl.velocity)}};
+  if (pl.kind == sim::PlacementKind::kFill) {
+    if (pl.has_region) j["placement"]["region"] = {{"min", v3(pl.region_lo)}, {"max", v3(pl.region_hi)}};
+  } else {
+    if (pl.has_inlet) j["placement"]["inlet"] = v3(pl.inlet);
+    j["placement"]["inlet_radius"] = pl.inlet_radius;
+    j["placement"]["rate"] = pl.rate;
+  }
+  const sim::Material& m = s.dynamics.material;
+  j["material"] = {{"restitution", m.restitution},
+                   {"friction", m.friction},
+                   {"stiffness", m.stiffness},
+                   {"youngs_modulus", m.youngs_modulus}};
+  j["gravity"] = v3(s.dynamics.gravity);
+  j["duration"] = s.duration;
+  j["fps"] = s.fps;
+  j["method"] = sim::to_string(s.dynamics.method);
+  j["backend"] = s.backend_auto ? "auto" : sim::to_string(s.dynamics.backend);
+  j["particle_contacts"] = s.dynamics.particle_contacts;
+  j["integrator"] = sim::to_string(s.dynamics.integrator);
+  j["time_step"] = s.dynamics.time_step;
+  j["seed"] = s.seed;
+  j["output"] = {{"vtp", s.vtp}};
+  return j.dump(2);
+}
+
+}  // namespace collido::scene

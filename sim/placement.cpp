@@ -1,0 +1,156 @@
+#include "sim/placement.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "sim/particles.h"
+
+namespace collido::sim {
+
+const char* to_string(PlacementKind k) {
+  return k == PlacementKind::kFill ? "fill" : k == PlacementKind::kPour ? "pour" : "jet";
+}
+
+bool parse_placement_kind(const std::string& s, PlacementKind* out) {
+  if (s == "fill") return *out = PlacementKind::kFill, true;
+  if (s == "pour") return *out = PlacementKind::kPour, true;
+  if (s == "jet") return *out = PlacementKind::kJet, true;
+  return false;
+}
+
+namespace {
+
+bool finite3(Vec3d v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+
+// Lattice sites in the region, a layer (fixed z) at a time from the bottom, that
+// lie inside a closed wall and clear of its surface, until `count` are found.
+Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl, SplitMix64& rng,
+            ParticleSet* out) {
+  const Bounds3d box = mesh_bounds(wall);
+  const Vec3d lo = pl.has_region ? pl.region_lo : box.lo, hi = pl.has_region ? pl.region_hi : box.hi;
+  if (!(lo.x < hi.x && lo.y < hi.y && lo.z < hi.z))
+    return invalid_argument("placement.region: min must lie below max on every axis");
+  const double r = ps.r_max, spacing = 2 * r * 1.05, jitter = 0.02 * r;
+  auto sites = [&](double a, double b) {
+    const double n = std::floor((b - a - 2 * r) / spacing) + 1;
+    return n < 1 ? uint64_t(0) : uint64_t(std::min(n, 1e7));
+  };
+  const uint64_t nx = sites(lo.x, hi.x), ny = sites(lo.y, hi.y), nz = sites(lo.z, hi.z);
+  if (nx * ny > (uint64_t(1) << 26))
+    return invalid_argument("placement.region: a layer of " + std::to_string(nx * ny) + " sites is too large");
+  const bool closed = is_closed_manifold(wall);
+  // The wall's own detector finds sites that would start touching it.
+  DetectConfig dc;
+  dc.r_max = r * 1.05;
+  dc.time_stages = false;
+  auto detector = Detector::create(wall, dc, std::max<uint64_t>(nx * ny, 1));
+  if (!detector) return detector.status();
+  out->resize(0);
+  for (uint64_t k = 0; k < nz && out->size() < ps.count; ++k) {
+    Particles layer;
+    for (uint64_t j = 0; j < ny; ++j)
+      for (uint64_t i = 0; i < nx; ++i) {
+        layer.x.push_back(lo.x + r + i * spacing + rng.uniform(-jitter, jitter));
+        layer.y.push_back(lo.y + r + j * spacing + rng.uniform(-jitter, jitter));
+        layer.z.push_back(lo.z + r + k * spacing + rng.uniform(-jitter, jitter));
+        layer.r.push_back(r * 1.05);
+      }
+    if (Status s = (*detector)->set_particles(layer); !s) return s;
+    DetectResult touching;
+    (*detector)->set_frame_options(false, false);
+    if (Status s = (*detector)->detect(&touching); !s) return s;
+    for (size_t s = 0; s < layer.size() && out->size() < ps.count; ++s) {
+      if (touching.counts[s]) continue;
+      if (closed && winding_number(wall, {layer.x[s], layer.y[s], layer.z[s]}) < 0.5) continue;
+      const size_t n = out->size();
+      out->resize(n + 1);
+      out->x[n] = layer.x[s], out->y[n] = layer.y[s], out->z[n] = layer.z[s];
+      out->vx[n] = pl.velocity.x, out->vy[n] = pl.velocity.y, out->vz[n] = pl.velocity.z;
+    }
+  }
+  if (out->size() < ps.count)
+    return invalid_argument("placement: the region holds only " + std::to_string(out->size()) + " of the " +
+                            std::to_string(ps.count) + " particles of radius " + std::to_string(r) +
+                            " m; use fewer or smaller particles, or a pour");
+  return Status::ok();
+}
+
+// Layers of a disc lattice leaving an inlet one after another, each released
+// once the layer before has moved 1.2 lattice spacings on.
+Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl, Vec3d gravity,
+             SplitMix64& rng, ParticleSet* out) {
+  const Bounds3d box = mesh_bounds(wall);
+  const double r = ps.r_max, s = 2.2 * r;
+  Vec3d v = pl.velocity;
+  const double g = length(gravity);
+  if (pl.kind == PlacementKind::kJet && !(length(v) > 0))
+    return invalid_argument("placement.velocity: a jet needs a non-zero velocity");
+  if (pl.kind == PlacementKind::kPour && !(length(v) > 0)) {
+    if (!(g > 0)) return invalid_argument("placement.velocity: a pour without gravity needs a velocity");
+    v = gravity * (1.0 / g);  // 1 m/s along gravity
+  }
+  const double v0 = length(v);
+  const Vec3d dir = v * (1.0 / v0);
+  const Vec3d centre = pl.has_inlet ? pl.inlet : Vec3d{box.center().x, box.center().y, box.hi.z - 3 * r};
+  const double radius = pl.inlet_radius > 0 ? pl.inlet_radius : std::min(box.extent().x, box.extent().y) / 3;
+  // Two unit vectors across the inlet.
+  const Vec3d t = std::fabs(dir.x) < 0.9 ? Vec3d{1, 0, 0} : Vec3d{0, 1, 0};
+  Vec3d u = cross(dir, t);
+  u = u * (1.0 / length(u));
+  const Vec3d w = cross(dir, u);
+  std::vector<Vec3d> disc;
+  const int n = int(std::floor(radius / s));
+  for (int i = -n; i <= n; ++i)
+    for (int j = -n; j <= n; ++j) {
+      const double a = i * s, b = j * s;
+      if (std::sqrt(a * a + b * b) <= radius - r) disc.push_back(u * a + w * b);
+    }
+  if (disc.empty())
+    return invalid_argument("placement.inlet_radius: " + std::to_string(radius) + " m holds no particle of radius " +
+                            std::to_string(r) + " m");
+  // Time for a layer to move D = 1.2 s along dir with speed v0 and acceleration a = g . dir.
+  const double D = 1.2 * s, a = dot(gravity, dir);
+  double tau = D / v0;
+  if (std::fabs(a) > 1e-12) {
+    const double disc2 = v0 * v0 + 2 * a * D;
+    if (disc2 < 0)
+      return invalid_argument("placement.velocity: " + std::to_string(v0) +
+                              " m/s is too slow against gravity to leave the inlet");
+    tau = (std::sqrt(disc2) - v0) / a;
+  }
+  if (pl.rate > 0) tau = std::max(tau, double(disc.size()) / pl.rate);
+  out->resize(ps.count);
+  const double jitter = 0.02 * r;
+  for (uint64_t i = 0; i < ps.count; ++i) {
+    const Vec3d p = centre + disc[i % disc.size()];
+    out->x[i] = p.x + rng.uniform(-jitter, jitter);
+    out->y[i] = p.y + rng.uniform(-jitter, jitter);
+    out->z[i] = p.z + rng.uniform(-jitter, jitter);
+    out->vx[i] = v.x, out->vy[i] = v.y, out->vz[i] = v.z;
+    out->release[i] = double(i / disc.size()) * tau;
+  }
+  return Status::ok();
+}
+
+}  // namespace
+
+Expected<ParticleSet> place_particles(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl,
+                                      Vec3d gravity, uint64_t seed) {
+  if (ps.count < 1 || ps.count > (uint64_t(1) << 28))
+    return invalid_argument("particles.count must lie in [1, 2^28], got " + std::to_string(ps.count));
+  if (!(ps.r_min > 0) || !std::isfinite(ps.r_max) || ps.r_max < ps.r_min)
+    return invalid_argument("particles.radius must be positive (a range as [min, max] with min <= max)");
+  if (wall.triangles.empty()) return invalid_argument("wall: the wall has no triangles");
+  if (!finite3(pl.velocity) || !finite3(pl.inlet) || !finite3(pl.region_lo) || !finite3(pl.region_hi) ||
+      !std::isfinite(pl.rate) || pl.rate < 0 || !std::isfinite(pl.inlet_radius) || pl.inlet_radius < 0)
+    return invalid_argument("placement: values must be finite (and rate, inlet_radius >= 0)");
+  SplitMix64 rng(seed);
+  ParticleSet out;
+  Status s = pl.kind == PlacementKind::kFill ? fill(wall, ps, pl, rng, &out) : inlet(wall, ps, pl, gravity, rng, &out);
+  if (!s) return s;
+  // Sizes last, so a range never changes where particles sit (the lattice fits r_max).
+  for (size_t i = 0; i < out.size(); ++i) out.r[i] = ps.r_min == ps.r_max ? ps.r_max : rng.uniform(ps.r_min, ps.r_max);
+  return out;
+}
+
+}  // namespace collido::sim

@@ -1,0 +1,48 @@
+// Where a run's particles start: filling a region inside the vessel without
+// overlaps, or released over time from an inlet (a pour, or a jet with a velocity).
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "sim/dynamics.h"
+#include "sim/mesh.h"
+
+namespace collido::sim {
+
+struct ParticleSpec {
+  uint64_t count = 1000;
+  double r_min = 0.5, r_max = 0.5;  // m; equal for one size, else uniform in [r_min, r_max]
+};
+
+enum class PlacementKind {
+  kFill,  // a jittered lattice in a region, inside a closed wall, clear of it
+  kPour,  // layers released from a disc inlet, falling with gravity
+  kJet,   // layers released from a disc inlet with the given velocity
+};
+const char* to_string(PlacementKind k);
+bool parse_placement_kind(const std::string& s, PlacementKind* out);
+
+struct PlacementSpec {
+  PlacementKind kind = PlacementKind::kFill;
+  // fill: the region (m); when unset, the wall's box.
+  bool has_region = false;
+  Vec3d region_lo{0, 0, 0}, region_hi{0, 0, 0};
+  // pour and jet: the inlet disc's centre and radius (m), its rate (particles/s,
+  // 0 = as fast as layers can leave without overlapping). When the centre is
+  // unset, the inlet sits under the top of the wall's box, centred.
+  bool has_inlet = false;
+  Vec3d inlet{0, 0, 0};
+  double inlet_radius = 0;  // 0 = a third of the box's smaller horizontal side
+  double rate = 0;
+  // Initial velocity (m/s): every particle's for fill and jet; for a pour the
+  // inlet speed (0 = 1 m/s along gravity).
+  Vec3d velocity{0, 0, 0};
+};
+
+// Builds the particle set. Fill refuses a region that cannot hold the count
+// (the message says how many fit); inlets refuse a disc too small for one particle.
+Expected<ParticleSet> place_particles(const TriangleMesh& wall, const ParticleSpec& particles,
+                                      const PlacementSpec& placement, Vec3d gravity, uint64_t seed);
+
+}  // namespace collido::sim
