@@ -54,8 +54,11 @@ class CpuBackend {
   double reduce_max(const double* d, size_t n) { return n ? *std::max_element(d, d + n) : 0.0; }
 
   // Stable LSD radix sort of (key, value) pairs into kout/vout, 8 bits a pass;
-  // passes whose byte is the same for every key are skipped.
-  void sort_pairs(const uint32_t* kin, const uint32_t* vin, uint32_t* kout, uint32_t* vout, size_t n) {
+  // passes whose byte is the same for every key are skipped (so key_bits, the
+  // bits the keys use, needs no special handling here).
+  void sort_pairs(const uint32_t* kin, const uint32_t* vin, uint32_t* kout, uint32_t* vout, size_t n,
+                  int key_bits = 32) {
+    (void)key_bits;
     tk_.resize(n);
     tv_.resize(n);
     std::memcpy(kout, kin, n * sizeof(uint32_t));

@@ -22,8 +22,11 @@ struct MinOp {
   __device__ float operator()(float a, float b) const { return b < a ? b : a; }
 };
 
+// 256 threads, at least two blocks per SM: caps a loop body at 128 registers
+// so the heavy force kernels keep a quarter of the SM's threads in flight to
+// hide their neighbour gathers (uncapped, the pair forces took 132 and ran one block).
 template <class F>
-__global__ void for_each_kernel(uint32_t n, F f) {
+__global__ void __launch_bounds__(256, 2) for_each_kernel(uint32_t n, F f) {
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i < n) f(i);
 }
@@ -135,10 +138,13 @@ class CudaBackend {
     return v;
   }
 
-  void sort_pairs(const uint32_t* kin, const uint32_t* vin, uint32_t* kout, uint32_t* vout, size_t n) {
+  // Radix sort of (key, value) pairs over the low key_bits bits of the keys.
+  void sort_pairs(const uint32_t* kin, const uint32_t* vin, uint32_t* kout, uint32_t* vout, size_t n,
+                  int key_bits = 32) {
     size_t bytes = 0;
-    cub::DeviceRadixSort::SortPairs(nullptr, bytes, kin, kout, vin, vout, static_cast<int>(n));
-    check(cub::DeviceRadixSort::SortPairs(temp(bytes), bytes, kin, kout, vin, vout, static_cast<int>(n)), "sort");
+    cub::DeviceRadixSort::SortPairs(nullptr, bytes, kin, kout, vin, vout, static_cast<int>(n), 0, key_bits);
+    check(cub::DeviceRadixSort::SortPairs(temp(bytes), bytes, kin, kout, vin, vout, static_cast<int>(n), 0, key_bits),
+          "sort");
   }
 
   uint32_t dedup_min(uint64_t* key, float* dist, size_t n, uint64_t* kout, float* dout) {

@@ -22,15 +22,18 @@ namespace collido::sim {
 
 // Wall contacts kept per particle per step (a sphere in the corner of a box touches three).
 inline constexpr int kMaxWallContacts = 4;
-// Friction springs remembered per particle (wall features and neighbours together).
-inline constexpr int kFrictionSlots = 8;
+// Friction springs remembered per particle: one per wall contact, and up to
+// kPairSlots neighbours (a settled pile has about six; more are counted as overflow).
+inline constexpr int kWallSlots = kMaxWallContacts;
+inline constexpr int kPairSlots = 8;
 // Steps between re-evaluations of the motion bound (the fastest speed).
 inline constexpr int kSpeedCheckInterval = 8;
 
 // Per-particle statistics columns filled by a measuring pass, reduced per frame.
-enum StatColumn : int {
-  kStatElastic, kStatOverlap, kStatWallContacts, kStatPairContacts, kStatTouching, kStatKinetic,
-  kStatPotential, kStatSpeed, kStatWaiting, kStatActive, kStatEscaped, kStatInvalid, kStatOverflow, kStatColumns
+enum StatColumn : size_t {
+  kStatElasticWall, kStatElasticPair, kStatOverlapWall, kStatOverlapPair, kStatWallContacts, kStatPairContacts,
+  kStatTouching, kStatOverflowWall, kStatOverflowPair, kStatKinetic, kStatPotential, kStatSpeed, kStatWaiting,
+  kStatActive, kStatEscaped, kStatInvalid, kStatColumns
 };
 
 template <class B>
@@ -98,11 +101,12 @@ class DynamicsPipeline final : public Simulation {
     forces(0.0, /*measure=*/true);
     kinematics_stats();
     double col[kStatColumns];
-    for (int c = 0; c < kStatColumns; ++c)
-      col[c] = c == kStatOverlap || c == kStatSpeed ? backend_.reduce_max(scratch_.data() + size_t(c) * n_, n_)
-                                                    : backend_.reduce_sum(scratch_.data() + size_t(c) * n_, n_);
-    st->elastic = col[kStatElastic];
-    st->max_overlap = col[kStatOverlap];
+    for (size_t c = 0; c < kStatColumns; ++c) {
+      const bool max = c == kStatOverlapWall || c == kStatOverlapPair || c == kStatSpeed;
+      col[c] = max ? backend_.reduce_max(scratch_.data() + c * n_, n_) : backend_.reduce_sum(scratch_.data() + c * n_, n_);
+    }
+    st->elastic = col[kStatElasticWall] + col[kStatElasticPair];
+    st->max_overlap = std::max(col[kStatOverlapWall], col[kStatOverlapPair]);
     st->wall_contacts = static_cast<uint64_t>(col[kStatWallContacts] + 0.5);
     st->particle_contacts = static_cast<uint64_t>(col[kStatPairContacts] * 0.5 + 0.5);  // each pair seen twice
     st->touching_wall = static_cast<uint64_t>(col[kStatTouching] + 0.5);
@@ -113,7 +117,7 @@ class DynamicsPipeline final : public Simulation {
     st->active = static_cast<uint64_t>(col[kStatActive] + 0.5);
     st->escaped = static_cast<uint64_t>(col[kStatEscaped] + 0.5);
     st->invalid = static_cast<uint64_t>(col[kStatInvalid] + 0.5);
-    st->history_overflow = static_cast<uint64_t>(col[kStatOverflow] + 0.5);
+    st->history_overflow = static_cast<uint64_t>(col[kStatOverflowWall] + col[kStatOverflowPair] + 0.5);
     return backend_.status();
   }
 
@@ -159,6 +163,7 @@ class DynamicsPipeline final : public Simulation {
 
     radius_host_ = ps.r;
     release_host_ = ps.release;
+    last_release_ = n_ ? *std::max_element(ps.release.begin(), ps.release.end()) : 0.0;
     std::vector<Vec3d> p(n_), v(n_);
     std::vector<double> inv_mass(n_);
     std::vector<uint8_t> state(n_);
@@ -180,19 +185,25 @@ class DynamicsPipeline final : public Simulation {
     backend_.fill(acc_.data(), n_, Vec3d{0, 0, 0});
     backend_.resize(speed_, std::max<size_t>(n_, 1));
     backend_.resize(scratch_, std::max<size_t>(n_ * kStatColumns, 1));
+    backend_.fill(scratch_.data(), n_ * kStatColumns, 0.0);  // pair columns stay 0 without pair contacts
     if (law_.mu > 0) {
       backend_.resize(omega_, std::max<size_t>(n_, 1));
       backend_.resize(alpha_, std::max<size_t>(n_, 1));
       backend_.fill(omega_.data(), n_, Vec3d{0, 0, 0});
       backend_.fill(alpha_.data(), n_, Vec3d{0, 0, 0});
-      for (auto& h : hist_) {
-        backend_.resize(h, std::max<size_t>(n_ * kFrictionSlots, 1));
-        backend_.fill(h.data(), n_ * kFrictionSlots, FrictionSlot{kNoKey, 0, 0, 0});
+      for (int k = 0; k < 2; ++k) {
+        backend_.resize(wall_hist_[k], std::max<size_t>(n_ * kWallSlots, 1));
+        backend_.fill(wall_hist_[k].data(), n_ * kWallSlots, FrictionSlot{kNoKey, 0, 0, 0});
+        if (!cfg_.particle_contacts) continue;
+        backend_.resize(pair_hist_[k], std::max<size_t>(n_ * kPairSlots, 1));
+        backend_.fill(pair_hist_[k].data(), n_ * kPairSlots, FrictionSlot{kNoKey, 0, 0, 0});
       }
     }
     if (cfg_.particle_contacts) {
       uint64_t cells = 0;
-      pgrid_ = make_grid(lo_, hi_, 2 * ts_.r_max, cfg_.max_dense_cells, n_, &cells);
+      // A dense table up to a few cells per particle: hashed buckets cost a filter on every read.
+      pgrid_ = make_grid(lo_, hi_, 2 * ts_.r_max, std::max<uint64_t>(cfg_.max_dense_cells, 8 * uint64_t(n_)), n_,
+                         &cells);
       backend_.resize(p_key_, std::max<size_t>(n_, 1));
       backend_.resize(p_idx_, std::max<size_t>(n_, 1));
       backend_.resize(p_key_sorted_, std::max<size_t>(n_, 1));
@@ -218,7 +229,10 @@ class DynamicsPipeline final : public Simulation {
 
   // --- one step -------------------------------------------------------------------------------
   void one_step(double dt) {
-    release(time_);
+    if (!all_released_) {
+      release(time_);
+      all_released_ = time_ >= last_release_;
+    }
     const bool verlet = cfg_.integrator == Integrator::kVelocityVerlet;
     if (verlet) kick_drift(dt);
     if (cfg_.particle_contacts) build_particle_grid();
@@ -321,17 +335,20 @@ class DynamicsPipeline final : public Simulation {
 
   void build_particle_grid() {
     const GridSpec g = pgrid_;
+    const uint32_t none = pgrid_.buckets;  // sorts after every bucket, within the key bits
     const Vec3d* x = pos_.data();
     const uint8_t* state = state_.data();
     uint32_t* key = p_key_.data();
     uint32_t* idx = p_idx_.data();
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
       int cx = 0, cy = 0, cz = 0;
-      key[i] = state[i] == kActive && g.cell_of(cast3<float>(x[i]), cx, cy, cz) ? g.bucket(g.linear(cx, cy, cz))
-                                                                               : kInvalidBucket;
+      key[i] = state[i] == kActive && g.cell_of(cast3<float>(x[i]), cx, cy, cz) ? g.bucket(g.linear(cx, cy, cz)) : none;
       idx[i] = i;
     });
-    backend_.sort_pairs(key, idx, p_key_sorted_.data(), p_idx_sorted_.data(), n_);
+    // Radix passes over the bits a bucket number needs, not all 32.
+    int bits = 1;
+    while (bits < 32 && (uint64_t(1) << bits) <= none) ++bits;
+    backend_.sort_pairs(key, idx, p_key_sorted_.data(), p_idx_sorted_.data(), n_, bits);
     uint32_t* start = cell_start_.data();
     uint32_t* end = cell_end_.data();
     const uint32_t* skey = p_key_sorted_.data();
@@ -340,19 +357,31 @@ class DynamicsPipeline final : public Simulation {
     backend_.fill(end, pgrid_.buckets, 0u);
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t j) {
       const uint32_t k = skey[j];
-      if (k == kInvalidBucket) return;
+      if (k == none) return;
       if (j == 0 || skey[j - 1] != k) start[k] = j;
       if (j + 1 == n || skey[j + 1] != k) end[k] = j + 1;
     });
   }
 
-  // Forces on every active particle. measure: write statistics only (no
-  // accelerations, no friction memory), so measuring never changes the run.
+  // Forces on every active particle, in two passes so each kernel stays
+  // small (registers decide how many threads hide the memory latency): pairs
+  // with gravity first, then the wall's contacts added on top. measure: write
+  // statistics only (no accelerations, no friction memory), so measuring
+  // never changes the run.
   void forces(double dt, bool measure) {
-    const WallView wall = wall_.view();
-    const PlanarTriangleD* tris_d = wall_.tris_d.data();
+    if (cfg_.particle_contacts) pair_forces(dt, measure);
+    wall_forces(dt, measure, /*add=*/cfg_.particle_contacts);
+  }
+
+  // Looks up a contact's spring in last step's terminated slot list.
+  COLLIDO_HD static COLLIDO_FORCEINLINE Vec3d find_spring(const FrictionSlot* slots, int k, uint32_t key) {
+    for (int s = 0; s < k && slots[s].key != kNoKey; ++s)
+      if (slots[s].key == key) return Vec3d{slots[s].sx, slots[s].sy, slots[s].sz};
+    return Vec3d{0, 0, 0};
+  }
+
+  void pair_forces(double dt, bool measure) {
     const GridSpec pg = pgrid_;
-    const bool pairs = cfg_.particle_contacts;
     const ContactLaw law = law_;
     const Vec3d grav = cfg_.gravity;
     const Vec3d* x = pos_.data();
@@ -364,8 +393,8 @@ class DynamicsPipeline final : public Simulation {
     uint8_t* flags = flags_.data();
     Vec3d* acc = acc_.data();
     Vec3d* alpha = alpha_.data();
-    const FrictionSlot* hin = hist_[hist_in_].data();
-    FrictionSlot* hout = hist_[hist_in_ ^ 1].data();
+    const FrictionSlot* hin = pair_hist_[hist_in_].data();
+    FrictionSlot* hout = pair_hist_[hist_in_ ^ 1].data();
     const uint32_t* start = cell_start_.data();
     const uint32_t* end = cell_end_.data();
     const uint32_t* sidx = p_idx_sorted_.data();
@@ -373,12 +402,9 @@ class DynamicsPipeline final : public Simulation {
     const size_t n = n_;
     const bool friction = law.mu > 0;
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
-      const uint8_t st = state[i];
-      if (st != kActive) {
-        if (measure)
-          for (int c = kStatElastic; c <= kStatTouching; ++c) stats[size_t(c) * n + i] = 0;
-        else
-          acc[i] = Vec3d{0, 0, 0};
+      if (state[i] != kActive) {
+        if (measure) stats[kStatElasticPair * n + i] = stats[kStatOverlapPair * n + i] =
+                         stats[kStatPairContacts * n + i] = stats[kStatOverflowPair * n + i] = 0;
         return;
       }
       const Vec3d xi = x[i], vi = v[i];
@@ -386,32 +412,93 @@ class DynamicsPipeline final : public Simulation {
       const double r = rad[i], m = 1.0 / inv_mass[i];
       Vec3d f = grav * m, torque{0, 0, 0};
       double elastic = 0, overlap_max = 0;
-      uint32_t nwall = 0, npair = 0, slots = 0, overflow = 0;
-      const FrictionSlot* old_slots = hin + size_t(i) * kFrictionSlots;
-      FrictionSlot* new_slots = hout + size_t(i) * kFrictionSlots;
-      // One contact: find last step's spring by key, apply the law, keep the new spring.
-      auto apply = [&](uint32_t key, Vec3d nrm, double overlap, Vec3d vrel, double m_eff, double share) {
-        Vec3d spring{0, 0, 0};
-        if (friction)
-          for (int s = 0; s < kFrictionSlots; ++s)
-            if (old_slots[s].key == key) {
-              spring = Vec3d{old_slots[s].sx, old_slots[s].sy, old_slots[s].sz};
-              break;
+      uint32_t npair = 0, slots = 0, overflow = 0;
+      const FrictionSlot* old_slots = hin + size_t(i) * kPairSlots;
+      FrictionSlot* new_slots = hout + size_t(i) * kPairSlots;
+      int cx = 0, cy = 0, cz = 0;
+      if (pg.cell_of(cast3<float>(xi), cx, cy, cz)) {
+        pg.for_each_neighbour(cx, cy, cz, 1, [&](uint64_t l, uint32_t b) {
+          for (uint32_t k = start[b], e = end[b]; k < e; ++k) {
+            const uint32_t j = sidx[k];
+            if (j == i) continue;
+            const Vec3d xj = x[j];
+            if (pg.hashed && !pg.holds(cast3<float>(xj), l)) continue;
+            const Vec3d d = xi - xj;
+            const double rs = r + rad[j];
+            const double dist2 = dot(d, d);
+            if (!(dist2 < rs * rs)) continue;
+            const double dist = sqrt(dist2);
+            // Coincident centres: separate along z, opposite ways for the two.
+            const Vec3d nrm = dist > 1e-12 * rs ? d * (1.0 / dist) : Vec3d{0, 0, i < j ? 1.0 : -1.0};
+            const double mj = 1.0 / inv_mass[j];
+            Vec3d vrel = vi - v[j];
+            if (friction) vrel = vrel + cross(wi, nrm * (-r)) - cross(w[j], nrm * rad[j]);
+            Vec3d spring = friction ? find_spring(old_slots, kPairSlots, j) : Vec3d{0, 0, 0};
+            const ContactForce cf = contact_force(law, nrm, rs - dist, vrel, m * mj / (m + mj), r, &spring, dt);
+            f = f + cf.f;
+            torque = torque + cf.torque;
+            elastic += 0.5 * cf.elastic;  // each side holds half the pair's springs
+            overlap_max = hd_max(overlap_max, (rs - dist) / r);
+            ++npair;
+            if (friction && !measure) {
+              if (slots < uint32_t(kPairSlots))
+                new_slots[slots++] = FrictionSlot{j, float(spring.x), float(spring.y), float(spring.z)};
+              else
+                ++overflow;
             }
-        const ContactForce cf = contact_force(law, nrm, overlap, vrel, m_eff, r, &spring, dt);
-        f = f + cf.f;
-        torque = torque + cf.torque;
-        elastic += share * cf.elastic;
-        overlap_max = hd_max(overlap_max, overlap / r);
-        if (friction && !measure) {
-          if (slots < kFrictionSlots)
-            new_slots[slots++] = FrictionSlot{key, float(spring.x), float(spring.y), float(spring.z)};
-          else
-            ++overflow;
-        }
-      };
+          }
+        });
+      }
+      flags[i] = npair ? uint8_t(kActive | kFlagParticleContact) : uint8_t(kActive);
+      if (measure) {
+        stats[kStatElasticPair * n + i] = elastic;
+        stats[kStatOverlapPair * n + i] = overlap_max;
+        stats[kStatPairContacts * n + i] = npair;
+        stats[kStatOverflowPair * n + i] = overflow;
+        return;
+      }
+      acc[i] = f * (1.0 / m);
+      if (friction) {
+        if (slots < uint32_t(kPairSlots)) new_slots[slots].key = kNoKey;  // terminates the list
+        alpha[i] = torque * (1.0 / (0.4 * m * r * r));
+      }
+    });
+  }
 
-      // Wall: one contact per touched feature.
+  // Wall contacts, one per touched feature. add: on top of pair_forces' accelerations, else from gravity.
+  void wall_forces(double dt, bool measure, bool add) {
+    const WallView wall = wall_.view();
+    const PlanarTriangleD* tris_d = wall_.tris_d.data();
+    const ContactLaw law = law_;
+    const Vec3d grav = cfg_.gravity;
+    const Vec3d* x = pos_.data();
+    const Vec3d* v = vel_.data();
+    const Vec3d* w = omega_.data();
+    const double* rad = radius_.data();
+    const double* inv_mass = inv_mass_.data();
+    const uint8_t* state = state_.data();
+    uint8_t* flags = flags_.data();
+    Vec3d* acc = acc_.data();
+    Vec3d* alpha = alpha_.data();
+    const FrictionSlot* hin = wall_hist_[hist_in_].data();
+    FrictionSlot* hout = wall_hist_[hist_in_ ^ 1].data();
+    double* stats = scratch_.data();
+    const size_t n = n_;
+    const bool friction = law.mu > 0;
+    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+      const uint8_t st = state[i];
+      if (st != kActive) {
+        if (measure)
+          stats[kStatElasticWall * n + i] = stats[kStatOverlapWall * n + i] = stats[kStatWallContacts * n + i] =
+              stats[kStatTouching * n + i] = stats[kStatOverflowWall * n + i] = 0;
+        else
+          acc[i] = Vec3d{0, 0, 0};
+        flags[i] = st;
+        return;
+      }
+      const Vec3d xi = x[i];
+      const double r = rad[i];
+      // Candidates from the prepared wall; most particles have none and stop here.
       WallContactSet<kMaxWallContacts> set;
       const double r2 = r * r, tol = 1e-9 * r;
       wall.for_each_candidate(cast3<float>(xi), [&](uint32_t k, uint32_t orig) {
@@ -432,59 +519,42 @@ class DynamicsPipeline final : public Simulation {
         }
         set.offer(WallContact{q, nrm, d, orig}, tol);
       });
+      const double m = 1.0 / inv_mass[i];
+      const FrictionSlot* old_slots = hin + size_t(i) * kWallSlots;
+      FrictionSlot* new_slots = hout + size_t(i) * kWallSlots;
+      Vec3d f{0, 0, 0}, torque{0, 0, 0};
+      double elastic = 0, overlap_max = 0;
+      const Vec3d vi = v[i];
+      const Vec3d wi = friction ? w[i] : Vec3d{0, 0, 0};
       for (int k = 0; k < set.n; ++k) {
         const Vec3d nrm = set.c[k].n;
         const double overlap = r - set.c[k].dist;
         const Vec3d vrel = friction ? vi + cross(wi, nrm * (-r)) : vi;
-        apply(kWallKeyBit | set.c[k].triangle, nrm, overlap, vrel, m, 1.0);
-        ++nwall;
+        const uint32_t key = kWallKeyBit | set.c[k].triangle;
+        Vec3d spring = friction ? find_spring(old_slots, kWallSlots, key) : Vec3d{0, 0, 0};
+        const ContactForce cf = contact_force(law, nrm, overlap, vrel, m, r, &spring, dt);
+        f = f + cf.f;
+        torque = torque + cf.torque;
+        elastic += cf.elastic;
+        overlap_max = hd_max(overlap_max, overlap / r);
+        if (friction && !measure) new_slots[k] = FrictionSlot{key, float(spring.x), float(spring.y), float(spring.z)};
       }
-      overflow += set.dropped;
-
-      // Particle pairs, through the grid, only when the scene asks for them.
-      if (pairs) {
-        int cx = 0, cy = 0, cz = 0;
-        if (pg.cell_of(cast3<float>(xi), cx, cy, cz)) {
-          pg.for_each_neighbour(cx, cy, cz, 1, [&](uint64_t l, uint32_t b) {
-            for (uint32_t k = start[b], e = end[b]; k < e; ++k) {
-              const uint32_t j = sidx[k];
-              if (j == i) continue;
-              const Vec3d xj = x[j];
-              if (pg.hashed && !pg.holds(cast3<float>(xj), l)) continue;
-              const Vec3d d = xi - xj;
-              const double rs = r + rad[j];
-              const double dist2 = dot(d, d);
-              if (!(dist2 < rs * rs)) continue;
-              const double dist = sqrt(dist2);
-              // Coincident centres: separate along z, opposite ways for the two.
-              const Vec3d nrm = dist > 1e-12 * rs ? d * (1.0 / dist) : Vec3d{0, 0, i < j ? 1.0 : -1.0};
-              const double mj = 1.0 / inv_mass[j];
-              Vec3d vrel = vi - v[j];
-              if (friction) vrel = vrel + cross(wi, nrm * (-r)) - cross(w[j], nrm * rad[j]);
-              apply(j, nrm, rs - dist, vrel, m * mj / (m + mj), 0.5);  // each side holds half the pair's spring
-              ++npair;
-            }
-          });
-        }
-      }
-
-      uint8_t fl = kActive;
-      if (nwall) fl |= kFlagWallContact;
-      if (npair) fl |= kFlagParticleContact;
-      flags[i] = fl;
+      const uint8_t base = add ? flags[i] : uint8_t(kActive);
+      flags[i] = set.n ? uint8_t(base | kFlagWallContact) : base;
       if (measure) {
-        stats[size_t(kStatElastic) * n + i] = elastic;
-        stats[size_t(kStatOverlap) * n + i] = overlap_max;
-        stats[size_t(kStatWallContacts) * n + i] = nwall;
-        stats[size_t(kStatPairContacts) * n + i] = npair;
-        stats[size_t(kStatTouching) * n + i] = nwall ? 1.0 : 0.0;
-        stats[size_t(kStatOverflow) * n + i] = overflow;
+        stats[kStatElasticWall * n + i] = elastic;
+        stats[kStatOverlapWall * n + i] = overlap_max;
+        stats[kStatWallContacts * n + i] = set.n;
+        stats[kStatTouching * n + i] = set.n ? 1.0 : 0.0;
+        stats[kStatOverflowWall * n + i] = set.dropped;
         return;
       }
-      acc[i] = f * (1.0 / m);
+      const Vec3d a = f * (1.0 / m);
+      acc[i] = add ? acc[i] + a : a + grav;
       if (friction) {
-        for (uint32_t s = slots; s < uint32_t(kFrictionSlots); ++s) new_slots[s] = FrictionSlot{kNoKey, 0, 0, 0};
-        alpha[i] = torque * (1.0 / (0.4 * m * r * r));
+        if (set.n < kWallSlots) new_slots[set.n].key = kNoKey;  // terminates the list
+        const Vec3d al = torque * (1.0 / (0.4 * m * r * r));
+        alpha[i] = add ? alpha[i] + al : al;
       }
     });
   }
@@ -512,14 +582,13 @@ class DynamicsPipeline final : public Simulation {
         pe = -m * dot(g, x[i]);
         sp = length(v[i]);
       }
-      stats[size_t(kStatKinetic) * n + i] = ke;
-      stats[size_t(kStatPotential) * n + i] = pe;
-      stats[size_t(kStatSpeed) * n + i] = sp;
-      stats[size_t(kStatWaiting) * n + i] = st == kWaiting;
-      stats[size_t(kStatActive) * n + i] = active;
-      stats[size_t(kStatEscaped) * n + i] = st == kEscaped;
-      stats[size_t(kStatInvalid) * n + i] = st == kInvalid;
-      if (!active) stats[size_t(kStatOverflow) * n + i] = 0;
+      stats[kStatKinetic * n + i] = ke;
+      stats[kStatPotential * n + i] = pe;
+      stats[kStatSpeed * n + i] = sp;
+      stats[kStatWaiting * n + i] = st == kWaiting;
+      stats[kStatActive * n + i] = active;
+      stats[kStatEscaped * n + i] = st == kEscaped;
+      stats[kStatInvalid * n + i] = st == kInvalid;
     });
   }
 
@@ -533,13 +602,16 @@ class DynamicsPipeline final : public Simulation {
   Vec3d origin_{0, 0, 0}, lo_{0, 0, 0}, hi_{0, 0, 0};  // domain in the local frame
   size_t n_ = 0;
   double time_ = 0;
+  double last_release_ = 0;  // s: no particle waits after this
+  bool all_released_ = false;
   uint64_t steps_ = 0;
   std::vector<double> radius_host_, release_host_;
 
   Buf<Vec3d> pos_, vel_, acc_, omega_, alpha_;
   Buf<double> radius_, inv_mass_, release_, speed_, scratch_;
   Buf<uint8_t> state_, flags_;
-  Buf<FrictionSlot> hist_[2];  // friction springs: last step's (hist_in_) and this step's
+  // Friction springs as terminated lists: last step's (hist_in_) and this step's.
+  Buf<FrictionSlot> wall_hist_[2], pair_hist_[2];
   int hist_in_ = 0;
   Buf<uint32_t> p_key_, p_idx_, p_key_sorted_, p_idx_sorted_, cell_start_, cell_end_;
 };

@@ -1,0 +1,95 @@
+// `collidoscope run` end to end: the run directory it writes, and errors.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "app/cli.h"
+#include "app/commands.h"
+#include "sim/snapshot.h"
+
+namespace collido::app {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string write_scene(const std::string& name, const std::string& json) {
+  const std::string path = ::testing::TempDir() + "/" + name;
+  std::ofstream(path) << json;
+  return path;
+}
+
+std::vector<std::string> lines(const std::string& path) {
+  std::ifstream in(path);
+  std::vector<std::string> out;
+  for (std::string l; std::getline(in, l);) out.push_back(l);
+  return out;
+}
+
+TEST(CliRun, WritesSnapshotsStatisticsAndParaViewFrames) {
+  const std::string scene = write_scene("drop.json", R"({
+    "wall": "box:x=6,y=6,z=6",
+    "particles": {"count": 27, "radius": 0.4},
+    "placement": {"kind": "fill", "region": {"min": [-2, -2, 1], "max": [2, 2, 5]}},
+    "material": {"restitution": 0.5, "friction": 0.3, "stiffness": 1e6},
+    "particle_contacts": true, "duration": 0.5, "fps": 10, "backend": "cpu"
+  })");
+  const std::string dir = ::testing::TempDir() + "/run_drop";
+  fs::remove_all(dir);
+  ASSERT_EQ(cmd_run({scene, "--out", dir, "--vtp", "--quiet"}), kExitOk);
+  for (const char* f : {"wall.stl", "scene.json", "run.json", "stats.csv", "frames.pvd", "vtp/frame_000005.vtp"})
+    EXPECT_TRUE(fs::exists(fs::path(dir) / f)) << f;
+  const auto stats = lines(dir + "/stats.csv");
+  ASSERT_EQ(stats.size(), 1u + 6u);  // header, frame 0 and five frames
+  EXPECT_EQ(stats[0].rfind("frame,time_s,substeps", 0), 0u);
+  for (uint64_t f = 0; f <= 5; ++f) {
+    auto snap = sim::read_snapshot(sim::snapshot_path(dir, f));
+    ASSERT_TRUE(snap) << snap.status().message();
+    EXPECT_EQ(snap->size(), 27u);
+    EXPECT_NEAR(snap->time, 0.1 * double(f), 1e-9);
+  }
+  // The particles fell: the last frame's are lower than the first's and some touch the floor.
+  auto first = sim::read_snapshot(sim::snapshot_path(dir, 0)), last = sim::read_snapshot(sim::snapshot_path(dir, 5));
+  double z0 = 0, z5 = 0;
+  int touching = 0;
+  for (size_t i = 0; i < 27; ++i) z0 += first->z[i], z5 += last->z[i], touching += last->contact[i];
+  EXPECT_LT(z5, z0);
+  EXPECT_GT(touching, 0);
+  std::stringstream pvd;
+  pvd << std::ifstream(dir + "/frames.pvd").rdbuf();
+  EXPECT_NE(pvd.str().find("vtp/frame_000005.vtp"), std::string::npos);
+}
+
+TEST(CliRun, BadScenesExitTwoAndImpossibleRunsExitOne) {
+  EXPECT_EQ(cmd_run({}), kExitUsage);
+  EXPECT_EQ(cmd_run({"--help"}), kExitOk);
+  EXPECT_EQ(cmd_run({"/nonexistent/scene.json"}), kExitUsage);
+  EXPECT_EQ(cmd_run({write_scene("bad_key.json", R"({"wall": "wall1", "speed": 3})")}), kExitUsage);
+  EXPECT_EQ(cmd_run({write_scene("bad_json.json", R"({"wall": )")}), kExitUsage);
+  const std::string ok = write_scene("ok.json", R"({"wall": "wall1", "particles": {"count": 5}, "duration": 0.01})");
+  EXPECT_EQ(cmd_run({ok, "--backend", "quantum"}), kExitUsage);
+  // A wall that does not exist, and more particles than the vessel holds.
+  const std::string dir = ::testing::TempDir() + "/run_fail";
+  EXPECT_EQ(cmd_run({write_scene("nowall.json", R"({"wall": {"file": "missing.stl"}})"), "--out", dir, "--quiet"}),
+            kExitFailure);
+  EXPECT_EQ(cmd_run({write_scene("full.json", R"({"wall": "box:x=2,y=2,z=2", "particles": {"count": 1000}})"),
+                     "--out", dir, "--quiet"}),
+            kExitFailure);
+}
+
+TEST(CliRun, AFixedStepBeyondTheStableBoundIsWarnedAboutAndStillReported) {
+  const std::string scene = write_scene("coarse.json", R"({
+    "wall": "box:x=6,y=6,z=6", "particles": {"count": 8, "radius": 0.4},
+    "material": {"stiffness": 1e6}, "time_step": 0.05, "duration": 0.5, "fps": 10, "backend": "cpu"
+  })");
+  const std::string dir = ::testing::TempDir() + "/run_coarse";
+  fs::remove_all(dir);
+  ASSERT_EQ(cmd_run({scene, "--out", dir, "--quiet"}), kExitOk);
+  std::stringstream run;
+  run << std::ifstream(dir + "/run.json").rdbuf();
+  EXPECT_NE(run.str().find("\"beyond_stable\": true"), std::string::npos) << run.str();
+}
+
+}  // namespace
+}  // namespace collido::app

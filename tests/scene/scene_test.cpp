@@ -1,0 +1,161 @@
+// The scene file: defaults, every key read, errors that name the key, a
+// round trip through to_json, and a fuzz of mutated documents.
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "scene/scene.h"
+#include "sim/particles.h"
+
+namespace collido::scene {
+namespace {
+
+const char* kFull = R"({
+  "wall": {"shape": "wall1"},
+  "particles": {"count": 500, "radius": [0.5, 1.0], "density": 1200},
+  "placement": {"kind": "pour", "inlet": [0, 0, 90], "inlet_radius": 20, "rate": 1000, "velocity": [0, 0, -5]},
+  "gravity": [0, 0, -3.7],
+  "material": {"restitution": 0.8, "friction": 0.2, "stiffness": 1e7},
+  "duration": 1.5, "fps": 20,
+  "method": "circumcircle", "backend": "cpu",
+  "particle_contacts": true, "integrator": "symplectic_euler", "time_step": 1e-5, "seed": 42,
+  "output": {"vtp": true}
+})";
+
+TEST(Scene, MinimalDocumentTakesDefaults) {
+  auto s = parse_scene(R"({"wall": "wall1"})");
+  ASSERT_TRUE(s) << s.status().message();
+  EXPECT_EQ(s->wall, "wall1");
+  EXPECT_FALSE(s->wall_is_file);
+  EXPECT_TRUE(s->backend_auto);
+  EXPECT_EQ(s->dynamics.method, sim::Method::kBin);
+  EXPECT_EQ(s->placement.kind, sim::PlacementKind::kFill);
+  EXPECT_EQ(s->frames(), 60u);  // 2 s at 30 fps
+  EXPECT_DOUBLE_EQ(s->dynamics.gravity.z, -9.81);
+}
+
+TEST(Scene, EveryKeyIsRead) {
+  auto s = parse_scene(kFull);
+  ASSERT_TRUE(s) << s.status().message();
+  EXPECT_EQ(s->particles.count, 500u);
+  EXPECT_DOUBLE_EQ(s->particles.r_min, 0.5);
+  EXPECT_DOUBLE_EQ(s->particles.r_max, 1.0);
+  EXPECT_DOUBLE_EQ(s->dynamics.material.density, 1200);
+  EXPECT_EQ(s->placement.kind, sim::PlacementKind::kPour);
+  EXPECT_TRUE(s->placement.has_inlet);
+  EXPECT_DOUBLE_EQ(s->placement.inlet.z, 90);
+  EXPECT_DOUBLE_EQ(s->placement.inlet_radius, 20);
+  EXPECT_DOUBLE_EQ(s->placement.rate, 1000);
+  EXPECT_DOUBLE_EQ(s->placement.velocity.z, -5);
+  EXPECT_DOUBLE_EQ(s->dynamics.gravity.z, -3.7);
+  EXPECT_DOUBLE_EQ(s->dynamics.material.restitution, 0.8);
+  EXPECT_DOUBLE_EQ(s->dynamics.material.friction, 0.2);
+  EXPECT_DOUBLE_EQ(s->dynamics.material.stiffness, 1e7);
+  EXPECT_EQ(s->frames(), 30u);
+  EXPECT_EQ(s->dynamics.method, sim::Method::kCircumcircle);
+  EXPECT_FALSE(s->backend_auto);
+  EXPECT_EQ(s->dynamics.backend, sim::Backend::kCpu);
+  EXPECT_TRUE(s->dynamics.particle_contacts);
+  EXPECT_EQ(s->dynamics.integrator, sim::Integrator::kSymplecticEuler);
+  EXPECT_DOUBLE_EQ(s->dynamics.time_step, 1e-5);
+  EXPECT_EQ(s->seed, 42u);
+  EXPECT_TRUE(s->vtp);
+}
+
+TEST(Scene, RoundTripThroughJson) {
+  auto a = parse_scene(kFull);
+  ASSERT_TRUE(a);
+  auto b = parse_scene(to_json(*a));
+  ASSERT_TRUE(b) << b.status().message() << "\n" << to_json(*a);
+  EXPECT_EQ(to_json(*a), to_json(*b));
+}
+
+void expect_error(const std::string& doc, const std::string& key) {
+  auto s = parse_scene(doc);
+  ASSERT_FALSE(s) << doc;
+  EXPECT_EQ(s.status().message().rfind(key, 0), 0u) << "message '" << s.status().message() << "' should start with "
+                                                    << key;
+}
+
+TEST(Scene, ErrorsNameTheKey) {
+  expect_error(R"({"wall": "wall1", "colour": "red"})", "colour: unknown key");
+  expect_error(R"({"wall": "wall1", "particles": {"radus": 1}})", "particles.radus: unknown key");
+  expect_error(R"({"wall": "wall1", "material": {"restitution": 1.5}})", "material.restitution");
+  expect_error(R"({"wall": "wall1", "material": {"restitution": 0}})", "material.restitution");
+  expect_error(R"({"wall": "wall1", "material": {"friction": -1}})", "material.friction");
+  expect_error(R"({"wall": "wall1", "material": {"stiffness": 1e6, "youngs_modulus": 1e9}})", "material");
+  expect_error(R"({"wall": "wall1", "particles": {"count": 0}})", "particles.count");
+  expect_error(R"({"wall": "wall1", "particles": {"count": 2.5}})", "particles.count");
+  expect_error(R"({"wall": "wall1", "particles": {"count": -3}})", "particles.count");
+  expect_error(R"({"wall": "wall1", "particles": {"radius": -1}})", "particles.radius");
+  expect_error(R"({"wall": "wall1", "particles": {"radius": [2, 1]}})", "particles.radius");
+  expect_error(R"({"wall": "wall1", "particles": {"radius": "big"}})", "particles.radius");
+  expect_error(R"({"wall": "wall1", "gravity": [0, 0]})", "gravity");
+  expect_error(R"({"wall": "wall1", "gravity": [0, 0, "down"]})", "gravity");
+  expect_error(R"({"wall": "wall1", "duration": 0})", "duration");
+  expect_error(R"({"wall": "wall1", "duration": 1e5, "fps": 1e4})", "fps");
+  expect_error(R"({"wall": "wall1", "method": "magic"})", "method");
+  expect_error(R"({"wall": "wall1", "method": "reference"})", "method");
+  expect_error(R"({"wall": "wall1", "backend": "tpu"})", "backend");
+  expect_error(R"({"wall": "wall1", "integrator": "rk4"})", "integrator");
+  expect_error(R"({"wall": "wall1", "particle_contacts": "yes"})", "particle_contacts");
+  expect_error(R"({"wall": "wall1", "placement": {"kind": "teleport"}})", "placement.kind");
+  expect_error(R"({"wall": "wall1", "placement": {"kind": "jet"}})", "placement.velocity");
+  expect_error(R"({"wall": "wall1", "placement": {"kind": "pour", "region": {"min": [0,0,0], "max": [1,1,1]}}})",
+               "placement.region");
+  expect_error(R"({"wall": "wall1", "placement": {"region": {"min": [0,0,0], "max": [1,-1,1]}}})", "placement.region");
+  expect_error(R"({"wall": "wall1", "placement": {"region": {"min": [0,0,0]}}})", "placement.region");
+  expect_error(R"({"wall": {"shape": "wall1", "file": "a.stl"}})", "wall");
+  expect_error(R"({"wall": {}})", "wall");
+  expect_error(R"({"particles": {"count": 5}})", "wall");
+  expect_error(R"({"wall": "wall1", "output": {"png": true}})", "output.png");
+  expect_error(R"([1, 2, 3])", "scene");
+  expect_error(R"({"wall": "wall1",)", "scene: not valid JSON");
+  expect_error("", "scene: not valid JSON");
+}
+
+TEST(Scene, WallFileIsRelativeToTheSceneFile) {
+  const std::string dir = ::testing::TempDir();
+  const std::string path = dir + "/s.json";
+  std::ofstream(path) << R"({"wall": {"file": "vessel.stl"}})";
+  auto s = load_scene(path);
+  ASSERT_TRUE(s) << s.status().message();
+  EXPECT_TRUE(s->wall_is_file);
+  EXPECT_EQ(s->wall, path.substr(0, path.find_last_of('/') + 1) + "vessel.stl");
+  EXPECT_FALSE(load_scene(dir + "/missing.json"));
+}
+
+// Mutated documents (bytes dropped, swapped, duplicated) either parse into a
+// valid scene or fail with a message; they never crash or hang.
+TEST(Scene, FuzzedDocumentsNeverCrash) {
+  const std::string base = kFull;
+  sim::SplitMix64 rng(7);
+  int parsed = 0, rejected = 0;
+  for (int k = 0; k < 3000; ++k) {
+    std::string doc = base;
+    const int edits = 1 + int(rng.uniform() * 4);
+    for (int e = 0; e < edits && !doc.empty(); ++e) {
+      const size_t at = size_t(rng.uniform() * double(doc.size()));
+      switch (int(rng.uniform() * 4)) {
+        case 0: doc.erase(at, 1); break;
+        case 1: doc[at] = "{}[]\",:0123456789.-eE tfn"[int(rng.uniform() * 25)]; break;
+        case 2: doc.insert(at, doc.substr(at, 8)); break;
+        default: doc[at] = char(rng.uniform() * 256); break;
+      }
+    }
+    auto s = parse_scene(doc);
+    if (s) {
+      ++parsed;
+      EXPECT_GE(s->particles.count, 1u);
+      EXPECT_GT(s->particles.r_min, 0);
+    } else {
+      ++rejected;
+      EXPECT_FALSE(s.status().message().empty());
+    }
+  }
+  EXPECT_GT(rejected, 0);
+  std::printf("fuzz: %d parsed, %d rejected\n", parsed, rejected);
+}
+
+}  // namespace
+}  // namespace collido::scene
