@@ -23,13 +23,14 @@ build: configure
 test: build
 	cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS)
 
-# The main job that exists today: detection on the paper's wall1 with results
-# (contacts CSV, JSON summary) written to results/demo/.
+# The main job until the service exists: detection and a pour simulation on the
+# paper's wall1, results (contacts, statistics, video) in results/demo/.
 run: build
 	bash scripts/demo.sh $(BUILD_DIR)
 
 bench: build
 	$(BUILD_DIR)/app/collidoscope bench detect
+	$(BUILD_DIR)/app/collidoscope bench run
 
 clean:
 	rm -rf $(BUILD_DIR)

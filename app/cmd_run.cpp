@@ -25,6 +25,7 @@ namespace {
 const std::vector<FlagSpec> kFlags = {
     {"out", true, "run directory (default results/<scene name>)"},
     {"backend", true, "auto | cpu | cuda: overrides the scene's backend"},
+    {"duration", true, "simulated seconds: overrides the scene's duration (a quick preview)"},
     {"vtp", false, "also write VTK PolyData frames (DIR/vtp/*.vtp, DIR/frames.pvd) for ParaView"},
     {"video", false, "render the frames into DIR/render (PNG, poster, MP4, WebM) when the run ends"},
     {"width", true, "video width (default 1280)"},
@@ -130,6 +131,12 @@ int cmd_run(const Args& args) {
     scene->backend_auto = b == "auto";
     if (!scene->backend_auto && !sim::parse_backend(b, &scene->dynamics.backend))
       return usage_error("run", "--backend must be auto, cpu or cuda");
+  }
+  if (p->has("duration")) {
+    const double d = p->get_double("duration", 0, &err);
+    if (!err.empty() || !(d > 0 && d <= 1e5)) return usage_error("run", "--duration must be in (0, 1e5] seconds");
+    scene->duration = d;
+    if (scene->frames() > 1000000) return usage_error("run", "--duration x the scene's fps gives over 10^6 frames");
   }
   const std::string out_dir = p->get("out", "results/" + fs::path(scene_path).stem().string());
   const bool quiet = p->has("quiet");

@@ -175,12 +175,13 @@ Status read_placement(const json& p, Scene* s) {
 
 Status read_material(const json& m, Scene* s) {
   ObjectReader r(m, "material");
-  COLLIDO_TRY(r.only({"restitution", "friction", "stiffness", "youngs_modulus"}));
+  COLLIDO_TRY(r.only({"restitution", "friction", "stiffness", "youngs_modulus", "impact_speed"}));
   sim::Material& mat = s->dynamics.material;
   COLLIDO_TRY(r.number("restitution", &mat.restitution, 1e-6, 1));
   COLLIDO_TRY(r.number("friction", &mat.friction, 0, 10));
   COLLIDO_TRY(r.number("stiffness", &mat.stiffness, 0, 1e15));
   COLLIDO_TRY(r.number("youngs_modulus", &mat.youngs_modulus, 0, 1e13));
+  COLLIDO_TRY(r.number("impact_speed", &s->dynamics.impact_speed, 0, kMaxSpeed));
   if (mat.stiffness > 0 && mat.youngs_modulus > 0)
     return invalid_argument("material: give stiffness or youngs_modulus, not both");
   return Status::ok();
@@ -262,7 +263,8 @@ std::string to_json(const Scene& s) {
   j["material"] = {{"restitution", m.restitution},
                    {"friction", m.friction},
                    {"stiffness", m.stiffness},
-                   {"youngs_modulus", m.youngs_modulus}};
+                   {"youngs_modulus", m.youngs_modulus},
+                   {"impact_speed", s.dynamics.impact_speed}};
   j["gravity"] = v3(s.dynamics.gravity);
   j["duration"] = s.duration;
   j["fps"] = s.fps;

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# `make run` today: one detection frame on the paper's wall1 (cylinder r=50,
-# h=100, 40 segments, 156 triangles) with 200,000 particles, checked against the
-# exact reference, written to results/demo/ with a picture of the contacts.
+# `make run` until the service exists: the paper's wall1 (cylinder r=50, h=100,
+# 40 segments, 156 triangles) twice. First one detection frame of 200,000
+# particles checked against the exact reference, then a simulation: 2,000
+# particles poured into wall1 (scenes/wall1_pour.json), rendered to a video.
+# Everything lands in results/demo/.
 set -euo pipefail
 build=${1:-build}
 app="$build/app/collidoscope"
@@ -27,4 +29,10 @@ if "$app" --help | grep -q "^  render"; then
   echo "== picture: particles touching the wall in orange"
   "$app" render "$out/run" --out "$out/render" --color contact --camera iso --video none --png-every 1
 fi
-echo "results in $out/: summary.json, contacts.csv, run/ (wall + snapshot), render/ (poster and frame PNG)"
+echo "== simulation: 2000 particles poured into wall1 (scenes/wall1_pour.json)"
+if "$app" --help | grep -q "^  render"; then video=--video; else video=; fi
+"$app" run scenes/wall1_pour.json --out "$out/pour" $video --width 1280 --height 720
+
+echo "results in $out/:"
+echo "  detection: summary.json, contacts.csv, run/ (wall + snapshot), render/ (poster, frame PNG)"
+echo "  simulation: pour/stats.csv (per frame), pour/run.json, pour/frames/ (snapshots)${video:+, pour/render/ (video.mp4, video.webm, poster.png)}"

@@ -28,6 +28,11 @@ class CpuBackend {
   void parallel_for(size_t n, F f) {
     cpu_parallel_for(n, f);
   }
+  // Loop bodies with many live values: the GPU caps their registers; threads here.
+  template <class F>
+  void parallel_for_heavy(size_t n, F f) {
+    cpu_parallel_for(n, f);
+  }
   template <class T>
   void fill(T* p, size_t n, T v) {
     std::fill(p, p + n, v);

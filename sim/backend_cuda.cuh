@@ -22,11 +22,17 @@ struct MinOp {
   __device__ float operator()(float a, float b) const { return b < a ? b : a; }
 };
 
-// 256 threads, at least two blocks per SM: caps a loop body at 128 registers
-// so the heavy force kernels keep a quarter of the SM's threads in flight to
-// hide their neighbour gathers (uncapped, the pair forces took 132 and ran one block).
 template <class F>
-__global__ void __launch_bounds__(256, 2) for_each_kernel(uint32_t n, F f) {
+__global__ void for_each_kernel(uint32_t n, F f) {
+  const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i < n) f(i);
+}
+
+// The same with at least two 256-thread blocks per SM: caps a heavy loop body
+// at 128 registers so it keeps a quarter of the SM's threads in flight to hide
+// its gathers (uncapped, the pair forces took 132 and ran one block per SM).
+template <class F>
+__global__ void __launch_bounds__(256, 2) for_each_kernel_heavy(uint32_t n, F f) {
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i < n) f(i);
 }
@@ -86,6 +92,15 @@ class CudaBackend {
     constexpr uint32_t kBlock = 256;
     const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
     cuda_detail::for_each_kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f);
+    check(cudaGetLastError(), "kernel launch");
+  }
+  // parallel_for for loop bodies with many live values (the force kernels).
+  template <class F>
+  void parallel_for_heavy(size_t n, F f) {
+    if (n == 0 || !ok_) return;
+    constexpr uint32_t kBlock = 256;
+    const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
+    cuda_detail::for_each_kernel_heavy<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f);
     check(cudaGetLastError(), "kernel launch");
   }
   template <class T>

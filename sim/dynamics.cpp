@@ -89,7 +89,13 @@ TimeStepInfo time_step_physics(const DynamicsConfig& c, const ParticleSet& p, co
   } else {
     // Automatic: stiff enough that the fastest expected impact overlaps at
     // most 2 % of the radius (the largest particle has the most mass per radius^2).
-    const double fall = std::sqrt(2 * length(c.gravity) * length(wall_box.extent()));
+    // The longest fall inside the wall's box, along gravity.
+    const double g = length(c.gravity);
+    const Vec3d e = wall_box.extent();
+    const double drop = g > 0 ? (std::fabs(e.x * c.gravity.x) + std::fabs(e.y * c.gravity.y) +
+                                 std::fabs(e.z * c.gravity.z)) / g
+                              : 0.0;
+    const double fall = std::sqrt(2 * g * drop);
     const double v = c.impact_speed > 0 ? c.impact_speed : std::max({v_max + fall, 1e-3});
     const double delta = 0.02 * ts.r_max;
     ts.stiffness = mass(ts.r_max) * (v / delta) * (v / delta);

@@ -210,6 +210,11 @@ class DynamicsPipeline final : public Simulation {
       backend_.resize(p_idx_sorted_, std::max<size_t>(n_, 1));
       backend_.resize(cell_start_, pgrid_.buckets);
       backend_.resize(cell_end_, pgrid_.buckets);
+      backend_.resize(sorted_, std::max<size_t>(n_, 1));
+      // Float filter slack: rounding of coordinates up to the domain's size, and of the radii.
+      const Vec3d ext = hi_ - lo_;
+      filter_slack_ = float(4e-7 * (std::fabs(lo_.x) + std::fabs(lo_.y) + std::fabs(lo_.z) + length(ext)) +
+                            1e-5 * ts_.r_max);
     }
     // Forces of the initial state, so the first Verlet half kick has them.
     release(0.0);
@@ -355,11 +360,19 @@ class DynamicsPipeline final : public Simulation {
     const uint32_t n = static_cast<uint32_t>(n_);
     backend_.fill(start, pgrid_.buckets, 0u);
     backend_.fill(end, pgrid_.buckets, 0u);
+    // Cell ranges, and a float copy of each particle in cell order: the pair
+    // loop reads its neighbours' cells as contiguous 16-byte records and goes
+    // to the double state only for real contacts.
+    PackedParticle* sp = sorted_.data();
+    const uint32_t* sidx = p_idx_sorted_.data();
+    const double* rad = radius_.data();
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t j) {
       const uint32_t k = skey[j];
       if (k == none) return;
       if (j == 0 || skey[j - 1] != k) start[k] = j;
       if (j + 1 == n || skey[j + 1] != k) end[k] = j + 1;
+      const uint32_t i = sidx[j];
+      sp[j] = PackedParticle{float(x[i].x), float(x[i].y), float(x[i].z), float(rad[i])};
     });
   }
 
@@ -398,10 +411,12 @@ class DynamicsPipeline final : public Simulation {
     const uint32_t* start = cell_start_.data();
     const uint32_t* end = cell_end_.data();
     const uint32_t* sidx = p_idx_sorted_.data();
+    const PackedParticle* sp = sorted_.data();
+    const float slack = filter_slack_;
     double* stats = scratch_.data();
     const size_t n = n_;
     const bool friction = law.mu > 0;
-    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+    backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
       if (state[i] != kActive) {
         if (measure) stats[kStatElasticPair * n + i] = stats[kStatOverlapPair * n + i] =
                          stats[kStatPairContacts * n + i] = stats[kStatOverflowPair * n + i] = 0;
@@ -410,19 +425,24 @@ class DynamicsPipeline final : public Simulation {
       const Vec3d xi = x[i], vi = v[i];
       const Vec3d wi = friction ? w[i] : Vec3d{0, 0, 0};
       const double r = rad[i], m = 1.0 / inv_mass[i];
+      const Vec3f xf = cast3<float>(xi);
+      const float rf = float(r);
       Vec3d f = grav * m, torque{0, 0, 0};
       double elastic = 0, overlap_max = 0;
       uint32_t npair = 0, slots = 0, overflow = 0;
       const FrictionSlot* old_slots = hin + size_t(i) * kPairSlots;
       FrictionSlot* new_slots = hout + size_t(i) * kPairSlots;
       int cx = 0, cy = 0, cz = 0;
-      if (pg.cell_of(cast3<float>(xi), cx, cy, cz)) {
+      if (pg.cell_of(xf, cx, cy, cz)) {
         pg.for_each_neighbour(cx, cy, cz, 1, [&](uint64_t l, uint32_t b) {
           for (uint32_t k = start[b], e = end[b]; k < e; ++k) {
+            const PackedParticle q = sp[k];
+            const float fx = xf.x - q.x, fy = xf.y - q.y, fz = xf.z - q.z, reach = rf + q.r + slack;
+            if (fx * fx + fy * fy + fz * fz >= reach * reach) continue;  // clearly apart (most neighbours)
             const uint32_t j = sidx[k];
             if (j == i) continue;
+            if (pg.hashed && !pg.holds(position(q), l)) continue;
             const Vec3d xj = x[j];
-            if (pg.hashed && !pg.holds(cast3<float>(xj), l)) continue;
             const Vec3d d = xi - xj;
             const double rs = r + rad[j];
             const double dist2 = dot(d, d);
@@ -485,7 +505,7 @@ class DynamicsPipeline final : public Simulation {
     double* stats = scratch_.data();
     const size_t n = n_;
     const bool friction = law.mu > 0;
-    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+    backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
       const uint8_t st = state[i];
       if (st != kActive) {
         if (measure)
@@ -614,6 +634,8 @@ class DynamicsPipeline final : public Simulation {
   Buf<FrictionSlot> wall_hist_[2], pair_hist_[2];
   int hist_in_ = 0;
   Buf<uint32_t> p_key_, p_idx_, p_key_sorted_, p_idx_sorted_, cell_start_, cell_end_;
+  Buf<PackedParticle> sorted_;  // float copies in cell order, for the pair loop's first test
+  float filter_slack_ = 0;
 };
 
 }  // namespace collido::sim

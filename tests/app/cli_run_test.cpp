@@ -61,6 +61,21 @@ TEST(CliRun, WritesSnapshotsStatisticsAndParaViewFrames) {
   EXPECT_NE(pvd.str().find("vtp/frame_000005.vtp"), std::string::npos);
 }
 
+// Every example scene in scenes/ loads, places its particles and runs a first frame.
+TEST(CliRun, ExampleScenesRun) {
+  int seen = 0;
+  for (const auto& e : fs::directory_iterator(COLLIDO_SCENES)) {
+    if (e.path().extension() != ".json") continue;
+    ++seen;
+    const std::string dir = ::testing::TempDir() + "/example_" + e.path().stem().string();
+    fs::remove_all(dir);
+    EXPECT_EQ(cmd_run({e.path().string(), "--out", dir, "--duration", "0.04", "--backend", "cpu", "--quiet"}), kExitOk)
+        << e.path();
+    EXPECT_TRUE(fs::exists(sim::snapshot_path(dir, 1))) << e.path();
+  }
+  EXPECT_GE(seen, 3);
+}
+
 TEST(CliRun, BadScenesExitTwoAndImpossibleRunsExitOne) {
   EXPECT_EQ(cmd_run({}), kExitUsage);
   EXPECT_EQ(cmd_run({"--help"}), kExitOk);
