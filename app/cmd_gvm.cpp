@@ -85,7 +85,8 @@ const std::vector<FlagSpec>& train_flags() {
       {"seed", true, "seed of the machine's signs, start and proposals (default 1)"},
       {"delta", true, "largest Monte Carlo step, fraction of a parameter's range (default 0.1)"},
       {"fixed-delta", false, "keep the step at --delta instead of adapting it per epoch"},
-      {"beta-max", true, "gain range [-B, B] of each hidden neuron (default 1)"},
+      {"beta-max", true, "gain range [-B, B] of each hidden neuron (default 3)"},
+      {"ensemble", true, "machines per output, from different seeds, averaged (default 5)"},
       {"activation", true, "tanh or sigmoid (default tanh)"},
       {"split-seed", true, "seed of the 70/30 train/validation split (default 1)"},
       {"curve", true, "write every epoch's train/validation loss to this CSV"},
@@ -103,9 +104,10 @@ int gvm_train(const Args& args) {
   if (parsed->has("help")) {
     print_help(
         "usage: collidoscope gvm train --logs RUNS.csv --out MODEL.json [options]\n\n"
-        "Trains the general vector machine on 70% of the logged runs, scores it and three\n"
-        "baselines (the paper's linear fit in triangles, least squares on log features,\n"
-        "a back-propagation MLP) on the other 30%, and writes the model.",
+        "Trains the general vector machines (an ensemble per output) on 70% of the logged\n"
+        "runs, scores them and three baselines (the paper's linear fit in triangles, least\n"
+        "squares on log features, a back-propagation MLP) on the other 30%, and writes the\n"
+        "model.",
         train_flags());
     return kExitOk;
   }
@@ -120,6 +122,7 @@ int gvm_train(const Args& args) {
   opt.gvm.seed = static_cast<uint64_t>(parsed->get_int("seed", 1, &error));
   opt.gvm.delta = parsed->get_double("delta", opt.gvm.delta, &error);
   opt.gvm.beta_max = parsed->get_double("beta-max", opt.gvm.beta_max, &error);
+  opt.gvm.ensemble = static_cast<int>(parsed->get_int("ensemble", opt.gvm.ensemble, &error));
   opt.split_seed = static_cast<uint64_t>(parsed->get_int("split-seed", 1, &error));
   opt.mlp.epochs = static_cast<int>(parsed->get_int("mlp-epochs", opt.mlp.epochs, &error));
   if (!error.empty()) return usage_error(cmd, error);
@@ -137,6 +140,8 @@ int gvm_train(const Args& args) {
     return usage_error(cmd, "--delta must be in (0, 1]");
   if (!(opt.gvm.beta_max > 0.0 && opt.gvm.beta_max <= 1000.0))
     return usage_error(cmd, "--beta-max must be in (0, 1000]");
+  if (opt.gvm.ensemble < 1 || opt.gvm.ensemble > 1000)
+    return usage_error(cmd, "--ensemble must be in 1..1000");
   if (opt.mlp.epochs < 0) return usage_error(cmd, "--mlp-epochs must be >= 0");
 
   const std::string log_path = parsed->get("logs");
@@ -151,17 +156,19 @@ int gvm_train(const Args& args) {
     return kExitFailure;
   }
   const auto& rep = cmp->gvm_report;
-  const auto& mp = cmp->gvm.machine().params();
+  const auto& mp = cmp->gvm.machines()[0][0].params();  // every machine has the same inputs
+  size_t machines = 0;
+  for (const auto& ms : cmp->gvm.machines()) machines += ms.size();
   size_t varying = 0;
   for (size_t i = 0; i < mp.inputs; ++i) varying += mp.in_max[i] > mp.in_min[i];
   std::printf("%zu runs from %s: %zu train, %zu validation (split seed %llu)\n", rows->size(),
               log_path.c_str(), cmp->split.train.size(), cmp->split.validation.size(),
               static_cast<unsigned long long>(opt.split_seed));
   std::printf(
-      "GVM: %d hidden %s neurons, beta in [-%g, %g], %zu inputs (%zu vary), %zu outputs; "
-      "%d epochs, delta %g, seed %llu\n",
-      opt.gvm.hidden, g::activation_name(opt.gvm.activation), opt.gvm.beta_max, opt.gvm.beta_max,
-      mp.inputs, varying, mp.outputs, opt.gvm.epochs, opt.gvm.delta,
+      "GVM: %zu machines (%d per output with values), each %d hidden %s neurons, beta in "
+      "[-%g, %g], %zu inputs (%zu vary), 1 output; %d epochs, delta %g, seed %llu\n",
+      machines, opt.gvm.ensemble, opt.gvm.hidden, g::activation_name(opt.gvm.activation),
+      opt.gvm.beta_max, opt.gvm.beta_max, mp.inputs, varying, opt.gvm.epochs, opt.gvm.delta,
       static_cast<unsigned long long>(opt.gvm.seed));
 
   // Loss on stdout at about ten epochs (first, last, evenly between); all of them with --curve.
@@ -176,7 +183,7 @@ int gvm_train(const Args& args) {
   }
   std::printf(
       "trained in %s (%lld proposals, %.1f%% kept); loss = mean squared error of the "
-      "targets scaled to [0,1]\n",
+      "targets scaled to [0,1], averaged over the machines\n",
       human_seconds(rep.seconds).c_str(), static_cast<long long>(rep.proposals),
       rep.proposals ? 100.0 * rep.accepted / rep.proposals : 0.0);
 

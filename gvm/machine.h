@@ -34,9 +34,14 @@ struct GvmOptions {
   Activation activation = Activation::kTanh;
   double w_max = 1.0;  // w in [-w_max, w_max]
   // beta in [-beta_max, beta_max]. It bounds how sharp a neuron can be, Zhao's margin
-  // knob: 1 gave the lowest held-out loss on 13-input run logs (sharper gains overfit),
-  // while one input carrying a full period of sin(x) needs about 5 (docs/gvm.md).
-  double beta_max = 1.0;
+  // knob. 3 gave the lowest held-out error on real calibration sweeps (run costs bend
+  // from a fixed floor to growth in the counts within half a decade; 1 cannot follow
+  // that and 10 overfits); one input carrying a full period of sin(x) needs about 5
+  // (docs/gvm.md).
+  double beta_max = 3.0;
+  // ResourcePredictor only (Machine::train ignores it): machines trained per output,
+  // each from its own seed, whose predictions are averaged.
+  int ensemble = 5;
 };
 
 struct EpochLoss {
@@ -94,7 +99,8 @@ class Machine {
   // Builds a machine from saved parameters, checking their shapes and ranges.
   static Expected<Machine> from_params(MachineParams params);
 
-  // Predicts raw-unit outputs y[outputs()] for raw-unit inputs x[inputs()]. No allocation.
+  // Predicts raw-unit outputs y[outputs()] for raw-unit inputs x[inputs()]. No allocation
+  // up to 64 inputs.
   void predict(const double* x, double* y) const;
   std::vector<double> predict(const std::vector<double>& x) const;
 

@@ -1,11 +1,14 @@
 #include "gvm/predictor.h"
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <map>
 #include <sstream>
+#include <thread>
 
 #include "gvm/json_io.h"
 
@@ -20,6 +23,14 @@ void encode_table(const std::vector<RunRecord>& rows, const FeatureSpace& f, Mat
     f.encode_inputs(rows[r].config, x->row(r));
     encode_outputs(rows[r].measure, rows[r].config.backend, y->row(r));
   }
+}
+
+// Seed of member m of output k's ensemble: distinct for every (seed, k, m).
+uint64_t member_seed(uint64_t seed, size_t k, int m) {
+  uint64_t z = seed + 0x9E3779B97F4A7C15ull * (1 + k * 1024 + static_cast<uint64_t>(m));
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
 }
 
 std::string count_text(double log10_value) {
@@ -40,22 +51,81 @@ Expected<ResourcePredictor> ResourcePredictor::train(const std::vector<RunRecord
       if (s) s = validate((*set)[r].measure);
       if (!s) return invalid_argument("row " + std::to_string(r + 1) + ": " + s.message());
     }
+  if (train.size() < 2) return invalid_argument("training needs at least 2 rows");
+  if (options.ensemble < 1 || options.ensemble > 1000)
+    return invalid_argument("ensemble must be in 1..1000");
   ResourcePredictor p;
   p.features_ = FeatureSpace::from_rows(train);
   Matrix x, y, vx, vy;
   encode_table(train, p.features_, &x, &y);
   encode_table(validation, p.features_, &vx, &vy);
+
+  // One task per (output, member); an output no training row has a value for (device
+  // memory in a CPU-only log) gets no machines and predicts 0.
+  struct Task {
+    Task(size_t k, int m, const Matrix& yk, const Matrix& vyk)
+        : output(k), member(m), y(yk), vy(vyk) {}
+    size_t output;
+    int member;
+    Matrix y, vy;
+    Expected<Machine> machine = invalid_argument("not trained");
+    TrainReport report;
+  };
+  std::vector<Task> tasks;
+  for (size_t k = 0; k < kOutputCount; ++k) {
+    bool any = false;
+    for (size_t r = 0; r < y.rows(); ++r) any = any || !std::isnan(y(r, k));
+    if (!any) continue;
+    Matrix yk(y.rows(), 1), vyk(vy.rows(), 1);
+    for (size_t r = 0; r < y.rows(); ++r) yk(r, 0) = y(r, k);
+    for (size_t r = 0; r < vy.rows(); ++r) vyk(r, 0) = vy(r, k);
+    for (int m = 0; m < options.ensemble; ++m) tasks.emplace_back(k, m, yk, vyk);
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  // Each task owns its seed and its slot, so threads change the wall time, not the result.
+  std::atomic<size_t> next{0};
+  auto work = [&] {
+    for (size_t i; (i = next.fetch_add(1)) < tasks.size();) {
+      Task& t = tasks[i];
+      GvmOptions o = options;
+      o.seed = member_seed(options.seed, t.output, t.member);
+      t.machine = Machine::train(x, t.y, vx, t.vy, o, &t.report, p.features_.input_names(),
+                                 {output_feature_names()[t.output]});
+    }
+  };
+  const size_t n_threads =
+      std::min<size_t>(tasks.size(), std::max(1u, std::thread::hardware_concurrency()));
+  std::vector<std::thread> pool;
+  for (size_t i = 1; i < n_threads; ++i) pool.emplace_back(work);
+  work();
+  for (auto& th : pool) th.join();
+
   TrainReport local;
-  TrainReport* rep = report ? report : &local;
-  auto m =
-      Machine::train(x, y, vx, vy, options, rep, p.features_.input_names(), output_feature_names());
-  if (!m) return m.status();
-  p.machine_ = std::move(*m);
+  TrainReport& rep = report ? *report : local;
+  rep = TrainReport{};
+  p.machines_.assign(kOutputCount, {});
+  for (Task& t : tasks) {
+    if (!t.machine) return t.machine.status();
+    p.machines_[t.output].push_back(std::move(*t.machine));
+    rep.proposals += t.report.proposals;
+    rep.accepted += t.report.accepted;
+    // The curve: per epoch, the mean over every machine (each is one output's loss).
+    if (rep.curve.empty()) rep.curve.assign(t.report.curve.size(), {0, 0.0, 0.0, 0.0});
+    for (size_t e = 0; e < t.report.curve.size(); ++e) {
+      const EpochLoss& c = t.report.curve[e];
+      const double w = 1.0 / static_cast<double>(tasks.size());
+      rep.curve[e].epoch = c.epoch;
+      rep.curve[e].train_loss += w * c.train_loss;
+      rep.curve[e].validation_loss += w * c.validation_loss;  // NaN without validation rows
+      rep.curve[e].acceptance += w * c.acceptance;
+    }
+  }
+  rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   p.training_rows_ = train.size();
   p.options_ = options;
-  if (!rep->curve.empty()) {
-    p.train_loss_ = rep->curve.back().train_loss;
-    p.validation_loss_ = rep->curve.back().validation_loss;
+  if (!rep.curve.empty()) {
+    p.train_loss_ = rep.curve.back().train_loss;
+    p.validation_loss_ = rep.curve.back().validation_loss;
   }
   // Per backend, the most common device, then that device's most common thread count.
   for (Backend b : {Backend::kCpu, Backend::kCuda}) {
@@ -85,20 +155,32 @@ RunMeasure ResourcePredictor::predict_measure(const RunConfig& c) const {
   }
   features_.encode_inputs(c, xp);
   double y[kOutputCount];
-  machine_.predict(xp, y);
+  // An output without machines (never trained, or no values in training) predicts 0.
+  for (size_t k = 0; k < kOutputCount; ++k) {
+    y[k] = 0.0;
+    if (k >= machines_.size() || machines_[k].empty()) continue;
+    for (const Machine& m : machines_[k]) {
+      double yk;
+      m.predict(xp, &yk);
+      y[k] += yk;
+    }
+    y[k] /= static_cast<double>(machines_[k].size());
+  }
   return decode_outputs(y, c.backend);
 }
 
 Expected<Prediction> ResourcePredictor::predict(const RunConfig& c) const {
   if (Status s = validate(c); !s) return s;
-  if (machine_.inputs() == 0) return invalid_argument("the predictor has not been trained");
+  if (machines_.empty() || machines_[0].empty())
+    return invalid_argument("the predictor has not been trained");
   Prediction out;
   out.measure = predict_measure(c);
   const std::vector<double> x = features_.encode_inputs(c);
   const char* count_names[] = {"particles", "triangles", "triangles_original", "frames", "threads"};
   const int64_t counts[] = {c.particles, c.triangles, c.triangles_original, c.frames,
                             std::max<int64_t>(c.threads, 1)};
-  for (const RangeIssue& issue : machine_.check_range(x.data())) {
+  // Every machine saw the same training rows, so any one knows the input ranges.
+  for (const RangeIssue& issue : machines_[0][0].check_range(x.data())) {
     const size_t i = issue.input;
     std::string msg;
     if (i <= FeatureSpace::kLogThreads) {
@@ -140,7 +222,7 @@ std::optional<RunConfig> ResourcePredictor::usual_host(Backend b) const {
 std::string ResourcePredictor::to_json() const {
   nlohmann::json j;
   j["kind"] = "collidoscope-resource-predictor";
-  j["version"] = 1;
+  j["version"] = 2;
   j["devices"] = features_.devices();
   j["usual"] = nlohmann::json::array();
   for (const auto& u : usual_)
@@ -154,10 +236,17 @@ std::string ResourcePredictor::to_json() const {
                    {"adaptive_delta", options_.adaptive_delta},
                    {"activation", activation_name(options_.activation)},
                    {"beta_max", options_.beta_max},
+                   {"ensemble", options_.ensemble},
                    {"train_loss", train_loss_}};
   // NaN (no validation rows) has no JSON spelling; leave the field out instead.
   if (std::isfinite(validation_loss_)) j["training"]["validation_loss"] = validation_loss_;
-  j["machine"] = machine_to_json(machine_.params());
+  // machines[k]: output k's ensemble (output_feature_names() order), maybe empty.
+  j["machines"] = nlohmann::json::array();
+  for (const auto& ms : machines_) {
+    nlohmann::json arr = nlohmann::json::array();
+    for (const Machine& m : ms) arr.push_back(machine_to_json(m.params()));
+    j["machines"].push_back(arr);
+  }
   // Device names come from logs; invalid UTF-8 is replaced rather than thrown about.
   return j.dump(1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
@@ -169,8 +258,10 @@ Expected<ResourcePredictor> ResourcePredictor::from_json(const std::string& text
   try {
     if (!j.is_object() || j.value("kind", "") != "collidoscope-resource-predictor")
       return parse_error("not a collidoscope resource-predictor model");
-    if (j.at("version").get<int>() != 1)
-      return parse_error("unsupported model version " + j.at("version").dump());
+    // Version 1 held one machine for all outputs; such models must be retrained.
+    if (j.at("version").get<int>() != 2)
+      return parse_error("unsupported model version " + j.at("version").dump() +
+                         " (retrain with `collidoscope gvm train`)");
     p.features_ = FeatureSpace::with_devices(j.at("devices").get<std::vector<std::string>>());
     for (const auto& u : j.at("usual")) {
       auto b = parse_backend(u.at("backend").get<std::string>());
@@ -187,19 +278,31 @@ Expected<ResourcePredictor> ResourcePredictor::from_json(const std::string& text
     auto act = parse_activation(t.at("activation").get<std::string>());
     if (act) p.options_.activation = *act;
     p.options_.beta_max = t.at("beta_max").get<double>();
+    p.options_.ensemble = t.at("ensemble").get<int>();
     p.train_loss_ = t.at("train_loss").get<double>();
     p.validation_loss_ = t.value("validation_loss", std::nan(""));
   } catch (const nlohmann::json::exception& e) {
     return parse_error(std::string("model JSON: ") + e.what());
   }
-  if (!j.contains("machine")) return parse_error("model JSON has no 'machine'");
-  auto params = machine_from_json(j["machine"]);
-  if (!params) return params.status();
-  auto m = Machine::from_params(std::move(*params));
-  if (!m) return m.status();
-  if (m->outputs() != kOutputCount || m->params().input_names != p.features_.input_names())
-    return parse_error("model machine does not match its feature list");
-  p.machine_ = std::move(*m);
+  if (!j.contains("machines") || !j["machines"].is_array() || j["machines"].size() != kOutputCount)
+    return parse_error("model JSON needs 'machines', one list per output");
+  for (size_t k = 0; k < kOutputCount; ++k) {
+    const nlohmann::json& list = j["machines"][k];
+    if (!list.is_array())
+      return parse_error("model JSON: machines[" + std::to_string(k) + "] is not a list");
+    p.machines_.emplace_back();
+    for (const auto& mj : list) {
+      auto params = machine_from_json(mj);
+      if (!params) return params.status();
+      auto m = Machine::from_params(std::move(*params));
+      if (!m) return m.status();
+      if (m->outputs() != 1 || m->params().input_names != p.features_.input_names())
+        return parse_error("model machine does not match its feature list");
+      p.machines_[k].push_back(std::move(*m));
+    }
+  }
+  if (p.machines_[0].empty())
+    return parse_error("model JSON has no machine for the time per frame");
   return p;
 }
 

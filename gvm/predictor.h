@@ -1,5 +1,8 @@
-// The resource predictor the service and the command line use: a GVM over the run-log
-// features, with the encoding it was trained with, so it answers for a RunConfig.
+// The resource predictor the service and the command line use: GVMs over the run-log
+// features, with the encoding they were trained with, so it answers for a RunConfig.
+// Each output has machines of its own (options.ensemble of them, from different seeds,
+// averaged): one hidden layer shared by all five costs fitted real calibration sweeps
+// worse, and an average of a few seeds is steadier than one (docs/gvm.md).
 #pragma once
 
 #include <optional>
@@ -25,7 +28,9 @@ class ResourcePredictor {
  public:
   ResourcePredictor() = default;
 
-  // Trains the GVM on train rows; validation rows only feed report->curve.
+  // Trains the GVMs on train rows; validation rows only feed report->curve, which holds
+  // per epoch the mean over outputs and machines. Machines train on several threads;
+  // the result does not depend on how many.
   static Expected<ResourcePredictor> train(const std::vector<RunRecord>& train,
                                            const std::vector<RunRecord>& validation,
                                            const GvmOptions& options, TrainReport* report);
@@ -40,7 +45,8 @@ class ResourcePredictor {
   // for configurations that do not say; nullopt when the backend was never trained.
   std::optional<RunConfig> usual_host(Backend b) const;
 
-  const Machine& machine() const { return machine_; }
+  // machines()[k]: the ensemble of output k (empty when no training row had a value).
+  const std::vector<std::vector<Machine>>& machines() const { return machines_; }
   const FeatureSpace& features() const { return features_; }
   size_t training_rows() const { return training_rows_; }
 
@@ -57,7 +63,7 @@ class ResourcePredictor {
     int64_t threads;
   };
   FeatureSpace features_;
-  Machine machine_;
+  std::vector<std::vector<Machine>> machines_;  // per output, the ensemble
   std::vector<Usual> usual_;
   size_t training_rows_ = 0;
   GvmOptions options_;

@@ -110,6 +110,27 @@ TEST(Predictor, TrainsOnACpuOnlyLog) {
   EXPECT_TRUE(std::isfinite(pr->measure.time_per_frame_s));
 }
 
+TEST(Predictor, OneEnsemblePerOutputAndTheSameModelEveryTime) {
+  std::vector<RunRecord> cpu;
+  for (const auto& r : synthetic_run_log(80, 8))
+    if (r.config.backend == Backend::kCpu) cpu.push_back(r);
+  GvmOptions opt;
+  opt.epochs = 10;
+  opt.ensemble = 3;
+  // Machines train on several threads; the model must not depend on their timing.
+  auto a = ResourcePredictor::train(cpu, {}, opt, nullptr);
+  auto b = ResourcePredictor::train(cpu, {}, opt, nullptr);
+  ASSERT_TRUE(a && b);
+  ASSERT_EQ(a->machines().size(), kOutputCount);
+  for (size_t k = 0; k < 3; ++k) EXPECT_EQ(a->machines()[k].size(), 3u) << k;
+  // A CPU-only log has no device memory or GPU load to learn.
+  EXPECT_TRUE(a->machines()[3].empty());
+  EXPECT_TRUE(a->machines()[4].empty());
+  EXPECT_EQ(a->to_json(), b->to_json());
+  opt.ensemble = 0;
+  EXPECT_FALSE(ResourcePredictor::train(cpu, {}, opt, nullptr));
+}
+
 TEST(Predictor, RejectsInvalidConfiguration) {
   RunConfig c = typical(Backend::kCpu);
   c.particles = 0;
@@ -138,6 +159,13 @@ TEST(Predictor, CorruptModelFilesAreErrors) {
   EXPECT_FALSE(ResourcePredictor::from_json("[1, 2"));
   EXPECT_FALSE(ResourcePredictor::from_json(R"({"kind": "something else"})"));
   std::string text = trained().to_json();
+  // Version 1 models (one machine for every output) must be retrained.
+  const size_t v = text.find("\"version\": 2");
+  ASSERT_NE(v, std::string::npos);
+  auto old =
+      ResourcePredictor::from_json(text.substr(0, v) + "\"version\": 1" + text.substr(v + 12));
+  ASSERT_FALSE(old);
+  EXPECT_NE(old.status().message().find("retrain"), std::string::npos);
   // A device list that no longer matches the machine's inputs.
   const size_t at = text.find("\"synthetic-cpu\"");
   ASSERT_NE(at, std::string::npos);

@@ -1,0 +1,95 @@
+// The calibrate command end to end: a tiny real sweep written as a run log, and its
+// argument errors. No wall-clock assertions: the machine running the tests is shared.
+#include <gtest/gtest.h>
+
+#include <string>
+#include <vector>
+
+#include "app/cli.h"
+#include "app/commands.h"
+#include "gvm/run_log.h"
+
+namespace collido::app {
+namespace {
+
+std::string tmp(const std::string& name) {
+  return testing::TempDir() + "/cmd_calibrate_test_" + name;
+}
+
+TEST(CmdCalibrate, BadArgumentsExitTwo) {
+  const std::string out = tmp("unused.csv");
+  EXPECT_EQ(cmd_calibrate({}), kExitUsage);  // no --out
+  EXPECT_EQ(cmd_calibrate({"--out", out, "--backend", "tpu"}), kExitUsage);
+  EXPECT_EQ(cmd_calibrate({"--out", out, "--configs", "0"}), kExitUsage);
+  EXPECT_EQ(cmd_calibrate({"--out", out, "--configs", "many"}), kExitUsage);
+  EXPECT_EQ(cmd_calibrate({"--out", out, "--threads", "-1"}), kExitUsage);
+  EXPECT_EQ(cmd_calibrate({"--out", out, "--repeats", "0"}), kExitUsage);
+  EXPECT_EQ(cmd_calibrate({"--out", out, "--seed", "x"}), kExitUsage);
+  EXPECT_EQ(cmd_calibrate({"--out", out, "--bogus"}), kExitUsage);
+  EXPECT_EQ(cmd_calibrate({"--out", out, "extra"}), kExitUsage);
+  EXPECT_EQ(cmd_calibrate({"--out"}), kExitUsage);  // --out needs a value
+  testing::internal::CaptureStdout();
+  EXPECT_EQ(cmd_calibrate({"--help"}), kExitOk);
+  testing::internal::GetCapturedStdout();
+}
+
+TEST(CmdCalibrate, UnwritableOutputExitsOne) {
+  EXPECT_EQ(cmd_calibrate({"--out", "/nonexistent-dir/runs.csv", "--quick", "--backend", "cpu"}),
+            kExitFailure);
+}
+
+std::vector<gvm::RunRecord> quick_sweep(const std::string& path, const char* configs) {
+  testing::internal::CaptureStdout();
+  const int code = cmd_calibrate(
+      {"--out", path, "--quick", "--backend", "cpu", "--configs", configs, "--seed", "7"});
+  testing::internal::GetCapturedStdout();
+  EXPECT_EQ(code, kExitOk);
+  auto rows = gvm::read_run_log(path);
+  EXPECT_TRUE(rows) << rows.status().message();
+  return rows ? *rows : std::vector<gvm::RunRecord>{};
+}
+
+TEST(CmdCalibrate, QuickSweepWritesARunLog) {
+  const auto rows = quick_sweep(tmp("quick.csv"), "5");
+  ASSERT_EQ(rows.size(), 5u);
+  for (const auto& r : rows) {
+    const auto& c = r.config;
+    const auto& m = r.measure;
+    EXPECT_TRUE(gvm::validate(c)) << gvm::validate(c).message();
+    EXPECT_TRUE(gvm::validate(m)) << gvm::validate(m).message();
+    EXPECT_EQ(c.backend, gvm::Backend::kCpu);
+    EXPECT_FALSE(c.device.empty());
+    EXPECT_GE(c.threads, 1);
+    EXPECT_GE(c.particles, 100);
+    EXPECT_LE(c.particles, 2000);
+    EXPECT_LE(c.frames, 3);
+    // Division only adds triangles; bin and the reference keep the originals.
+    EXPECT_GE(c.triangles, c.triangles_original);
+    if (c.method == gvm::Method::kBin || c.method == gvm::Method::kReference) {
+      EXPECT_EQ(c.triangles, c.triangles_original);
+    }
+    EXPECT_GT(m.time_per_frame_s, 0.0);
+    // Total time holds the set-up and every frame.
+    EXPECT_GE(m.total_time_s, m.time_per_frame_s * static_cast<double>(c.frames));
+    EXPECT_GT(m.peak_host_bytes, 1e6);  // a process with the engine loaded is megabytes
+    EXPECT_EQ(m.peak_device_bytes, 0.0);
+    EXPECT_EQ(m.gpu_load, 0.0);
+  }
+}
+
+TEST(CmdCalibrate, SameSeedSameConfigurations) {
+  const auto a = quick_sweep(tmp("seed_a.csv"), "3");
+  const auto b = quick_sweep(tmp("seed_b.csv"), "3");
+  ASSERT_EQ(a.size(), 3u);
+  ASSERT_EQ(b.size(), 3u);
+  for (size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i].config.particles, b[i].config.particles);
+    EXPECT_EQ(a[i].config.triangles, b[i].config.triangles);
+    EXPECT_EQ(a[i].config.method, b[i].config.method);
+    EXPECT_EQ(a[i].config.traversal, b[i].config.traversal);
+    EXPECT_EQ(a[i].config.frames, b[i].config.frames);
+  }
+}
+
+}  // namespace
+}  // namespace collido::app
