@@ -216,6 +216,32 @@ void floor_settles_once() {
   }
 }
 
+// The paper's division methods as the wall's preparation: the pieces of one
+// triangle are coplanar, so a ball on them is pushed once and rests where it
+// rests on the binned original triangles.
+void division_methods_push_once() {
+  const TriangleMesh floor = floor_mesh(5, 4);
+  const double r = 0.5;
+  double z_bin = 0;
+  for (Method m : {Method::kBin, Method::kGravity, Method::kCircumcircle, Method::kMidpoint4}) {
+    DynamicsConfig cfg;
+    cfg.method = m;
+    cfg.material.stiffness = 1e7;
+    cfg.material.restitution = 0.2;
+    auto s = make_sim(floor, cfg, particles_at({{0.3, 0.2, 0.6}}, {}, r));
+    ASSERT_TRUE(s);
+    if (m != Method::kBin) EXPECT_GT(s->wall_info().triangles_used, floor.triangles.size()) << to_string(m);
+    FrameStats st;
+    for (int f = 0; f < 30; ++f) ASSERT_TRUE(s->advance(0.1, &st));
+    ParticleSet out;
+    ASSERT_TRUE(s->download(&out, nullptr));
+    EXPECT_EQ(st.wall_contacts, 1u) << to_string(m);
+    if (m == Method::kBin) z_bin = out.z[0];
+    EXPECT_NEAR(out.z[0], z_bin, 1e-6 * r) << to_string(m);
+    EXPECT_NEAR(out.x[0], 0.3, 1e-9) << to_string(m);
+  }
+}
+
 // Restitution: a ball dropped onto the floor without gravity leaves with e times its speed.
 void restitution_is_kept() {
   const TriangleMesh box = make_box(10, 10, 10);
@@ -313,6 +339,7 @@ TEST(Dynamics, TimeStepBeyondTheCriticalOneBlowsUp) { time_step_sweep(); }
 TEST(Dynamics, FastParticlesTunnelOnlyWithACoarseFixedStep) { tunnelling(); }
 TEST(Dynamics, SharedVerticesAndEdgesPushOnce) { floor_settles_once(); }
 TEST(Dynamics, RestitutionIsKept) { restitution_is_kept(); }
+TEST(Dynamics, DivisionMethodsPushOnceToo) { division_methods_push_once(); }
 TEST(Dynamics, FrictionTurnsSlidingIntoRolling) { friction_makes_it_roll(); }
 // On the CPU a narrower wall1 (radius 8, height 40, 40 segments) and 200 particles, so
 // they pile up (the GPU suite pours the 10^4 into wall1 itself).
@@ -362,6 +389,7 @@ TEST_F(DynamicsCuda, TimeStepBeyondTheCriticalOneBlowsUp) { time_step_sweep(); }
 TEST_F(DynamicsCuda, FastParticlesTunnelOnlyWithACoarseFixedStep) { tunnelling(); }
 TEST_F(DynamicsCuda, SharedVerticesAndEdgesPushOnce) { floor_settles_once(); }
 TEST_F(DynamicsCuda, RestitutionIsKept) { restitution_is_kept(); }
+TEST_F(DynamicsCuda, DivisionMethodsPushOnceToo) { division_methods_push_once(); }
 TEST_F(DynamicsCuda, FrictionTurnsSlidingIntoRolling) { friction_makes_it_roll(); }
 // The full size: 10^4 particles, at least 10^5 steps.
 TEST_F(DynamicsCuda, PourTenThousandIntoWall1Settles) { pour_into(make_cylinder(50, 100, 40), 20, 25, 100000); }
