@@ -26,6 +26,7 @@ const std::vector<FlagSpec> kFlags = {
     {"steps", true, "timed steps per configuration (default 50)"},
     {"warmup", true, "untimed steps first (default 5)"},
     {"threads", true, "CPU threads (default: all cores)"},
+    {"stages", false, "also time each stage (a sync after each) and print the breakdown"},
     {"help", false, "this help"},
 };
 
@@ -95,6 +96,12 @@ int bench_run(const Args& args) {
               (long long)steps);
   std::printf("| particles | pair contacts | ms/step | steps/s | particle-steps/s | wall contacts | pair contacts | "
               "device MB |\n|---:|:---:|---:|---:|---:|---:|---:|---:|\n");
+  struct Breakdown {
+    uint64_t n;
+    bool pairs;
+    double drift, grid, pair, wall, kick;
+  };
+  std::vector<Breakdown> breakdown;
   for (uint64_t n : counts) {
     sim::TriangleMesh wall;
     sim::ParticleSet ps;
@@ -121,11 +128,26 @@ int bench_run(const Args& args) {
       sim::FrameStats st;
       (*s)->measure(&st);
       const double ms = 1e3 * sec / double(steps);
+      if (p->has("stages")) {
+        (*s)->set_stage_timing(true);
+        (*s)->step(uint64_t(steps), dt);
+        const sim::StepTimes& t = (*s)->stage_times();
+        const double k = 1.0 / double(t.steps);
+        breakdown.push_back({n, with_pairs, t.drift_ms * k, t.grid_ms * k, t.pair_ms * k, t.wall_ms * k, t.kick_ms * k});
+      }
       std::printf("| %llu | %s | %.4g | %.4g | %.3g | %llu | %llu | %.1f |\n", (unsigned long long)n,
                   with_pairs ? "yes" : "no", ms, 1e3 / ms, double(n) * 1e3 / ms, (unsigned long long)st.wall_contacts,
                   (unsigned long long)st.particle_contacts, double((*s)->device_bytes()) / 1e6);
       std::fflush(stdout);
     }
+  }
+  if (!breakdown.empty()) {
+    std::printf("\n# stage breakdown (ms per step, a sync after each stage)\n"
+                "| particles | pair contacts | release + drift | grid (hash, sort, cells) | pair forces | wall forces | "
+                "kick + checks |\n|---:|:---:|---:|---:|---:|---:|---:|\n");
+    for (const Breakdown& b : breakdown)
+      std::printf("| %llu | %s | %.4f | %.4f | %.4f | %.4f | %.4f |\n", (unsigned long long)b.n, b.pairs ? "yes" : "no",
+                  b.drift, b.grid, b.pair, b.wall, b.kick);
   }
   return kExitOk;
 }

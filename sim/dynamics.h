@@ -103,6 +103,13 @@ struct FrameStats {
   double total_energy() const { return kinetic + potential + elastic; }
 };
 
+// Milliseconds spent in each part of the steps since timing was switched on
+// (each stage ends with a device sync, so the sum is a little above untimed steps).
+struct StepTimes {
+  uint64_t steps = 0;
+  double drift_ms = 0, grid_ms = 0, pair_ms = 0, wall_ms = 0, kick_ms = 0;
+};
+
 class Simulation {
  public:
   virtual ~Simulation() = default;
@@ -120,6 +127,10 @@ class Simulation {
   // Copies the state back: positions and velocities in world units (release
   // kept from the input) and per-particle flags (ParticleState | contact bits).
   virtual Status download(ParticleSet* state, std::vector<uint8_t>* flags) = 0;
+
+  // Times each stage of the following steps (benchmarks); off by default.
+  virtual void set_stage_timing(bool on) = 0;
+  virtual const StepTimes& stage_times() const = 0;
 
   virtual const TimeStepInfo& time_step_info() const = 0;
   virtual const PrepareInfo& wall_info() const = 0;

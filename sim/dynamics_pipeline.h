@@ -51,6 +51,11 @@ class DynamicsPipeline final : public Simulation {
   }
 
   const TimeStepInfo& time_step_info() const override { return ts_; }
+  void set_stage_timing(bool on) override {
+    timing_ = on;
+    times_ = StepTimes{};
+  }
+  const StepTimes& stage_times() const override { return times_; }
   const PrepareInfo& wall_info() const override { return info_; }
   double time() const override { return time_; }
   uint64_t steps_taken() const override { return steps_; }
@@ -234,18 +239,37 @@ class DynamicsPipeline final : public Simulation {
 
   // --- one step -------------------------------------------------------------------------------
   void one_step(double dt) {
+    lap_ = std::chrono::steady_clock::now();
     if (!all_released_) {
       release(time_);
       all_released_ = time_ >= last_release_;
     }
     const bool verlet = cfg_.integrator == Integrator::kVelocityVerlet;
     if (verlet) kick_drift(dt);
-    if (cfg_.particle_contacts) build_particle_grid();
-    forces(dt, false);
+    lap(times_.drift_ms);
+    if (cfg_.particle_contacts) {
+      build_particle_grid();
+      lap(times_.grid_ms);
+      pair_forces(dt, false);
+      lap(times_.pair_ms);
+    }
+    wall_forces(dt, false, /*add=*/cfg_.particle_contacts);
+    lap(times_.wall_ms);
     if (law_.mu > 0) swap_history();
     finish_step(dt, verlet);
+    lap(times_.kick_ms);
+    times_.steps += timing_;
     time_ += dt;
     ++steps_;
+  }
+
+  // Adds the time since the last lap to `slot` (after a sync) when stages are timed.
+  void lap(double& slot) {
+    if (!timing_) return;
+    backend_.sync();
+    const auto now = std::chrono::steady_clock::now();
+    slot += std::chrono::duration<double, std::milli>(now - lap_).count();
+    lap_ = now;
   }
 
   double automatic_step() {
@@ -624,6 +648,9 @@ class DynamicsPipeline final : public Simulation {
   double time_ = 0;
   double last_release_ = 0;  // s: no particle waits after this
   bool all_released_ = false;
+  bool timing_ = false;
+  StepTimes times_;
+  std::chrono::steady_clock::time_point lap_;
   uint64_t steps_ = 0;
   std::vector<double> radius_host_, release_host_;
 
