@@ -55,14 +55,18 @@ int bench_run(const Args& args) {
   auto p = parse_args(args, kFlags, &err);
   if (!p) return usage_error("bench run", err);
   if (p->has("help")) {
-    print_help("usage: collidoscope bench run [--backend cpu|cuda] [--counts 1e4,1e5,1e6] [--pairs both]", kFlags);
+    print_help(
+        "usage: collidoscope bench run [--backend cpu|cuda] [--counts 1e4,1e5,1e6] [--pairs both]",
+        kFlags);
     return kExitOk;
   }
   sim::Backend backend = sim::Backend::kCpu;
-  if (!sim::parse_backend(p->get("backend", "cpu"), &backend)) return usage_error("bench run", "--backend must be cpu or cuda");
+  if (!sim::parse_backend(p->get("backend", "cpu"), &backend))
+    return usage_error("bench run", "--backend must be cpu or cuda");
   std::string why;
   if (backend == sim::Backend::kCuda && !sim::cuda_available(&why)) {
-    std::fprintf(stderr, "collidoscope bench run: note: no usable GPU (%s); running on the CPU\n", why.c_str());
+    std::fprintf(stderr, "collidoscope bench run: note: no usable GPU (%s); running on the CPU\n",
+                 why.c_str());
     backend = sim::Backend::kCpu;
   }
   const int64_t steps = p->get_int("steps", 50, &err), warmup = p->get_int("warmup", 5, &err);
@@ -74,10 +78,14 @@ int bench_run(const Args& args) {
   if (threads > 0) sim::set_cpu_threads(int(threads));
   const std::string pairs = p->get("pairs", "both");
   std::vector<bool> pair_modes;
-  if (pairs == "both") pair_modes = {false, true};
-  else if (pairs == "on") pair_modes = {true};
-  else if (pairs == "off") pair_modes = {false};
-  else return usage_error("bench run", "--pairs must be on, off or both");
+  if (pairs == "both")
+    pair_modes = {false, true};
+  else if (pairs == "on")
+    pair_modes = {true};
+  else if (pairs == "off")
+    pair_modes = {false};
+  else
+    return usage_error("bench run", "--pairs must be on, off or both");
   std::vector<uint64_t> counts;
   {
     std::stringstream ss(p->get("counts", "1e4,1e5,1e6"));
@@ -92,10 +100,12 @@ int bench_run(const Args& args) {
   }
 
   std::printf("# bench run: %s%s, friction %.2g, %lld timed steps\n", sim::to_string(backend),
-              backend == sim::Backend::kCuda ? (" (" + sim::cuda_device_name() + ")").c_str() : "", friction,
-              (long long)steps);
-  std::printf("| particles | pair contacts | ms/step | steps/s | particle-steps/s | wall contacts | pair contacts | "
-              "device MB |\n|---:|:---:|---:|---:|---:|---:|---:|---:|\n");
+              backend == sim::Backend::kCuda ? (" (" + sim::cuda_device_name() + ")").c_str() : "",
+              friction, (long long)steps);
+  std::printf(
+      "| particles | pair contacts | ms/step | steps/s | particle-steps/s | wall contacts | pair "
+      "contacts | "
+      "device MB |\n|---:|:---:|---:|---:|---:|---:|---:|---:|\n");
   struct Breakdown {
     uint64_t n;
     bool pairs;
@@ -124,7 +134,8 @@ int bench_run(const Args& args) {
         std::fprintf(stderr, "collidoscope bench run: %s\n", e.message().c_str());
         return kExitFailure;
       }
-      const double sec = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      const double sec =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       sim::FrameStats st;
       (*s)->measure(&st);
       const double ms = 1e3 * sec / double(steps);
@@ -133,21 +144,25 @@ int bench_run(const Args& args) {
         (*s)->step(uint64_t(steps), dt);
         const sim::StepTimes& t = (*s)->stage_times();
         const double k = 1.0 / double(t.steps);
-        breakdown.push_back({n, with_pairs, t.drift_ms * k, t.grid_ms * k, t.pair_ms * k, t.wall_ms * k, t.kick_ms * k});
+        breakdown.push_back({n, with_pairs, t.drift_ms * k, t.grid_ms * k, t.pair_ms * k,
+                             t.wall_ms * k, t.kick_ms * k});
       }
-      std::printf("| %llu | %s | %.4g | %.4g | %.3g | %llu | %llu | %.1f |\n", (unsigned long long)n,
-                  with_pairs ? "yes" : "no", ms, 1e3 / ms, double(n) * 1e3 / ms, (unsigned long long)st.wall_contacts,
+      std::printf("| %llu | %s | %.4g | %.4g | %.3g | %llu | %llu | %.1f |\n",
+                  (unsigned long long)n, with_pairs ? "yes" : "no", ms, 1e3 / ms,
+                  double(n) * 1e3 / ms, (unsigned long long)st.wall_contacts,
                   (unsigned long long)st.particle_contacts, double((*s)->device_bytes()) / 1e6);
       std::fflush(stdout);
     }
   }
   if (!breakdown.empty()) {
-    std::printf("\n# stage breakdown (ms per step, a sync after each stage)\n"
-                "| particles | pair contacts | release + drift | grid (hash, sort, cells) | pair forces | wall forces | "
-                "kick + checks |\n|---:|:---:|---:|---:|---:|---:|---:|\n");
+    std::printf(
+        "\n# stage breakdown (ms per step, a sync after each stage)\n"
+        "| particles | pair contacts | release + drift | grid (hash, sort, cells) | pair forces | "
+        "wall forces | "
+        "kick + checks |\n|---:|:---:|---:|---:|---:|---:|---:|\n");
     for (const Breakdown& b : breakdown)
-      std::printf("| %llu | %s | %.4f | %.4f | %.4f | %.4f | %.4f |\n", (unsigned long long)b.n, b.pairs ? "yes" : "no",
-                  b.drift, b.grid, b.pair, b.wall, b.kick);
+      std::printf("| %llu | %s | %.4f | %.4f | %.4f | %.4f | %.4f |\n", (unsigned long long)b.n,
+                  b.pairs ? "yes" : "no", b.drift, b.grid, b.pair, b.wall, b.kick);
   }
   return kExitOk;
 }

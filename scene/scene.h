@@ -13,16 +13,16 @@
 namespace collido::scene {
 
 struct Scene {
-  std::string wall;            // a shape spec ("wall1", "cylinder:r=..") or a file path
+  std::string wall;  // a shape spec ("wall1", "cylinder:r=..") or a file path
   bool wall_is_file = false;
   sim::ParticleSpec particles;
   sim::PlacementSpec placement;
   sim::DynamicsConfig dynamics;
-  bool backend_auto = true;    // "auto": the GPU when one is usable, else the CPU
-  double duration = 2;         // simulated seconds
-  double fps = 30;             // output frames per simulated second
+  bool backend_auto = true;  // "auto": the GPU when one is usable, else the CPU
+  double duration = 2;       // simulated seconds
+  double fps = 30;           // output frames per simulated second
   uint64_t seed = 1;
-  bool vtp = false;            // also write VTK PolyData frames for ParaView
+  bool vtp = false;  // also write VTK PolyData frames for ParaView
 
   // Frames written after the initial one.
   uint64_t frames() const;

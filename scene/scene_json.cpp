@@ -9,11 +9,15 @@ namespace collido::scene {
 
 using json = nlohmann::json;
 
-uint64_t Scene::frames() const { return static_cast<uint64_t>(std::ceil(duration * fps - 1e-9)); }
+uint64_t Scene::frames() const {
+  return static_cast<uint64_t>(std::ceil(duration * fps - 1e-9));
+}
 
 namespace {
 
-std::string join(const std::string& where, const std::string& key) { return where.empty() ? key : where + "." + key; }
+std::string join(const std::string& where, const std::string& key) {
+  return where.empty() ? key : where + "." + key;
+}
 
 // Reads one JSON object's keys with type checks; every error names the full key.
 class ObjectReader {
@@ -22,7 +26,8 @@ class ObjectReader {
 
   // An error for any key not in `known`.
   Status only(std::initializer_list<const char*> known) const {
-    if (!o_.is_object()) return invalid_argument((where_.empty() ? "scene" : where_) + ": expected a JSON object");
+    if (!o_.is_object())
+      return invalid_argument((where_.empty() ? "scene" : where_) + ": expected a JSON object");
     for (auto it = o_.begin(); it != o_.end(); ++it) {
       bool ok = false;
       for (const char* k : known) ok = ok || it.key() == k;
@@ -41,7 +46,8 @@ class ObjectReader {
     if (!v.is_number()) return invalid_argument(name(key) + ": expected a number");
     const double d = v.get<double>();
     if (!std::isfinite(d) || d < lo || d > hi)
-      return invalid_argument(name(key) + ": " + v.dump() + " is outside [" + num(lo) + ", " + num(hi) + "]");
+      return invalid_argument(name(key) + ": " + v.dump() + " is outside [" + num(lo) + ", " +
+                              num(hi) + "]");
     *out = d;
     return Status::ok();
   }
@@ -52,8 +58,8 @@ class ObjectReader {
       return invalid_argument(name(key) + ": expected a whole number >= 0");
     const uint64_t n = v.get<uint64_t>();
     if (n < lo || n > hi)
-      return invalid_argument(name(key) + ": " + v.dump() + " is outside [" + std::to_string(lo) + ", " +
-                              std::to_string(hi) + "]");
+      return invalid_argument(name(key) + ": " + v.dump() + " is outside [" + std::to_string(lo) +
+                              ", " + std::to_string(hi) + "]");
     *out = n;
     return Status::ok();
   }
@@ -79,7 +85,8 @@ class ObjectReader {
       if (!v[i].is_number()) return invalid_argument(name(key) + ": expected [x, y, z] of numbers");
       c[i] = v[i].get<double>();
       if (!std::isfinite(c[i]) || std::fabs(c[i]) > limit)
-        return invalid_argument(name(key) + ": components must be finite and within +-" + num(limit));
+        return invalid_argument(name(key) + ": components must be finite and within +-" +
+                                num(limit));
     }
     *out = {c[0], c[1], c[2]};
     if (set) *set = true;
@@ -103,8 +110,9 @@ class ObjectReader {
     }                              \
   } while (0)
 
-constexpr double kMaxCoordinate = 1e7;  // m: far beyond any vessel, short of float trouble in the grid
-constexpr double kMaxSpeed = 1e5;       // m/s
+constexpr double kMaxCoordinate =
+    1e7;                           // m: far beyond any vessel, short of float trouble in the grid
+constexpr double kMaxSpeed = 1e5;  // m/s
 
 Status read_wall(const json& w, Scene* s) {
   if (w.is_string()) {
@@ -113,7 +121,8 @@ Status read_wall(const json& w, Scene* s) {
   } else {
     ObjectReader r(w, "wall");
     COLLIDO_TRY(r.only({"shape", "file"}));
-    if (r.has("shape") == r.has("file")) return invalid_argument("wall: give either \"shape\" or \"file\"");
+    if (r.has("shape") == r.has("file"))
+      return invalid_argument("wall: give either \"shape\" or \"file\"");
     COLLIDO_TRY(r.string("shape", &s->wall));
     COLLIDO_TRY(r.string("file", &s->wall));
     s->wall_is_file = r.has("file");
@@ -134,7 +143,8 @@ Status read_particles(const json& p, Scene* s) {
     } else if (v.is_array() && v.size() == 2 && v[0].is_number() && v[1].is_number()) {
       const double a = v[0].get<double>(), b = v[1].get<double>();
       if (!(a >= 1e-9 && b <= 1e4 && a <= b))
-        return invalid_argument("particles.radius: a range [min, max] needs 1e-9 <= min <= max <= 1e4");
+        return invalid_argument(
+            "particles.radius: a range [min, max] needs 1e-9 <= min <= max <= 1e4");
       s->particles.r_min = a, s->particles.r_max = b;
     } else {
       return invalid_argument("particles.radius: expected a number or [min, max]");
@@ -155,10 +165,12 @@ Status read_placement(const json& p, Scene* s) {
   if (r.has("region")) {
     ObjectReader g(r.at("region"), "placement.region");
     COLLIDO_TRY(g.only({"min", "max"}));
-    if (!g.has("min") || !g.has("max")) return invalid_argument("placement.region: needs min and max");
+    if (!g.has("min") || !g.has("max"))
+      return invalid_argument("placement.region: needs min and max");
     COLLIDO_TRY(g.vec3("min", &pl.region_lo, kMaxCoordinate));
     COLLIDO_TRY(g.vec3("max", &pl.region_hi, kMaxCoordinate));
-    if (!(pl.region_lo.x < pl.region_hi.x && pl.region_lo.y < pl.region_hi.y && pl.region_lo.z < pl.region_hi.z))
+    if (!(pl.region_lo.x < pl.region_hi.x && pl.region_lo.y < pl.region_hi.y &&
+          pl.region_lo.z < pl.region_hi.z))
       return invalid_argument("placement.region: min must lie below max on every axis");
     pl.has_region = true;
   }
@@ -169,7 +181,8 @@ Status read_placement(const json& p, Scene* s) {
   if (pl.kind == sim::PlacementKind::kJet && !(length(pl.velocity) > 0))
     return invalid_argument("placement.velocity: a jet needs a non-zero velocity");
   if (pl.kind != sim::PlacementKind::kFill && pl.has_region)
-    return invalid_argument("placement.region: only a fill has a region (a " + kind + " has an inlet)");
+    return invalid_argument("placement.region: only a fill has a region (a " + kind +
+                            " has an inlet)");
   return Status::ok();
 }
 
@@ -194,9 +207,11 @@ Expected<Scene> parse_scene(const std::string& text) {
   if (doc.is_discarded()) return parse_error("scene: not valid JSON");
   Scene s;
   ObjectReader r(doc, "");
-  COLLIDO_TRY(r.only({"wall", "particles", "placement", "gravity", "material", "duration", "fps", "method",
-                      "backend", "particle_contacts", "integrator", "time_step", "seed", "output"}));
-  if (!r.has("wall")) return invalid_argument("wall: missing (a shape such as \"wall1\" or {\"file\": ...})");
+  COLLIDO_TRY(
+      r.only({"wall", "particles", "placement", "gravity", "material", "duration", "fps", "method",
+              "backend", "particle_contacts", "integrator", "time_step", "seed", "output"}));
+  if (!r.has("wall"))
+    return invalid_argument("wall: missing (a shape such as \"wall1\" or {\"file\": ...})");
   COLLIDO_TRY(read_wall(r.at("wall"), &s));
   if (r.has("particles")) COLLIDO_TRY(read_particles(r.at("particles"), &s));
   if (r.has("placement")) COLLIDO_TRY(read_placement(r.at("placement"), &s));
@@ -204,12 +219,15 @@ Expected<Scene> parse_scene(const std::string& text) {
   COLLIDO_TRY(r.vec3("gravity", &s.dynamics.gravity, 1e4));
   COLLIDO_TRY(r.number("duration", &s.duration, 1e-9, 1e5));
   COLLIDO_TRY(r.number("fps", &s.fps, 1e-3, 1e4));
-  if (s.frames() > 1000000) return invalid_argument("fps: duration x fps gives more than 10^6 frames");
+  if (s.frames() > 1000000)
+    return invalid_argument("fps: duration x fps gives more than 10^6 frames");
   std::string method = sim::to_string(s.dynamics.method), backend = "auto",
               integrator = sim::to_string(s.dynamics.integrator);
   COLLIDO_TRY(r.string("method", &method));
-  if (!sim::parse_method(method, &s.dynamics.method) || s.dynamics.method == sim::Method::kReference)
-    return invalid_argument("method: \"" + method + "\" is not bin, gravity, circumcircle or midpoint4");
+  if (!sim::parse_method(method, &s.dynamics.method) ||
+      s.dynamics.method == sim::Method::kReference)
+    return invalid_argument("method: \"" + method +
+                            "\" is not bin, gravity, circumcircle or midpoint4");
   COLLIDO_TRY(r.string("backend", &backend));
   s.backend_auto = backend == "auto";
   if (!s.backend_auto && !sim::parse_backend(backend, &s.dynamics.backend))
@@ -217,7 +235,8 @@ Expected<Scene> parse_scene(const std::string& text) {
   COLLIDO_TRY(r.boolean("particle_contacts", &s.dynamics.particle_contacts));
   COLLIDO_TRY(r.string("integrator", &integrator));
   if (!sim::parse_integrator(integrator, &s.dynamics.integrator))
-    return invalid_argument("integrator: \"" + integrator + "\" is not velocity_verlet or symplectic_euler");
+    return invalid_argument("integrator: \"" + integrator +
+                            "\" is not velocity_verlet or symplectic_euler");
   COLLIDO_TRY(r.number("time_step", &s.dynamics.time_step, 0, 1e3));
   COLLIDO_TRY(r.integer("seed", &s.seed, 0, UINT64_MAX));
   if (r.has("output")) {
@@ -233,7 +252,8 @@ Expected<Scene> load_scene(const std::string& path) {
   if (!in) return io_error(path + ": cannot open");
   std::ostringstream text;
   text << in.rdbuf();
-  if (text.str().size() > (size_t(16) << 20)) return invalid_argument(path + ": a scene file over 16 MiB");
+  if (text.str().size() > (size_t(16) << 20))
+    return invalid_argument(path + ": a scene file over 16 MiB");
   auto scene = parse_scene(text.str());
   if (!scene) return Status(scene.status().code(), path + ": " + scene.status().message());
   if (scene->wall_is_file && !scene->wall.empty() && scene->wall[0] != '/') {
@@ -248,12 +268,14 @@ std::string to_json(const Scene& s) {
   json j;
   j["wall"] = s.wall_is_file ? json{{"file", s.wall}} : json{{"shape", s.wall}};
   j["particles"] = {{"count", s.particles.count}, {"density", s.dynamics.material.density}};
-  j["particles"]["radius"] = s.particles.r_min == s.particles.r_max ? json(s.particles.r_max)
-                                                                    : json::array({s.particles.r_min, s.particles.r_max});
+  j["particles"]["radius"] = s.particles.r_min == s.particles.r_max
+                                 ? json(s.particles.r_max)
+                                 : json::array({s.particles.r_min, s.particles.r_max});
   const sim::PlacementSpec& pl = s.placement;
   j["placement"] = {{"kind", sim::to_string(pl.kind)}, {"velocity", v3(pl.velocity)}};
   if (pl.kind == sim::PlacementKind::kFill) {
-    if (pl.has_region) j["placement"]["region"] = {{"min", v3(pl.region_lo)}, {"max", v3(pl.region_hi)}};
+    if (pl.has_region)
+      j["placement"]["region"] = {{"min", v3(pl.region_lo)}, {"max", v3(pl.region_hi)}};
   } else {
     if (pl.has_inlet) j["placement"]["inlet"] = v3(pl.inlet);
     j["placement"]["inlet_radius"] = pl.inlet_radius;

@@ -12,52 +12,10 @@
 
 namespace collido::sim {
 
-// A triangle prepared for the dynamics' contact geometry, in double: corner
-// a, unit edge direction e1 (along ab), unit normal n, and b = (b1, 0),
-// c = (c1, c2) in the (e1, n x e1) frame, as PlanarTriangle for detection.
-// Forces need more than detection: a float closest point carries the
-// rounding of the coordinates (about 1e-7 of them) into the push's
-// direction, a sideways force that walks a resting particle across a floor.
-struct PlanarTriangleD {
-  Vec3d a, e1, n;
-  double b1, c1, c2;  // c2 == 0: degenerate (a segment)
-};
-
-inline PlanarTriangleD make_planar_d(Vec3d a, Vec3d b, Vec3d c, Vec3d origin) {
-  a = a - origin, b = b - origin, c = c - origin;
-  const double lab = norm2(b - a), lbc = norm2(c - b), lca = norm2(a - c);
-  if (lbc >= lab && lbc >= lca) {
-    Vec3d t = a;
-    a = b, b = c, c = t;
-  } else if (lca >= lab && lca >= lbc) {
-    Vec3d t = a;
-    a = c, c = b, b = t;
-  }
-  PlanarTriangleD out;
-  const Vec3d ab = b - a, ac = c - a;
-  const double len = length(ab);
-  out.e1 = len > 0 ? ab * (1.0 / len) : Vec3d{1, 0, 0};
-  Vec3d n = cross(ab, ac);
-  const double nl = length(n);
-  out.c2 = 0;
-  if (nl > 1e-300 && nl > 1e-14 * len * len) {
-    n = n * (1.0 / nl);
-    out.c2 = hd_max(dot(ac, cross(n, out.e1)), 0.0);
-  } else {
-    Vec3d t = std::fabs(out.e1.x) < 0.9 ? Vec3d{1, 0, 0} : Vec3d{0, 1, 0};
-    n = cross(out.e1, t);
-    n = n * (1.0 / length(n));
-  }
-  out.a = a;
-  out.n = n;
-  out.b1 = len;
-  out.c1 = dot(ac, out.e1);
-  return out;
-}
-
 // Closest point on a 2D segment (s, e) to (u, v); writes the point, returns the squared distance.
-COLLIDO_HD COLLIDO_FORCEINLINE double segment_closest_2d(double u, double v, double su, double sv, double eu,
-                                                         double ev, double& qu, double& qv) {
+COLLIDO_HD COLLIDO_FORCEINLINE double segment_closest_2d(double u, double v, double su, double sv,
+                                                         double eu, double ev, double& qu,
+                                                         double& qv) {
   const double du = eu - su, dv = ev - sv;
   const double len2 = du * du + dv * dv;
   double t = len2 > 0 ? ((u - su) * du + (v - sv) * dv) / len2 : 0;
@@ -67,16 +25,19 @@ COLLIDO_HD COLLIDO_FORCEINLINE double segment_closest_2d(double u, double v, dou
   return x * x + y * y;
 }
 
-// Squared distance from p to the triangle, the closest point *q, p's signed
-// height *h over the plane, and whether the closest point is inside the face
-// (then the push is along +-n exactly).
-COLLIDO_HD COLLIDO_FORCEINLINE double closest_point_planar(Vec3d p, const PlanarTriangleD& t, Vec3d* q, double* h,
-                                                           bool* face) {
+// Squared distance from p to the triangle (prepared in double: a float
+// closest point would carry the coordinates' rounding, about 1e-7 of them,
+// into the push's direction, a sideways force that walks a resting particle
+// across a floor), the closest point *q, p's signed height *h over the plane,
+// and whether the closest point is inside the face (then the push is along +-n exactly).
+COLLIDO_HD COLLIDO_FORCEINLINE double closest_point_planar(Vec3d p, const PlanarTriangleD& t,
+                                                           Vec3d* q, double* h, bool* face) {
   const Vec3d ap = p - t.a;
   const Vec3d e2 = cross(t.n, t.e1);
   const double u = dot(ap, t.e1), v = dot(ap, e2), hh = dot(ap, t.n);
   double qu = u, qv = v, d = 0;
-  const bool inside = t.c2 > 0 && v >= 0 && (t.c1 - t.b1) * v - t.c2 * (u - t.b1) >= 0 && t.c2 * u - t.c1 * v >= 0;
+  const bool inside =
+      t.c2 > 0 && v >= 0 && (t.c1 - t.b1) * v - t.c2 * (u - t.b1) >= 0 && t.c2 * u - t.c1 * v >= 0;
   if (!inside) {
     double au, av, bu, bv, cu, cv;
     const double d0 = segment_closest_2d(u, v, 0, 0, t.b1, 0, au, av);
@@ -120,7 +81,8 @@ struct WallContactSet {
       if (dot(w.q - c[k].q, c[k].n) <= tol) return;  // behind an existing contact's plane
     int m = 0;
     for (int k = 0; k < n; ++k)
-      if (!(dot(c[k].q - w.q, w.n) <= tol)) c[m++] = c[k];  // keep those the new one does not shadow
+      if (!(dot(c[k].q - w.q, w.n) <= tol))
+        c[m++] = c[k];  // keep those the new one does not shadow
     n = m;
     if (n < K) {
       c[n++] = w;
@@ -137,10 +99,10 @@ struct WallContactSet {
 
 // Constants of the contact law shared by every pair.
 struct ContactLaw {
-  double k = 0;        // normal stiffness, N/m
-  double zeta = 0;     // damping ratio; gamma = 2 zeta sqrt(m_eff k)
-  double kt = 0;       // tangential stiffness, N/m (2/7 k)
-  double mu = 0;       // Coulomb coefficient (0: no friction)
+  double k = 0;     // normal stiffness, N/m
+  double zeta = 0;  // damping ratio; gamma = 2 zeta sqrt(m_eff k)
+  double kt = 0;    // tangential stiffness, N/m (2/7 k)
+  double mu = 0;    // Coulomb coefficient (0: no friction)
 };
 
 // Tangential spring state of one contact, kept between steps.
@@ -153,9 +115,9 @@ inline constexpr uint32_t kNoKey = 0xFFFFFFFFu;
 
 // Result of one contact on the particle it belongs to.
 struct ContactForce {
-  Vec3d f;       // force on the particle, N
-  Vec3d torque;  // about its centre, N m
-  double elastic; // J stored in the normal and tangential springs
+  Vec3d f;         // force on the particle, N
+  Vec3d torque;    // about its centre, N m
+  double elastic;  // J stored in the normal and tangential springs
 };
 
 // Force of one contact on particle i. n: unit normal towards i; overlap > 0;
@@ -163,8 +125,9 @@ struct ContactForce {
 // (translation and rotation); m_eff: reduced mass; lever: distance from i's
 // centre to the contact point. *spring is the tangential spring (in: last
 // step's, out: this step's); dt is the step.
-COLLIDO_HD COLLIDO_FORCEINLINE ContactForce contact_force(const ContactLaw& law, Vec3d n, double overlap, Vec3d vrel,
-                                                          double m_eff, double lever, Vec3d* spring, double dt) {
+COLLIDO_HD COLLIDO_FORCEINLINE ContactForce contact_force(const ContactLaw& law, Vec3d n,
+                                                          double overlap, Vec3d vrel, double m_eff,
+                                                          double lever, Vec3d* spring, double dt) {
   ContactForce out;
   const double gamma = 2.0 * law.zeta * hd_sqrt(m_eff * law.k);
   const double vn = dot(vrel, n);

@@ -32,24 +32,31 @@ double damping_ratio(double e) {
 
 namespace {
 
-bool finite_nonneg(double v) { return std::isfinite(v) && v >= 0; }
+bool finite_nonneg(double v) {
+  return std::isfinite(v) && v >= 0;
+}
 
 Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const ParticleSet& p) {
   if (wall.triangles.empty()) return invalid_argument("wall: the wall has no triangles");
   if (c.method == Method::kReference)
-    return invalid_argument("method: the dynamics prepares the wall as bin or a division method, not reference");
+    return invalid_argument(
+        "method: the dynamics prepares the wall as bin or a division method, not reference");
   const Material& m = c.material;
   if (!(m.density > 0) || !std::isfinite(m.density))
     return invalid_argument("material.density must be a positive density in kg/m^3");
   if (!(m.restitution > 0 && m.restitution <= 1))
-    return invalid_argument("material.restitution must lie in (0, 1], got " + std::to_string(m.restitution));
+    return invalid_argument("material.restitution must lie in (0, 1], got " +
+                            std::to_string(m.restitution));
   if (!finite_nonneg(m.friction) || m.friction > 10)
-    return invalid_argument("material.friction must lie in [0, 10], got " + std::to_string(m.friction));
+    return invalid_argument("material.friction must lie in [0, 10], got " +
+                            std::to_string(m.friction));
   if (!finite_nonneg(m.stiffness)) return invalid_argument("material.stiffness must be >= 0 N/m");
-  if (!finite_nonneg(m.youngs_modulus)) return invalid_argument("material.youngs_modulus must be >= 0 Pa");
+  if (!finite_nonneg(m.youngs_modulus))
+    return invalid_argument("material.youngs_modulus must be >= 0 Pa");
   if (!std::isfinite(c.gravity.x) || !std::isfinite(c.gravity.y) || !std::isfinite(c.gravity.z))
     return invalid_argument("gravity must be finite");
-  if (!finite_nonneg(c.time_step)) return invalid_argument("time_step must be >= 0 s (0 = automatic)");
+  if (!finite_nonneg(c.time_step))
+    return invalid_argument("time_step must be >= 0 s (0 = automatic)");
   if (!(c.step_fraction > 0 && c.step_fraction <= 1))
     return invalid_argument("step_fraction must lie in (0, 1]");
   if (!(c.motion_fraction > 0 && c.motion_fraction <= 1))
@@ -61,7 +68,9 @@ Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const Particl
     if (!(p.r[i] > 0) || !std::isfinite(p.r[i]))
       return invalid_argument("particle " + std::to_string(i) + ": radius must be positive");
     for (double v : {p.x[i], p.y[i], p.z[i], p.vx[i], p.vy[i], p.vz[i]})
-      if (!std::isfinite(v)) return invalid_argument("particle " + std::to_string(i) + ": non-finite position or velocity");
+      if (!std::isfinite(v))
+        return invalid_argument("particle " + std::to_string(i) +
+                                ": non-finite position or velocity");
     if (!finite_nonneg(p.release[i]))
       return invalid_argument("particle " + std::to_string(i) + ": release time must be >= 0 s");
   }
@@ -69,7 +78,8 @@ Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const Particl
 }
 
 // The contact spring and the steps it allows (see DESIGN.md "Dynamics").
-TimeStepInfo time_step_physics(const DynamicsConfig& c, const ParticleSet& p, const Bounds3d& wall_box) {
+TimeStepInfo time_step_physics(const DynamicsConfig& c, const ParticleSet& p,
+                               const Bounds3d& wall_box) {
   TimeStepInfo ts;
   ts.r_min = *std::min_element(p.r.begin(), p.r.end());
   ts.r_max = *std::max_element(p.r.begin(), p.r.end());
@@ -93,7 +103,8 @@ TimeStepInfo time_step_physics(const DynamicsConfig& c, const ParticleSet& p, co
     const double g = length(c.gravity);
     const Vec3d e = wall_box.extent();
     const double drop = g > 0 ? (std::fabs(e.x * c.gravity.x) + std::fabs(e.y * c.gravity.y) +
-                                 std::fabs(e.z * c.gravity.z)) / g
+                                 std::fabs(e.z * c.gravity.z)) /
+                                    g
                               : 0.0;
     const double fall = std::sqrt(2 * g * drop);
     const double v = c.impact_speed > 0 ? c.impact_speed : std::max({v_max + fall, 1e-3});
@@ -115,14 +126,16 @@ TimeStepInfo time_step_physics(const DynamicsConfig& c, const ParticleSet& p, co
 
 }  // namespace
 
-Expected<std::unique_ptr<Simulation>> Simulation::create(const TriangleMesh& wall, const DynamicsConfig& config,
+Expected<std::unique_ptr<Simulation>> Simulation::create(const TriangleMesh& wall,
+                                                         const DynamicsConfig& config,
                                                          const ParticleSet& particles) {
   if (Status s = validate(wall, config, particles); !s) return s;
   const Bounds3d wall_box = mesh_bounds(wall);
   const TimeStepInfo ts = time_step_physics(config, particles, wall_box);
   // The domain: the wall's box and every starting position, grown by the margin.
   Bounds3d box = wall_box;
-  for (size_t i = 0; i < particles.size(); ++i) box.grow({particles.x[i], particles.y[i], particles.z[i]});
+  for (size_t i = 0; i < particles.size(); ++i)
+    box.grow({particles.x[i], particles.y[i], particles.z[i]});
   const double margin =
       config.domain_margin >= 0 ? config.domain_margin : 0.1 * length(box.extent()) + 4 * ts.r_max;
   const Vec3d pad{margin, margin, margin};
@@ -133,7 +146,8 @@ Expected<std::unique_ptr<Simulation>> Simulation::create(const TriangleMesh& wal
     return Status(ErrorCode::kBackend, "this build has no CUDA backend");
 #endif
   }
-  return DynamicsPipeline<CpuBackend>::make(wall, config, particles, ts, box.lo - pad, box.hi + pad);
+  return DynamicsPipeline<CpuBackend>::make(wall, config, particles, ts, box.lo - pad,
+                                            box.hi + pad);
 }
 
 }  // namespace collido::sim

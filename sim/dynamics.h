@@ -29,11 +29,11 @@ const char* to_string(Integrator i);
 bool parse_integrator(const std::string& s, Integrator* out);
 
 struct Material {
-  double density = 2500;       // particle density, kg/m^3
-  double stiffness = 0;        // normal contact spring, N/m; 0 = from youngs_modulus, else automatic
-  double youngs_modulus = 0;   // Pa; when set (and stiffness is 0), stiffness = E * mean radius
-  double restitution = 0.5;    // normal coefficient of restitution, (0, 1]
-  double friction = 0;         // Coulomb coefficient; 0 = frictionless, no tangential state kept
+  double density = 2500;      // particle density, kg/m^3
+  double stiffness = 0;       // normal contact spring, N/m; 0 = from youngs_modulus, else automatic
+  double youngs_modulus = 0;  // Pa; when set (and stiffness is 0), stiffness = E * mean radius
+  double restitution = 0.5;   // normal coefficient of restitution, (0, 1]
+  double friction = 0;        // Coulomb coefficient; 0 = frictionless, no tangential state kept
 };
 
 struct DynamicsConfig {
@@ -41,7 +41,7 @@ struct DynamicsConfig {
   Backend backend = Backend::kCpu;
   Integrator integrator = Integrator::kVelocityVerlet;
   Material material;
-  Vec3d gravity{0, 0, -9.81};    // m/s^2
+  Vec3d gravity{0, 0, -9.81};  // m/s^2
   bool particle_contacts = false;
   double time_step = 0;          // s; 0 = automatic (re-evaluated as speeds change)
   double step_fraction = 0.1;    // automatic: share of the critical step of the stiffest contact
@@ -49,8 +49,8 @@ struct DynamicsConfig {
   // Speed used to size the automatic stiffness (m/s): the fastest impact the
   // scene expects; 0 = estimated from the initial speeds and a fall across the wall's box.
   double impact_speed = 0;
-  double grid_length = 0;        // wall cells, m; 0 = 2 r_max
-  double domain_margin = -1;     // escape distance outside the wall's box, m; < 0 = automatic
+  double grid_length = 0;     // wall cells, m; 0 = 2 r_max
+  double domain_margin = -1;  // escape distance outside the wall's box, m; < 0 = automatic
   uint64_t max_dense_cells = 1ull << 24;
 };
 
@@ -75,31 +75,32 @@ inline constexpr uint8_t kFlagParticleContact = 8;  // touches another particle 
 
 // How the time step was chosen: printed by the CLI and written with the run.
 struct TimeStepInfo {
-  double stiffness = 0;       // N/m, as used
-  double damping_ratio = 0;   // from the restitution
-  double critical_step = 0;   // s: explicit stability bound of the stiffest contact
-  double spring_step = 0;     // s: step_fraction * critical_step
-  double explicit_step = 0;   // s: the scene's fixed step (0 = automatic)
-  bool beyond_stable = false; // the fixed step exceeds the critical one
+  double stiffness = 0;        // N/m, as used
+  double damping_ratio = 0;    // from the restitution
+  double critical_step = 0;    // s: explicit stability bound of the stiffest contact
+  double spring_step = 0;      // s: step_fraction * critical_step
+  double explicit_step = 0;    // s: the scene's fixed step (0 = automatic)
+  bool beyond_stable = false;  // the fixed step exceeds the critical one
   double r_min = 0, r_max = 0, m_min = 0;
 };
 
 // What one frame ended with, for the stats file and the progress line.
 struct FrameStats {
   uint64_t frame = 0;
-  double time = 0;             // s
-  uint64_t substeps = 0;       // steps taken in this frame
+  double time = 0;                // s
+  uint64_t substeps = 0;          // steps taken in this frame
   double dt_min = 0, dt_max = 0;  // s, over the frame's steps
   uint64_t waiting = 0, active = 0, escaped = 0, invalid = 0;
   uint64_t wall_contacts = 0;      // one per touched wall feature
   uint64_t particle_contacts = 0;  // pairs
   uint64_t touching_wall = 0;      // particles with at least one wall contact
-  double kinetic = 0;          // J, translation and rotation
-  double potential = 0;        // J, gravity, relative to the wall's centre
-  double elastic = 0;          // J, stored in the contact springs
-  double max_speed = 0;        // m/s
-  double max_overlap = 0;      // deepest overlap as a share of that particle's radius
-  uint64_t history_overflow = 0;  // friction contacts beyond the per-particle slots (no memory kept)
+  double kinetic = 0;              // J, translation and rotation
+  double potential = 0;            // J, gravity, relative to the wall's centre
+  double elastic = 0;              // J, stored in the contact springs
+  double max_speed = 0;            // m/s
+  double max_overlap = 0;          // deepest overlap as a share of that particle's radius
+  uint64_t history_overflow =
+      0;  // friction contacts beyond the per-particle slots (no memory kept)
   double total_energy() const { return kinetic + potential + elastic; }
 };
 
@@ -114,7 +115,8 @@ class Simulation {
  public:
   virtual ~Simulation() = default;
   // Prepares the wall and loads the particles. Errors name the bad setting.
-  static Expected<std::unique_ptr<Simulation>> create(const TriangleMesh& wall, const DynamicsConfig& config,
+  static Expected<std::unique_ptr<Simulation>> create(const TriangleMesh& wall,
+                                                      const DynamicsConfig& config,
                                                       const ParticleSet& particles);
 
   // Advances the state by `duration` seconds in steps of the automatic (or the
@@ -134,7 +136,7 @@ class Simulation {
 
   virtual const TimeStepInfo& time_step_info() const = 0;
   virtual const PrepareInfo& wall_info() const = 0;
-  virtual double time() const = 0;            // s
+  virtual double time() const = 0;  // s
   virtual uint64_t steps_taken() const = 0;
   virtual uint64_t device_bytes() const = 0;  // memory held by the backend
 };

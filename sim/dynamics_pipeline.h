@@ -31,9 +31,23 @@ inline constexpr int kSpeedCheckInterval = 8;
 
 // Per-particle statistics columns filled by a measuring pass, reduced per frame.
 enum StatColumn : size_t {
-  kStatElasticWall, kStatElasticPair, kStatOverlapWall, kStatOverlapPair, kStatWallContacts, kStatPairContacts,
-  kStatTouching, kStatOverflowWall, kStatOverflowPair, kStatKinetic, kStatPotential, kStatSpeed, kStatWaiting,
-  kStatActive, kStatEscaped, kStatInvalid, kStatColumns
+  kStatElasticWall,
+  kStatElasticPair,
+  kStatOverlapWall,
+  kStatOverlapPair,
+  kStatWallContacts,
+  kStatPairContacts,
+  kStatTouching,
+  kStatOverflowWall,
+  kStatOverflowPair,
+  kStatKinetic,
+  kStatPotential,
+  kStatSpeed,
+  kStatWaiting,
+  kStatActive,
+  kStatEscaped,
+  kStatInvalid,
+  kStatColumns
 };
 
 template <class B>
@@ -42,9 +56,11 @@ class DynamicsPipeline final : public Simulation {
   using Buf = typename B::template Buffer<T>;
 
  public:
-  static Expected<std::unique_ptr<Simulation>> make(const TriangleMesh& mesh, const DynamicsConfig& cfg,
-                                                    const ParticleSet& particles, const TimeStepInfo& ts,
-                                                    Vec3d domain_lo, Vec3d domain_hi) {
+  static Expected<std::unique_ptr<Simulation>> make(const TriangleMesh& mesh,
+                                                    const DynamicsConfig& cfg,
+                                                    const ParticleSet& particles,
+                                                    const TimeStepInfo& ts, Vec3d domain_lo,
+                                                    Vec3d domain_hi) {
     auto s = std::unique_ptr<DynamicsPipeline>(new DynamicsPipeline(cfg, ts));
     if (Status e = s->init(mesh, particles, domain_lo, domain_hi); !e) return e;
     return std::unique_ptr<Simulation>(std::move(s));
@@ -62,7 +78,8 @@ class DynamicsPipeline final : public Simulation {
   uint64_t device_bytes() const override { return backend_.bytes_held(); }
 
   Status step(uint64_t steps, double dt) override {
-    if (!(dt > 0) || !std::isfinite(dt)) return invalid_argument("time step must be positive, got " + std::to_string(dt));
+    if (!(dt > 0) || !std::isfinite(dt))
+      return invalid_argument("time step must be positive, got " + std::to_string(dt));
     for (uint64_t k = 0; k < steps; ++k) one_step(dt);
     backend_.sync();
     return backend_.status();
@@ -108,12 +125,14 @@ class DynamicsPipeline final : public Simulation {
     double col[kStatColumns];
     for (size_t c = 0; c < kStatColumns; ++c) {
       const bool max = c == kStatOverlapWall || c == kStatOverlapPair || c == kStatSpeed;
-      col[c] = max ? backend_.reduce_max(scratch_.data() + c * n_, n_) : backend_.reduce_sum(scratch_.data() + c * n_, n_);
+      col[c] = max ? backend_.reduce_max(scratch_.data() + c * n_, n_)
+                   : backend_.reduce_sum(scratch_.data() + c * n_, n_);
     }
     st->elastic = col[kStatElasticWall] + col[kStatElasticPair];
     st->max_overlap = std::max(col[kStatOverlapWall], col[kStatOverlapPair]);
     st->wall_contacts = static_cast<uint64_t>(col[kStatWallContacts] + 0.5);
-    st->particle_contacts = static_cast<uint64_t>(col[kStatPairContacts] * 0.5 + 0.5);  // each pair seen twice
+    st->particle_contacts =
+        static_cast<uint64_t>(col[kStatPairContacts] * 0.5 + 0.5);  // each pair seen twice
     st->touching_wall = static_cast<uint64_t>(col[kStatTouching] + 0.5);
     st->kinetic = col[kStatKinetic];
     st->potential = col[kStatPotential];
@@ -122,7 +141,8 @@ class DynamicsPipeline final : public Simulation {
     st->active = static_cast<uint64_t>(col[kStatActive] + 0.5);
     st->escaped = static_cast<uint64_t>(col[kStatEscaped] + 0.5);
     st->invalid = static_cast<uint64_t>(col[kStatInvalid] + 0.5);
-    st->history_overflow = static_cast<uint64_t>(col[kStatOverflowWall] + col[kStatOverflowPair] + 0.5);
+    st->history_overflow =
+        static_cast<uint64_t>(col[kStatOverflowWall] + col[kStatOverflowPair] + 0.5);
     return backend_.status();
   }
 
@@ -134,7 +154,8 @@ class DynamicsPipeline final : public Simulation {
     }
     out->resize(n_);
     for (size_t i = 0; i < n_; ++i) {
-      out->x[i] = p[i].x + origin_.x, out->y[i] = p[i].y + origin_.y, out->z[i] = p[i].z + origin_.z;
+      out->x[i] = p[i].x + origin_.x, out->y[i] = p[i].y + origin_.y,
+      out->z[i] = p[i].z + origin_.z;
       out->vx[i] = v[i].x, out->vy[i] = v[i].y, out->vz[i] = v[i].z;
       out->r[i] = radius_host_[i];
       out->release[i] = release_host_[i];
@@ -155,7 +176,8 @@ class DynamicsPipeline final : public Simulation {
     n_ = ps.size();
     const double cell = cfg_.grid_length > 0 ? cfg_.grid_length : 2 * ts_.r_max;
     info_.grid_length = cell;
-    if (Status e = wall_.prepare(backend_, mesh, cfg_.method, ts_.r_max, cell, cfg_.max_dense_cells, n_, &info_,
+    if (Status e = wall_.prepare(backend_, mesh, cfg_.method, ts_.r_max, cell, cfg_.max_dense_cells,
+                                 n_, &info_,
                                  /*double_triangles=*/true);
         !e)
       return e;
@@ -190,7 +212,8 @@ class DynamicsPipeline final : public Simulation {
     backend_.fill(acc_.data(), n_, Vec3d{0, 0, 0});
     backend_.resize(speed_, std::max<size_t>(n_, 1));
     backend_.resize(scratch_, std::max<size_t>(n_ * kStatColumns, 1));
-    backend_.fill(scratch_.data(), n_ * kStatColumns, 0.0);  // pair columns stay 0 without pair contacts
+    backend_.fill(scratch_.data(), n_ * kStatColumns,
+                  0.0);  // pair columns stay 0 without pair contacts
     if (law_.mu > 0) {
       backend_.resize(omega_, std::max<size_t>(n_, 1));
       backend_.resize(alpha_, std::max<size_t>(n_, 1));
@@ -207,8 +230,8 @@ class DynamicsPipeline final : public Simulation {
     if (cfg_.particle_contacts) {
       uint64_t cells = 0;
       // A dense table up to a few cells per particle: hashed buckets cost a filter on every read.
-      pgrid_ = make_grid(lo_, hi_, 2 * ts_.r_max, std::max<uint64_t>(cfg_.max_dense_cells, 8 * uint64_t(n_)), n_,
-                         &cells);
+      pgrid_ = make_grid(lo_, hi_, 2 * ts_.r_max,
+                         std::max<uint64_t>(cfg_.max_dense_cells, 8 * uint64_t(n_)), n_, &cells);
       backend_.resize(p_key_, std::max<size_t>(n_, 1));
       backend_.resize(p_idx_, std::max<size_t>(n_, 1));
       backend_.resize(p_key_sorted_, std::max<size_t>(n_, 1));
@@ -218,8 +241,9 @@ class DynamicsPipeline final : public Simulation {
       backend_.resize(sorted_, std::max<size_t>(n_, 1));
       // Float filter slack: rounding of coordinates up to the domain's size, and of the radii.
       const Vec3d ext = hi_ - lo_;
-      filter_slack_ = float(4e-7 * (std::fabs(lo_.x) + std::fabs(lo_.y) + std::fabs(lo_.z) + length(ext)) +
-                            1e-5 * ts_.r_max);
+      filter_slack_ =
+          float(4e-7 * (std::fabs(lo_.x) + std::fabs(lo_.y) + std::fabs(lo_.z) + length(ext)) +
+                1e-5 * ts_.r_max);
     }
     // Forces of the initial state, so the first Verlet half kick has them.
     release(0.0);
@@ -357,7 +381,8 @@ class DynamicsPipeline final : public Simulation {
     const Vec3d* v = vel_.data();
     const uint8_t* state = state_.data();
     double* speed = speed_.data();
-    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) { speed[i] = state[i] == kActive ? length(v[i]) : 0.0; });
+    backend_.parallel_for(
+        n_, [=] COLLIDO_HD(uint32_t i) { speed[i] = state[i] == kActive ? length(v[i]) : 0.0; });
   }
 
   void swap_history() { hist_in_ ^= 1; }
@@ -371,7 +396,9 @@ class DynamicsPipeline final : public Simulation {
     uint32_t* idx = p_idx_.data();
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
       int cx = 0, cy = 0, cz = 0;
-      key[i] = state[i] == kActive && g.cell_of(cast3<float>(x[i]), cx, cy, cz) ? g.bucket(g.linear(cx, cy, cz)) : none;
+      key[i] = state[i] == kActive && g.cell_of(cast3<float>(x[i]), cx, cy, cz)
+                   ? g.bucket(g.linear(cx, cy, cz))
+                   : none;
       idx[i] = i;
     });
     // Radix passes over the bits a bucket number needs, not all 32.
@@ -411,7 +438,8 @@ class DynamicsPipeline final : public Simulation {
   }
 
   // Looks up a contact's spring in last step's terminated slot list.
-  COLLIDO_HD static COLLIDO_FORCEINLINE Vec3d find_spring(const FrictionSlot* slots, int k, uint32_t key) {
+  COLLIDO_HD static COLLIDO_FORCEINLINE Vec3d find_spring(const FrictionSlot* slots, int k,
+                                                          uint32_t key) {
     for (int s = 0; s < k && slots[s].key != kNoKey; ++s)
       if (slots[s].key == key) return Vec3d{slots[s].sx, slots[s].sy, slots[s].sz};
     return Vec3d{0, 0, 0};
@@ -442,8 +470,9 @@ class DynamicsPipeline final : public Simulation {
     const bool friction = law.mu > 0;
     backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
       if (state[i] != kActive) {
-        if (measure) stats[kStatElasticPair * n + i] = stats[kStatOverlapPair * n + i] =
-                         stats[kStatPairContacts * n + i] = stats[kStatOverflowPair * n + i] = 0;
+        if (measure)
+          stats[kStatElasticPair * n + i] = stats[kStatOverlapPair * n + i] =
+              stats[kStatPairContacts * n + i] = stats[kStatOverflowPair * n + i] = 0;
         return;
       }
       const Vec3d xi = x[i], vi = v[i];
@@ -462,7 +491,8 @@ class DynamicsPipeline final : public Simulation {
           for (uint32_t k = start[b], e = end[b]; k < e; ++k) {
             const PackedParticle q = sp[k];
             const float fx = xf.x - q.x, fy = xf.y - q.y, fz = xf.z - q.z, reach = rf + q.r + slack;
-            if (fx * fx + fy * fy + fz * fz >= reach * reach) continue;  // clearly apart (most neighbours)
+            if (fx * fx + fy * fy + fz * fz >= reach * reach)
+              continue;  // clearly apart (most neighbours)
             const uint32_t j = sidx[k];
             if (j == i) continue;
             if (pg.hashed && !pg.holds(position(q), l)) continue;
@@ -473,12 +503,14 @@ class DynamicsPipeline final : public Simulation {
             if (!(dist2 < rs * rs)) continue;
             const double dist = sqrt(dist2);
             // Coincident centres: separate along z, opposite ways for the two.
-            const Vec3d nrm = dist > 1e-12 * rs ? d * (1.0 / dist) : Vec3d{0, 0, i < j ? 1.0 : -1.0};
+            const Vec3d nrm =
+                dist > 1e-12 * rs ? d * (1.0 / dist) : Vec3d{0, 0, i < j ? 1.0 : -1.0};
             const double mj = 1.0 / inv_mass[j];
             Vec3d vrel = vi - v[j];
             if (friction) vrel = vrel + cross(wi, nrm * (-r)) - cross(w[j], nrm * rad[j]);
             Vec3d spring = friction ? find_spring(old_slots, kPairSlots, j) : Vec3d{0, 0, 0};
-            const ContactForce cf = contact_force(law, nrm, rs - dist, vrel, m * mj / (m + mj), r, &spring, dt);
+            const ContactForce cf =
+                contact_force(law, nrm, rs - dist, vrel, m * mj / (m + mj), r, &spring, dt);
             f = f + cf.f;
             torque = torque + cf.torque;
             elastic += 0.5 * cf.elastic;  // each side holds half the pair's springs
@@ -486,7 +518,8 @@ class DynamicsPipeline final : public Simulation {
             ++npair;
             if (friction && !measure) {
               if (slots < uint32_t(kPairSlots))
-                new_slots[slots++] = FrictionSlot{j, float(spring.x), float(spring.y), float(spring.z)};
+                new_slots[slots++] =
+                    FrictionSlot{j, float(spring.x), float(spring.y), float(spring.z)};
               else
                 ++overflow;
             }
@@ -509,7 +542,8 @@ class DynamicsPipeline final : public Simulation {
     });
   }
 
-  // Wall contacts, one per touched feature. add: on top of pair_forces' accelerations, else from gravity.
+  // Wall contacts, one per touched feature. add: on top of pair_forces' accelerations, else from
+  // gravity.
   void wall_forces(double dt, bool measure, bool add) {
     const WallView wall = wall_.view();
     const PlanarTriangleD* tris_d = wall_.tris_d.data();
@@ -533,8 +567,9 @@ class DynamicsPipeline final : public Simulation {
       const uint8_t st = state[i];
       if (st != kActive) {
         if (measure)
-          stats[kStatElasticWall * n + i] = stats[kStatOverlapWall * n + i] = stats[kStatWallContacts * n + i] =
-              stats[kStatTouching * n + i] = stats[kStatOverflowWall * n + i] = 0;
+          stats[kStatElasticWall * n + i] = stats[kStatOverlapWall * n + i] =
+              stats[kStatWallContacts * n + i] = stats[kStatTouching * n + i] =
+                  stats[kStatOverflowWall * n + i] = 0;
         else
           acc[i] = Vec3d{0, 0, 0};
         flags[i] = st;
@@ -581,7 +616,8 @@ class DynamicsPipeline final : public Simulation {
         torque = torque + cf.torque;
         elastic += cf.elastic;
         overlap_max = hd_max(overlap_max, overlap / r);
-        if (friction && !measure) new_slots[k] = FrictionSlot{key, float(spring.x), float(spring.y), float(spring.z)};
+        if (friction && !measure)
+          new_slots[k] = FrictionSlot{key, float(spring.x), float(spring.y), float(spring.z)};
       }
       const uint8_t base = add ? flags[i] : uint8_t(kActive);
       flags[i] = set.n ? uint8_t(base | kFlagWallContact) : base;

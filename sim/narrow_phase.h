@@ -122,9 +122,12 @@ COLLIDO_HD inline bool triangle_box_overlap(Vec3T<T> a, Vec3T<T> b, Vec3T<T> c, 
                                             Vec3T<T> half) {
   const Vec3T<T> v0 = a - centre, v1 = b - centre, v2 = c - centre;
   // Box face normals: compare the triangle's extent with the box's.
-  if (hd_min(v0.x, hd_min(v1.x, v2.x)) > half.x || hd_max(v0.x, hd_max(v1.x, v2.x)) < -half.x) return false;
-  if (hd_min(v0.y, hd_min(v1.y, v2.y)) > half.y || hd_max(v0.y, hd_max(v1.y, v2.y)) < -half.y) return false;
-  if (hd_min(v0.z, hd_min(v1.z, v2.z)) > half.z || hd_max(v0.z, hd_max(v1.z, v2.z)) < -half.z) return false;
+  if (hd_min(v0.x, hd_min(v1.x, v2.x)) > half.x || hd_max(v0.x, hd_max(v1.x, v2.x)) < -half.x)
+    return false;
+  if (hd_min(v0.y, hd_min(v1.y, v2.y)) > half.y || hd_max(v0.y, hd_max(v1.y, v2.y)) < -half.y)
+    return false;
+  if (hd_min(v0.z, hd_min(v1.z, v2.z)) > half.z || hd_max(v0.z, hd_max(v1.z, v2.z)) < -half.z)
+    return false;
   const Vec3T<T> e0 = v1 - v0, e1 = v2 - v1, e2 = v0 - v2;
   // Triangle plane.
   const Vec3T<T> n = cross(e0, e1);
@@ -144,19 +147,24 @@ COLLIDO_HD inline bool triangle_box_overlap(Vec3T<T> a, Vec3T<T> b, Vec3T<T> c, 
 
 namespace collido::sim {
 
-// A triangle prepared for float distance queries: corner a, a unit edge
-// direction e1 (along ab), the unit normal n, and the 2D coordinates of b and
-// c in the (e1, n x e1) frame. The frame is computed in double, so the float
-// query only projects onto unit vectors and tests 2D edges, which keeps
-// slivers (needles 10^4 times longer than wide) accurate to float rounding of
-// the coordinates instead of failing in the cancellations of the 3D formulas.
-struct PlanarTriangle {
-  Vec3f a, e1, n;
-  float b1, c1, c2;  // b = (b1, 0), c = (c1, c2) with c2 >= 0; c2 == 0: degenerate (a segment)
+// A triangle prepared for distance queries: corner a, a unit edge direction
+// e1 (along ab), the unit normal n, and the 2D coordinates of b and c in the
+// (e1, n x e1) frame. The frame is computed in double, so a float query only
+// projects onto unit vectors and tests 2D edges, which keeps slivers (needles
+// 10^4 times longer than wide) accurate to float rounding of the coordinates
+// instead of failing in the cancellations of the 3D formulas. Detection uses
+// the float form; contact forces the double one (sim/contact_force.h).
+template <class T>
+struct PlanarTriangleT {
+  Vec3T<T> a, e1, n;
+  T b1, c1, c2;  // b = (b1, 0), c = (c1, c2) with c2 >= 0; c2 == 0: degenerate (a segment)
 };
+using PlanarTriangle = PlanarTriangleT<float>;
+using PlanarTriangleD = PlanarTriangleT<double>;
 
-// Builds the frame in double for the triangle (a, b, c) shifted by -origin.
-inline PlanarTriangle make_planar(Vec3d a, Vec3d b, Vec3d c, Vec3d origin) {
+// Builds the frame in double for the triangle (a, b, c) shifted by -origin, stored as T.
+template <class T = float>
+inline PlanarTriangleT<T> make_planar(Vec3d a, Vec3d b, Vec3d c, Vec3d origin) {
   a = a - origin, b = b - origin, c = c - origin;
   // Put the longest edge first so e1 is well defined whenever any edge is.
   const double lab = norm2(b - a), lbc = norm2(c - b), lca = norm2(a - c);
@@ -167,7 +175,7 @@ inline PlanarTriangle make_planar(Vec3d a, Vec3d b, Vec3d c, Vec3d origin) {
     Vec3d t = a;
     a = c, c = b, b = t;
   }
-  PlanarTriangle out;
+  PlanarTriangleT<T> out;
   const Vec3d ab = b - a, ac = c - a;
   const double len = length(ab);
   const Vec3d e1 = len > 0 ? ab * (1.0 / len) : Vec3d{1, 0, 0};
@@ -183,17 +191,18 @@ inline PlanarTriangle make_planar(Vec3d a, Vec3d b, Vec3d c, Vec3d origin) {
     n = cross(e1, t);
     n = n * (1.0 / length(n));
   }
-  out.a = cast3<float>(a);
-  out.e1 = cast3<float>(e1);
-  out.n = cast3<float>(n);
-  out.b1 = static_cast<float>(len);
-  out.c1 = static_cast<float>(dot(ac, e1));
-  out.c2 = static_cast<float>(c2 > 0 ? c2 : 0);
+  out.a = cast3<T>(a);
+  out.e1 = cast3<T>(e1);
+  out.n = cast3<T>(n);
+  out.b1 = static_cast<T>(len);
+  out.c1 = static_cast<T>(dot(ac, e1));
+  out.c2 = static_cast<T>(c2 > 0 ? c2 : 0);
   return out;
 }
 
 // Squared distance from p to a 2D segment (s, e), the point given as (u, v).
-COLLIDO_HD COLLIDO_FORCEINLINE float segment_dist2_2d(float u, float v, float su, float sv, float eu, float ev) {
+COLLIDO_HD COLLIDO_FORCEINLINE float segment_dist2_2d(float u, float v, float su, float sv,
+                                                      float eu, float ev) {
   const float du = eu - su, dv = ev - sv;
   const float len2 = du * du + dv * dv;
   float t = len2 > 0.f ? ((u - su) * du + (v - sv) * dv) / len2 : 0.f;
@@ -208,7 +217,8 @@ COLLIDO_HD COLLIDO_FORCEINLINE float point_triangle_dist2(Vec3f p, const PlanarT
   const Vec3f e2 = cross(t.n, t.e1);
   const float u = dot(ap, t.e1), v = dot(ap, e2), h = dot(ap, t.n);
   // Inside when left of all three counter-clockwise edges (a->b is the u axis).
-  if (t.c2 > 0.f && v >= 0.f && (t.c1 - t.b1) * v - t.c2 * (u - t.b1) >= 0.f && t.c2 * u - t.c1 * v >= 0.f)
+  if (t.c2 > 0.f && v >= 0.f && (t.c1 - t.b1) * v - t.c2 * (u - t.b1) >= 0.f &&
+      t.c2 * u - t.c1 * v >= 0.f)
     return h * h;
   const float d = hd_min(segment_dist2_2d(u, v, 0.f, 0.f, t.b1, 0.f),
                          hd_min(segment_dist2_2d(u, v, t.b1, 0.f, t.c1, t.c2),

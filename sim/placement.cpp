@@ -20,14 +20,17 @@ bool parse_placement_kind(const std::string& s, PlacementKind* out) {
 
 namespace {
 
-bool finite3(Vec3d v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+bool finite3(Vec3d v) {
+  return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
 
 // Lattice sites in the region, a layer (fixed z) at a time from the bottom, that
 // lie inside a closed wall and clear of its surface, until `count` are found.
-Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl, SplitMix64& rng,
-            ParticleSet* out) {
+Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl,
+            SplitMix64& rng, ParticleSet* out) {
   const Bounds3d box = mesh_bounds(wall);
-  const Vec3d lo = pl.has_region ? pl.region_lo : box.lo, hi = pl.has_region ? pl.region_hi : box.hi;
+  const Vec3d lo = pl.has_region ? pl.region_lo : box.lo,
+              hi = pl.has_region ? pl.region_hi : box.hi;
   if (!(lo.x < hi.x && lo.y < hi.y && lo.z < hi.z))
     return invalid_argument("placement.region: min must lie below max on every axis");
   const double r = ps.r_max, spacing = 2 * r * 1.05, jitter = 0.02 * r;
@@ -37,7 +40,8 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
   };
   const uint64_t nx = sites(lo.x, hi.x), ny = sites(lo.y, hi.y), nz = sites(lo.z, hi.z);
   if (nx * ny > (uint64_t(1) << 26))
-    return invalid_argument("placement.region: a layer of " + std::to_string(nx * ny) + " sites is too large");
+    return invalid_argument("placement.region: a layer of " + std::to_string(nx * ny) +
+                            " sites is too large");
   const bool closed = is_closed_manifold(wall);
   // The wall's own detector finds sites that would start touching it.
   DetectConfig dc;
@@ -69,16 +73,16 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
     }
   }
   if (out->size() < ps.count)
-    return invalid_argument("placement: the region holds only " + std::to_string(out->size()) + " of the " +
-                            std::to_string(ps.count) + " particles of radius " + std::to_string(r) +
-                            " m; use fewer or smaller particles, or a pour");
+    return invalid_argument("placement: the region holds only " + std::to_string(out->size()) +
+                            " of the " + std::to_string(ps.count) + " particles of radius " +
+                            std::to_string(r) + " m; use fewer or smaller particles, or a pour");
   return Status::ok();
 }
 
 // Layers of a disc lattice leaving an inlet one after another, each released
 // once the layer before has moved 1.2 lattice spacings on.
-Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl, Vec3d gravity,
-             SplitMix64& rng, ParticleSet* out) {
+Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl,
+             Vec3d gravity, SplitMix64& rng, ParticleSet* out) {
   const Bounds3d box = mesh_bounds(wall);
   const double r = ps.r_max, s = 2.2 * r;
   Vec3d v = pl.velocity;
@@ -86,13 +90,16 @@ Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSp
   if (pl.kind == PlacementKind::kJet && !(length(v) > 0))
     return invalid_argument("placement.velocity: a jet needs a non-zero velocity");
   if (pl.kind == PlacementKind::kPour && !(length(v) > 0)) {
-    if (!(g > 0)) return invalid_argument("placement.velocity: a pour without gravity needs a velocity");
+    if (!(g > 0))
+      return invalid_argument("placement.velocity: a pour without gravity needs a velocity");
     v = gravity * (1.0 / g);  // 1 m/s along gravity
   }
   const double v0 = length(v);
   const Vec3d dir = v * (1.0 / v0);
-  const Vec3d centre = pl.has_inlet ? pl.inlet : Vec3d{box.center().x, box.center().y, box.hi.z - 3 * r};
-  const double radius = pl.inlet_radius > 0 ? pl.inlet_radius : std::min(box.extent().x, box.extent().y) / 3;
+  const Vec3d centre =
+      pl.has_inlet ? pl.inlet : Vec3d{box.center().x, box.center().y, box.hi.z - 3 * r};
+  const double radius =
+      pl.inlet_radius > 0 ? pl.inlet_radius : std::min(box.extent().x, box.extent().y) / 3;
   // Two unit vectors across the inlet.
   const Vec3d t = std::fabs(dir.x) < 0.9 ? Vec3d{1, 0, 0} : Vec3d{0, 1, 0};
   Vec3d u = cross(dir, t);
@@ -106,8 +113,8 @@ Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSp
       if (std::sqrt(a * a + b * b) <= radius - r) disc.push_back(u * a + w * b);
     }
   if (disc.empty())
-    return invalid_argument("placement.inlet_radius: " + std::to_string(radius) + " m holds no particle of radius " +
-                            std::to_string(r) + " m");
+    return invalid_argument("placement.inlet_radius: " + std::to_string(radius) +
+                            " m holds no particle of radius " + std::to_string(r) + " m");
   // Time for a layer to move D = 1.2 s along dir with speed v0 and acceleration a = g . dir.
   const double D = 1.2 * s, a = dot(gravity, dir);
   double tau = D / v0;
@@ -134,22 +141,27 @@ Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSp
 
 }  // namespace
 
-Expected<ParticleSet> place_particles(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl,
-                                      Vec3d gravity, uint64_t seed) {
+Expected<ParticleSet> place_particles(const TriangleMesh& wall, const ParticleSpec& ps,
+                                      const PlacementSpec& pl, Vec3d gravity, uint64_t seed) {
   if (ps.count < 1 || ps.count > (uint64_t(1) << 28))
-    return invalid_argument("particles.count must lie in [1, 2^28], got " + std::to_string(ps.count));
+    return invalid_argument("particles.count must lie in [1, 2^28], got " +
+                            std::to_string(ps.count));
   if (!(ps.r_min > 0) || !std::isfinite(ps.r_max) || ps.r_max < ps.r_min)
-    return invalid_argument("particles.radius must be positive (a range as [min, max] with min <= max)");
+    return invalid_argument(
+        "particles.radius must be positive (a range as [min, max] with min <= max)");
   if (wall.triangles.empty()) return invalid_argument("wall: the wall has no triangles");
-  if (!finite3(pl.velocity) || !finite3(pl.inlet) || !finite3(pl.region_lo) || !finite3(pl.region_hi) ||
-      !std::isfinite(pl.rate) || pl.rate < 0 || !std::isfinite(pl.inlet_radius) || pl.inlet_radius < 0)
+  if (!finite3(pl.velocity) || !finite3(pl.inlet) || !finite3(pl.region_lo) ||
+      !finite3(pl.region_hi) || !std::isfinite(pl.rate) || pl.rate < 0 ||
+      !std::isfinite(pl.inlet_radius) || pl.inlet_radius < 0)
     return invalid_argument("placement: values must be finite (and rate, inlet_radius >= 0)");
   SplitMix64 rng(seed);
   ParticleSet out;
-  Status s = pl.kind == PlacementKind::kFill ? fill(wall, ps, pl, rng, &out) : inlet(wall, ps, pl, gravity, rng, &out);
+  Status s = pl.kind == PlacementKind::kFill ? fill(wall, ps, pl, rng, &out)
+                                             : inlet(wall, ps, pl, gravity, rng, &out);
   if (!s) return s;
   // Sizes last, so a range never changes where particles sit (the lattice fits r_max).
-  for (size_t i = 0; i < out.size(); ++i) out.r[i] = ps.r_min == ps.r_max ? ps.r_max : rng.uniform(ps.r_min, ps.r_max);
+  for (size_t i = 0; i < out.size(); ++i)
+    out.r[i] = ps.r_min == ps.r_max ? ps.r_max : rng.uniform(ps.r_min, ps.r_max);
   return out;
 }
 

@@ -15,18 +15,21 @@ Status write_vtp(const std::string& path, const Snapshot& s) {
       << "<Piece NumberOfPoints=\"" << n << "\" NumberOfVerts=\"" << n << "\">\n"
       << "<Points>\n<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n";
   for (size_t i = 0; i < n; ++i) {
-    std::snprintf(buf, sizeof buf, "%.9g %.9g %.9g\n", s.origin.x + s.x[i], s.origin.y + s.y[i], s.origin.z + s.z[i]);
+    std::snprintf(buf, sizeof buf, "%.9g %.9g %.9g\n", s.origin.x + s.x[i], s.origin.y + s.y[i],
+                  s.origin.z + s.z[i]);
     out << buf;
   }
   out << "</DataArray>\n</Points>\n<PointData Scalars=\"radius\" Vectors=\"velocity\">\n"
       << "<DataArray type=\"Float32\" Name=\"radius\" format=\"ascii\">\n";
   for (size_t i = 0; i < n; ++i) out << s.r[i] << '\n';
-  out << "</DataArray>\n<DataArray type=\"Float32\" Name=\"velocity\" NumberOfComponents=\"3\" format=\"ascii\">\n";
+  out << "</DataArray>\n<DataArray type=\"Float32\" Name=\"velocity\" NumberOfComponents=\"3\" "
+         "format=\"ascii\">\n";
   for (size_t i = 0; i < n; ++i) out << s.vx[i] << ' ' << s.vy[i] << ' ' << s.vz[i] << '\n';
   out << "</DataArray>\n<DataArray type=\"UInt8\" Name=\"contact\" format=\"ascii\">\n";
   for (size_t i = 0; i < n; ++i) out << int(s.contact[i]) << '\n';
   // One vertex cell per point, so ParaView draws them without a filter.
-  out << "</DataArray>\n</PointData>\n<Verts>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n";
+  out << "</DataArray>\n</PointData>\n<Verts>\n<DataArray type=\"Int64\" Name=\"connectivity\" "
+         "format=\"ascii\">\n";
   for (size_t i = 0; i < n; ++i) out << i << '\n';
   out << "</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n";
   for (size_t i = 0; i < n; ++i) out << i + 1 << '\n';

@@ -9,10 +9,10 @@
 #include <cmath>
 #include <vector>
 
+#include "sim/contact_force.h"
 #include "sim/detect.h"
 #include "sim/divide.h"
 #include "sim/grid.h"
-#include "sim/contact_force.h"
 #include "sim/narrow_phase.h"
 
 namespace collido::sim {
@@ -103,7 +103,8 @@ class WallIndex {
   // (world units); `particles` sizes a hashed table. Fills the wall part of *info.
   // double_triangles: also keep the triangles in double (tris_d) for contact forces.
   Status prepare(B& backend, const TriangleMesh& mesh, Method method, double r_max, double cell,
-                 uint64_t max_dense_cells, size_t particles, PrepareInfo* info, bool double_triangles = false) {
+                 uint64_t max_dense_cells, size_t particles, PrepareInfo* info,
+                 bool double_triangles = false) {
     double_ = double_triangles;
     method_ = method;
     r_max_ = r_max;
@@ -138,12 +139,13 @@ class WallIndex {
   Status prepare_pieces(B& backend, const TriangleMesh& mesh, double cell, PrepareInfo* info) {
     const DivisionMethod dm = method_ == Method::kGravity        ? DivisionMethod::kGravity
                               : method_ == Method::kCircumcircle ? DivisionMethod::kCircumcircle
-                                                                     : DivisionMethod::kMidpoint4;
+                                                                 : DivisionMethod::kMidpoint4;
     // Division is bounded by area / r_max^2; refuse absurd requests before allocating.
     const double estimate = 8 * mesh_area(mesh) / (r_max_ * r_max_) + mesh.triangles.size();
     if (estimate > 4e8)
       return invalid_argument("dividing this wall for r_max = " + std::to_string(r_max_) +
-                              " would make about " + std::to_string(estimate) + " triangles; use --method bin");
+                              " would make about " + std::to_string(estimate) +
+                              " triangles; use --method bin");
     DividedMesh dv = divide(mesh, dm, r_max_);
     info->triangles_used = dv.pieces.size();
     info->max_sphere_radius = dv.max_sphere_radius;
@@ -170,15 +172,17 @@ class WallIndex {
     for (size_t i = 0; i < m; ++i) {
       const auto& p = dv.pieces[i];
       host_tris[i] = make_planar(p[0], p[1], p[2], origin);
-      if (double_) host_tris_d[i] = make_planar_d(p[0], p[1], p[2], origin);
+      if (double_) host_tris_d[i] = make_planar<double>(p[0], p[1], p[2], origin);
       int x = 0, y = 0, z = 0;
       Vec3f c = cast3<float>(dv.sphere_centre[i] - origin);
-      if (!grid.cell_of(c, x, y, z)) return Status(ErrorCode::kBackend, "piece centre outside its grid");
+      if (!grid.cell_of(c, x, y, z))
+        return Status(ErrorCode::kBackend, "piece centre outside its grid");
       cellkey[i] = grid.linear(x, y, z);
       key[i] = grid.bucket(cellkey[i]);
       idx[i] = static_cast<uint32_t>(i);
     }
-    std::stable_sort(idx.begin(), idx.end(), [&](uint32_t a, uint32_t b) { return key[a] < key[b]; });
+    std::stable_sort(idx.begin(), idx.end(),
+                     [&](uint32_t a, uint32_t b) { return key[a] < key[b]; });
     std::vector<PlanarTriangle> tris_sorted(m);
     std::vector<PlanarTriangleD> tris_d_sorted(double_ ? m : 0);
     std::vector<uint32_t> orig_sorted(m);
@@ -202,7 +206,8 @@ class WallIndex {
     return Status::ok();
   }
 
-  Status prepare_bin(B& backend, const TriangleMesh& mesh, const Bounds3d& box, double cell, PrepareInfo* info) {
+  Status prepare_bin(B& backend, const TriangleMesh& mesh, const Bounds3d& box, double cell,
+                     PrepareInfo* info) {
     const size_t m = mesh.triangles.size();
     info->triangles_used = m;
     reach = 0;
@@ -219,10 +224,13 @@ class WallIndex {
     std::vector<PlanarTriangle> host_tris(m);
     std::vector<PlanarTriangleD> host_tris_d(double_ ? m : 0);
     for (size_t t = 0; t < m; ++t) {
-      host_corners[t] = {cast3<float>(mesh.corner(t, 0) - origin), cast3<float>(mesh.corner(t, 1) - origin),
-                    cast3<float>(mesh.corner(t, 2) - origin)};
+      host_corners[t] = {cast3<float>(mesh.corner(t, 0) - origin),
+                         cast3<float>(mesh.corner(t, 1) - origin),
+                         cast3<float>(mesh.corner(t, 2) - origin)};
       host_tris[t] = make_planar(mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2), origin);
-      if (double_) host_tris_d[t] = make_planar_d(mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2), origin);
+      if (double_)
+        host_tris_d[t] =
+            make_planar<double>(mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2), origin);
     }
     upload(backend, tris, host_tris);
     if (double_) upload(backend, tris_d, host_tris_d);
@@ -237,7 +245,8 @@ class WallIndex {
     const float fgrow = static_cast<float>(grow);
     uint32_t* count = bin_count.data();
     backend.parallel_for(m, [=] COLLIDO_HD(uint32_t t) {
-      for_each_bin_cell(g, T[t], fgrow, [&](uint64_t l) { atomic_add_u32(&count[g.bucket(l)], 1u); });
+      for_each_bin_cell(g, T[t], fgrow,
+                        [&](uint64_t l) { atomic_add_u32(&count[g.bucket(l)], 1u); });
     });
     const uint64_t total = backend.exclusive_scan(count, size_t(grid.buckets) + 1);
     if (total > (1ull << 31))
@@ -265,10 +274,14 @@ class WallIndex {
 
   // Calls f(linear cell) for each cell whose box grown by `grow` overlaps the triangle.
   template <class F>
-  COLLIDO_HD static void for_each_bin_cell(const GridSpec& g, const TriangleF& t, float grow, F&& f) {
-    const float lox = fminf(t.a.x, fminf(t.b.x, t.c.x)) - grow, hix = fmaxf(t.a.x, fmaxf(t.b.x, t.c.x)) + grow;
-    const float loy = fminf(t.a.y, fminf(t.b.y, t.c.y)) - grow, hiy = fmaxf(t.a.y, fmaxf(t.b.y, t.c.y)) + grow;
-    const float loz = fminf(t.a.z, fminf(t.b.z, t.c.z)) - grow, hiz = fmaxf(t.a.z, fmaxf(t.b.z, t.c.z)) + grow;
+  COLLIDO_HD static void for_each_bin_cell(const GridSpec& g, const TriangleF& t, float grow,
+                                           F&& f) {
+    const float lox = fminf(t.a.x, fminf(t.b.x, t.c.x)) - grow,
+                hix = fmaxf(t.a.x, fmaxf(t.b.x, t.c.x)) + grow;
+    const float loy = fminf(t.a.y, fminf(t.b.y, t.c.y)) - grow,
+                hiy = fmaxf(t.a.y, fmaxf(t.b.y, t.c.y)) + grow;
+    const float loz = fminf(t.a.z, fminf(t.b.z, t.c.z)) - grow,
+                hiz = fmaxf(t.a.z, fmaxf(t.b.z, t.c.z)) + grow;
     auto clampi = [](int v, int n) { return v < 0 ? 0 : (v >= n ? n - 1 : v); };
     const int x0 = clampi(int(floorf((lox - g.origin.x) * g.inv_cell)), g.nx),
               x1 = clampi(int(floorf((hix - g.origin.x) * g.inv_cell)), g.nx);
@@ -295,9 +308,9 @@ class WallIndex {
   GridSpec grid;
   int reach = 1;
   Vec3d origin{0, 0, 0};
-  Buf<PlanarTriangle> tris;  // narrow-phase form
+  Buf<PlanarTriangle> tris;     // narrow-phase form
   Buf<PlanarTriangleD> tris_d;  // the same in double, for contact forces (when asked for)
-  Buf<TriangleF> corners;    // bin preparation only
+  Buf<TriangleF> corners;       // bin preparation only
   Buf<uint32_t> tri_original, tri_start, tri_end;
   Buf<uint64_t> tri_cell;
   Buf<uint32_t> bin_start, bin_tri;

@@ -38,7 +38,8 @@ TEST(CliRun, WritesSnapshotsStatisticsAndParaViewFrames) {
   const std::string dir = ::testing::TempDir() + "/run_drop";
   fs::remove_all(dir);
   ASSERT_EQ(cmd_run({scene, "--out", dir, "--vtp", "--quiet"}), kExitOk);
-  for (const char* f : {"wall.stl", "scene.json", "run.json", "stats.csv", "frames.pvd", "vtp/frame_000005.vtp"})
+  for (const char* f :
+       {"wall.stl", "scene.json", "run.json", "stats.csv", "frames.pvd", "vtp/frame_000005.vtp"})
     EXPECT_TRUE(fs::exists(fs::path(dir) / f)) << f;
   const auto stats = lines(dir + "/stats.csv");
   ASSERT_EQ(stats.size(), 1u + 6u);  // header, frame 0 and five frames
@@ -50,7 +51,8 @@ TEST(CliRun, WritesSnapshotsStatisticsAndParaViewFrames) {
     EXPECT_NEAR(snap->time, 0.1 * double(f), 1e-9);
   }
   // The particles fell: the last frame's are lower than the first's and some touch the floor.
-  auto first = sim::read_snapshot(sim::snapshot_path(dir, 0)), last = sim::read_snapshot(sim::snapshot_path(dir, 5));
+  auto first = sim::read_snapshot(sim::snapshot_path(dir, 0)),
+       last = sim::read_snapshot(sim::snapshot_path(dir, 5));
   double z0 = 0, z5 = 0;
   int touching = 0;
   for (size_t i = 0; i < 27; ++i) z0 += first->z[i], z5 += last->z[i], touching += last->contact[i];
@@ -69,7 +71,9 @@ TEST(CliRun, ExampleScenesRun) {
     ++seen;
     const std::string dir = ::testing::TempDir() + "/example_" + e.path().stem().string();
     fs::remove_all(dir);
-    EXPECT_EQ(cmd_run({e.path().string(), "--out", dir, "--duration", "0.04", "--backend", "cpu", "--quiet"}), kExitOk)
+    EXPECT_EQ(cmd_run({e.path().string(), "--out", dir, "--duration", "0.04", "--backend", "cpu",
+                       "--quiet"}),
+              kExitOk)
         << e.path();
     EXPECT_TRUE(fs::exists(sim::snapshot_path(dir, 1))) << e.path();
   }
@@ -82,13 +86,16 @@ TEST(CliRun, BadScenesExitTwoAndImpossibleRunsExitOne) {
   EXPECT_EQ(cmd_run({"/nonexistent/scene.json"}), kExitUsage);
   EXPECT_EQ(cmd_run({write_scene("bad_key.json", R"({"wall": "wall1", "speed": 3})")}), kExitUsage);
   EXPECT_EQ(cmd_run({write_scene("bad_json.json", R"({"wall": )")}), kExitUsage);
-  const std::string ok = write_scene("ok.json", R"({"wall": "wall1", "particles": {"count": 5}, "duration": 0.01})");
+  const std::string ok =
+      write_scene("ok.json", R"({"wall": "wall1", "particles": {"count": 5}, "duration": 0.01})");
   EXPECT_EQ(cmd_run({ok, "--backend", "quantum"}), kExitUsage);
   // A wall that does not exist, and more particles than the vessel holds.
   const std::string dir = ::testing::TempDir() + "/run_fail";
-  EXPECT_EQ(cmd_run({write_scene("nowall.json", R"({"wall": {"file": "missing.stl"}})"), "--out", dir, "--quiet"}),
+  EXPECT_EQ(cmd_run({write_scene("nowall.json", R"({"wall": {"file": "missing.stl"}})"), "--out",
+                     dir, "--quiet"}),
             kExitFailure);
-  EXPECT_EQ(cmd_run({write_scene("full.json", R"({"wall": "box:x=2,y=2,z=2", "particles": {"count": 1000}})"),
+  EXPECT_EQ(cmd_run({write_scene("full.json",
+                                 R"({"wall": "box:x=2,y=2,z=2", "particles": {"count": 1000}})"),
                      "--out", dir, "--quiet"}),
             kExitFailure);
 }

@@ -73,8 +73,8 @@ TEST(Scene, RoundTripThroughJson) {
 void expect_error(const std::string& doc, const std::string& key) {
   auto s = parse_scene(doc);
   ASSERT_FALSE(s) << doc;
-  EXPECT_EQ(s.status().message().rfind(key, 0), 0u) << "message '" << s.status().message() << "' should start with "
-                                                    << key;
+  EXPECT_EQ(s.status().message().rfind(key, 0), 0u)
+      << "message '" << s.status().message() << "' should start with " << key;
 }
 
 TEST(Scene, ErrorsNameTheKey) {
@@ -83,7 +83,8 @@ TEST(Scene, ErrorsNameTheKey) {
   expect_error(R"({"wall": "wall1", "material": {"restitution": 1.5}})", "material.restitution");
   expect_error(R"({"wall": "wall1", "material": {"restitution": 0}})", "material.restitution");
   expect_error(R"({"wall": "wall1", "material": {"friction": -1}})", "material.friction");
-  expect_error(R"({"wall": "wall1", "material": {"stiffness": 1e6, "youngs_modulus": 1e9}})", "material");
+  expect_error(R"({"wall": "wall1", "material": {"stiffness": 1e6, "youngs_modulus": 1e9}})",
+               "material");
   expect_error(R"({"wall": "wall1", "particles": {"count": 0}})", "particles.count");
   expect_error(R"({"wall": "wall1", "particles": {"count": 2.5}})", "particles.count");
   expect_error(R"({"wall": "wall1", "particles": {"count": -3}})", "particles.count");
@@ -101,10 +102,13 @@ TEST(Scene, ErrorsNameTheKey) {
   expect_error(R"({"wall": "wall1", "particle_contacts": "yes"})", "particle_contacts");
   expect_error(R"({"wall": "wall1", "placement": {"kind": "teleport"}})", "placement.kind");
   expect_error(R"({"wall": "wall1", "placement": {"kind": "jet"}})", "placement.velocity");
-  expect_error(R"({"wall": "wall1", "placement": {"kind": "pour", "region": {"min": [0,0,0], "max": [1,1,1]}}})",
+  expect_error(
+      R"({"wall": "wall1", "placement": {"kind": "pour", "region": {"min": [0,0,0], "max": [1,1,1]}}})",
+      "placement.region");
+  expect_error(R"({"wall": "wall1", "placement": {"region": {"min": [0,0,0], "max": [1,-1,1]}}})",
                "placement.region");
-  expect_error(R"({"wall": "wall1", "placement": {"region": {"min": [0,0,0], "max": [1,-1,1]}}})", "placement.region");
-  expect_error(R"({"wall": "wall1", "placement": {"region": {"min": [0,0,0]}}})", "placement.region");
+  expect_error(R"({"wall": "wall1", "placement": {"region": {"min": [0,0,0]}}})",
+               "placement.region");
   expect_error(R"({"wall": {"shape": "wall1", "file": "a.stl"}})", "wall");
   expect_error(R"({"wall": {}})", "wall");
   expect_error(R"({"particles": {"count": 5}})", "wall");
@@ -137,10 +141,18 @@ TEST(Scene, FuzzedDocumentsNeverCrash) {
     for (int e = 0; e < edits && !doc.empty(); ++e) {
       const size_t at = size_t(rng.uniform() * double(doc.size()));
       switch (int(rng.uniform() * 4)) {
-        case 0: doc.erase(at, 1); break;
-        case 1: doc[at] = "{}[]\",:0123456789.-eE tfn"[int(rng.uniform() * 25)]; break;
-        case 2: doc.insert(at, doc.substr(at, 8)); break;
-        default: doc[at] = char(rng.uniform() * 256); break;
+        case 0:
+          doc.erase(at, 1);
+          break;
+        case 1:
+          doc[at] = "{}[]\",:0123456789.-eE tfn"[int(rng.uniform() * 25)];
+          break;
+        case 2:
+          doc.insert(at, doc.substr(at, 8));
+          break;
+        default:
+          doc[at] = char(rng.uniform() * 256);
+          break;
       }
     }
     auto s = parse_scene(doc);

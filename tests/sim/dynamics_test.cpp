@@ -26,7 +26,8 @@ ParticleSet particles_at(const std::vector<Vec3d>& pos, const std::vector<Vec3d>
   return p;
 }
 
-// n particles on a lattice inside the box [-h, h]^2 x [z0, z0 + 2h] with random velocities of size `speed`.
+// n particles on a lattice inside the box [-h, h]^2 x [z0, z0 + 2h] with random velocities of size
+// `speed`.
 ParticleSet lattice(int per_side, double h, double z0, double r, double speed, uint64_t seed) {
   SplitMix64 rng(seed);
   std::vector<Vec3d> pos, vel;
@@ -41,7 +42,8 @@ ParticleSet lattice(int per_side, double h, double z0, double r, double speed, u
   return particles_at(pos, vel, r);
 }
 
-std::unique_ptr<Simulation> make_sim(const TriangleMesh& wall, DynamicsConfig cfg, const ParticleSet& p) {
+std::unique_ptr<Simulation> make_sim(const TriangleMesh& wall, DynamicsConfig cfg,
+                                     const ParticleSet& p) {
   cfg.backend = g_backend;
   auto s = Simulation::create(wall, cfg, p);
   EXPECT_TRUE(s.has_value()) << s.status().message();
@@ -58,7 +60,8 @@ FrameStats measure(Simulation& s) {
 TriangleMesh floor_mesh(double h, int cells) {
   TriangleMesh m;
   for (int j = 0; j <= cells; ++j)
-    for (int i = 0; i <= cells; ++i) m.vertices.push_back({-h + 2 * h * i / cells, -h + 2 * h * j / cells, 0});
+    for (int i = 0; i <= cells; ++i)
+      m.vertices.push_back({-h + 2 * h * i / cells, -h + 2 * h * j / cells, 0});
   auto v = [&](int i, int j) { return uint32_t(j * (cells + 1) + i); };
   for (int j = 0; j < cells; ++j)
     for (int i = 0; i < cells; ++i) {
@@ -90,9 +93,11 @@ void elastic_box_energy() {
     wall_hits += st.wall_contacts, pair_hits += st.particle_contacts;
     ASSERT_EQ(st.escaped + st.invalid, 0u);
   }
-  std::printf("elastic box: %llu steps, worst energy drift %.3g %%, frames with wall/pair contacts %llu/%llu\n",
-              (unsigned long long)s->steps_taken(), 100 * worst, (unsigned long long)wall_hits,
-              (unsigned long long)pair_hits);
+  std::printf(
+      "elastic box: %llu steps, worst energy drift %.3g %%, frames with wall/pair contacts "
+      "%llu/%llu\n",
+      (unsigned long long)s->steps_taken(), 100 * worst, (unsigned long long)wall_hits,
+      (unsigned long long)pair_hits);
   EXPECT_GT(wall_hits, 0u);  // the particles did meet the walls and each other
   EXPECT_GT(pair_hits, 0u);
   EXPECT_LE(worst, 0.01);
@@ -167,10 +172,12 @@ void tunnelling() {
     ASSERT_TRUE(s->download(&out, &flags));
     size_t outside = 0;
     for (size_t i = 0; i < out.size(); ++i)
-      if ((flags[i] & kStateMask) != kActive || winding_number(box, {out.x[i], out.y[i], out.z[i]}) < 0.5) ++outside;
+      if ((flags[i] & kStateMask) != kActive ||
+          winding_number(box, {out.x[i], out.y[i], out.z[i]}) < 0.5)
+        ++outside;
     std::printf("fast particles, %s step: %zu of %zu outside (escaped %llu, non-finite %llu)\n",
-                dt > 0 ? "fixed 5 ms" : "automatic", outside, out.size(), (unsigned long long)st.escaped,
-                (unsigned long long)st.invalid);
+                dt > 0 ? "fixed 5 ms" : "automatic", outside, out.size(),
+                (unsigned long long)st.escaped, (unsigned long long)st.invalid);
     if (dt > 0) {
       EXPECT_GT(st.escaped, 0u);
       EXPECT_GT(outside, 0u);
@@ -193,7 +200,8 @@ void floor_settles_once() {
   big.triangles = {{0, 1, 2}};
   big.source_ids = {0};
   const TriangleMesh fine = floor_mesh(5, 40);  // vertices every 0.25
-  const std::vector<Vec3d> spots = {{0, 0, 0.6}, {0.125, 0, 0.6}, {0.125, 0.125, 0.6}, {0.06, 0.2, 0.6}};
+  const std::vector<Vec3d> spots = {
+      {0, 0, 0.6}, {0.125, 0, 0.6}, {0.125, 0.125, 0.6}, {0.06, 0.2, 0.6}};
   const double m = cfg.material.density * 4.0 / 3.0 * M_PI * r * r * r;
   const double expected = r - m * 9.81 / cfg.material.stiffness;
   for (const Vec3d& at : spots) {
@@ -230,7 +238,8 @@ void division_methods_push_once() {
     cfg.material.restitution = 0.2;
     auto s = make_sim(floor, cfg, particles_at({{0.3, 0.2, 0.6}}, {}, r));
     ASSERT_TRUE(s);
-    if (m != Method::kBin) EXPECT_GT(s->wall_info().triangles_used, floor.triangles.size()) << to_string(m);
+    if (m != Method::kBin)
+      EXPECT_GT(s->wall_info().triangles_used, floor.triangles.size()) << to_string(m);
     FrameStats st;
     for (int f = 0; f < 30; ++f) ASSERT_TRUE(s->advance(0.1, &st));
     ParticleSet out;
@@ -297,7 +306,8 @@ void pour_into(const TriangleMesh& wall, int per_layer_side, int layers, uint64_
   for (int l = 0; l < layers; ++l)
     for (int i = 0; i < per_layer_side; ++i)
       for (int j = 0; j < per_layer_side; ++j)
-        pos.push_back({(i - 0.5 * (per_layer_side - 1)) * spacing, (j - 0.5 * (per_layer_side - 1)) * spacing, 20});
+        pos.push_back({(i - 0.5 * (per_layer_side - 1)) * spacing,
+                       (j - 0.5 * (per_layer_side - 1)) * spacing, 20});
   // Layers leave the inlet at 10 m/s every 0.3 s: 3 m apart, clear of the one before.
   vel.assign(pos.size(), Vec3d{0, 0, -10});
   p = particles_at(pos, vel, r);
@@ -329,21 +339,39 @@ void pour_into(const TriangleMesh& wall, int per_layer_side, int layers, uint64_
     EXPECT_GT(winding_number(wall, {out.x[i], out.y[i], out.z[i]}), 0.5) << "particle " << i;
     top = std::max(top, out.z[i]);
   }
-  std::printf("poured %zu particles into the cylinder: settled after %.1f s, %llu steps, pile top z = %.2f, max overlap %.2f %%\n",
-              out.size(), t, (unsigned long long)s->steps_taken(), top, 100 * st.max_overlap);
+  std::printf(
+      "poured %zu particles into the cylinder: settled after %.1f s, %llu steps, pile top z = "
+      "%.2f, max overlap %.2f %%\n",
+      out.size(), t, (unsigned long long)s->steps_taken(), top, 100 * st.max_overlap);
   EXPECT_LT(st.max_overlap, 0.05);
 }
 
-TEST(Dynamics, ElasticBoxKeepsItsEnergy) { elastic_box_energy(); }
-TEST(Dynamics, TimeStepBeyondTheCriticalOneBlowsUp) { time_step_sweep(); }
-TEST(Dynamics, FastParticlesTunnelOnlyWithACoarseFixedStep) { tunnelling(); }
-TEST(Dynamics, SharedVerticesAndEdgesPushOnce) { floor_settles_once(); }
-TEST(Dynamics, RestitutionIsKept) { restitution_is_kept(); }
-TEST(Dynamics, DivisionMethodsPushOnceToo) { division_methods_push_once(); }
-TEST(Dynamics, FrictionTurnsSlidingIntoRolling) { friction_makes_it_roll(); }
+TEST(Dynamics, ElasticBoxKeepsItsEnergy) {
+  elastic_box_energy();
+}
+TEST(Dynamics, TimeStepBeyondTheCriticalOneBlowsUp) {
+  time_step_sweep();
+}
+TEST(Dynamics, FastParticlesTunnelOnlyWithACoarseFixedStep) {
+  tunnelling();
+}
+TEST(Dynamics, SharedVerticesAndEdgesPushOnce) {
+  floor_settles_once();
+}
+TEST(Dynamics, RestitutionIsKept) {
+  restitution_is_kept();
+}
+TEST(Dynamics, DivisionMethodsPushOnceToo) {
+  division_methods_push_once();
+}
+TEST(Dynamics, FrictionTurnsSlidingIntoRolling) {
+  friction_makes_it_roll();
+}
 // On the CPU a narrower wall1 (radius 8, height 40, 40 segments) and 200 particles, so
 // they pile up (the GPU suite pours the 10^4 into wall1 itself).
-TEST(Dynamics, PourIntoACylinderSettles) { pour_into(make_cylinder(8, 40, 40), 5, 8, 20000); }
+TEST(Dynamics, PourIntoACylinderSettles) {
+  pour_into(make_cylinder(8, 40, 40), 5, 8, 20000);
+}
 
 TEST(Dynamics, BadSettingsNameTheKey) {
   const TriangleMesh box = make_box(10, 10, 10);
@@ -384,15 +412,31 @@ class DynamicsCuda : public ::testing::Test {
   }
   void TearDown() override { g_backend = Backend::kCpu; }
 };
-TEST_F(DynamicsCuda, ElasticBoxKeepsItsEnergy) { elastic_box_energy(); }
-TEST_F(DynamicsCuda, TimeStepBeyondTheCriticalOneBlowsUp) { time_step_sweep(); }
-TEST_F(DynamicsCuda, FastParticlesTunnelOnlyWithACoarseFixedStep) { tunnelling(); }
-TEST_F(DynamicsCuda, SharedVerticesAndEdgesPushOnce) { floor_settles_once(); }
-TEST_F(DynamicsCuda, RestitutionIsKept) { restitution_is_kept(); }
-TEST_F(DynamicsCuda, DivisionMethodsPushOnceToo) { division_methods_push_once(); }
-TEST_F(DynamicsCuda, FrictionTurnsSlidingIntoRolling) { friction_makes_it_roll(); }
+TEST_F(DynamicsCuda, ElasticBoxKeepsItsEnergy) {
+  elastic_box_energy();
+}
+TEST_F(DynamicsCuda, TimeStepBeyondTheCriticalOneBlowsUp) {
+  time_step_sweep();
+}
+TEST_F(DynamicsCuda, FastParticlesTunnelOnlyWithACoarseFixedStep) {
+  tunnelling();
+}
+TEST_F(DynamicsCuda, SharedVerticesAndEdgesPushOnce) {
+  floor_settles_once();
+}
+TEST_F(DynamicsCuda, RestitutionIsKept) {
+  restitution_is_kept();
+}
+TEST_F(DynamicsCuda, DivisionMethodsPushOnceToo) {
+  division_methods_push_once();
+}
+TEST_F(DynamicsCuda, FrictionTurnsSlidingIntoRolling) {
+  friction_makes_it_roll();
+}
 // The full size: 10^4 particles, at least 10^5 steps.
-TEST_F(DynamicsCuda, PourTenThousandIntoWall1Settles) { pour_into(make_cylinder(50, 100, 40), 20, 25, 100000); }
+TEST_F(DynamicsCuda, PourTenThousandIntoWall1Settles) {
+  pour_into(make_cylinder(50, 100, 40), 20, 25, 100000);
+}
 
 TEST_F(DynamicsCuda, TrajectoriesAgreeWithTheCpu) {
   // A dense, frictional, colliding scene in wall1: 100 steps on each backend.
@@ -416,8 +460,8 @@ TEST_F(DynamicsCuda, TrajectoriesAgreeWithTheCpu) {
   }
   double worst = 0;
   for (size_t i = 0; i < p.size(); ++i)
-    worst = std::max({worst, std::fabs(out[0].x[i] - out[1].x[i]), std::fabs(out[0].y[i] - out[1].y[i]),
-                      std::fabs(out[0].z[i] - out[1].z[i])});
+    worst = std::max({worst, std::fabs(out[0].x[i] - out[1].x[i]),
+                      std::fabs(out[0].y[i] - out[1].y[i]), std::fabs(out[0].z[i] - out[1].z[i])});
   std::printf("CPU vs GPU after 100 steps: largest position difference %.3g radii\n", worst / 1.0);
   EXPECT_LE(worst, 1e-4);
 }

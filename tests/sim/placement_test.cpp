@@ -15,8 +15,9 @@ double closest_pair(const ParticleSet& p, const std::vector<size_t>& idx) {
   for (size_t a = 0; a < idx.size(); ++a)
     for (size_t b = a + 1; b < idx.size(); ++b) {
       const size_t i = idx[a], j = idx[b];
-      const double d = std::sqrt((p.x[i] - p.x[j]) * (p.x[i] - p.x[j]) + (p.y[i] - p.y[j]) * (p.y[i] - p.y[j]) +
-                                 (p.z[i] - p.z[j]) * (p.z[i] - p.z[j]));
+      const double d =
+          std::sqrt((p.x[i] - p.x[j]) * (p.x[i] - p.x[j]) + (p.y[i] - p.y[j]) * (p.y[i] - p.y[j]) +
+                    (p.z[i] - p.z[j]) * (p.z[i] - p.z[j]));
       best = std::min(best, d - p.r[i] - p.r[j]);
     }
   return best;
