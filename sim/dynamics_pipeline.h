@@ -367,7 +367,7 @@ class DynamicsPipeline final : public Simulation {
         return;
       }
       v[i] = vi;
-      x[i] = xi;
+      if (!verlet) x[i] = xi;  // Verlet moved it in the drift
       speed[i] = sqrt(s2);
       if (xi.x < lo.x || xi.y < lo.y || xi.z < lo.z || xi.x > hi.x || xi.y > hi.y || xi.z > hi.z) {
         state[i] = kEscaped;
