@@ -48,13 +48,18 @@ const std::vector<FlagSpec>& calibrate_flags() {
   static const std::vector<FlagSpec> specs = {
       {"out", true, "run log CSV to write (required; rewritten after every configuration)"},
       {"backend", true, "cpu | cuda | auto (default auto: cuda when a GPU is usable)"},
-      {"configs", true, "number of configurations (default 300, 6 with --quick)"},
+      {"configs", true, "number of configurations (default 300 on cpu, 200 on cuda, 6 with --quick)"},
       {"seed", true, "seed of the sweep and of the particles (default 1)"},
       {"quick", false, "tiny sweep (small walls, <= 2000 particles, <= 3 frames) for tests"},
       {"threads", true,
        "CPU threads of every run (default 0 = all cores; 1 is steadier on "
        "a machine shared with other work)"},
-      {"repeats", true, "runs per configuration; smallest times, largest memory kept (default 3)"},
+      {"repeats", true,
+       "runs per configuration; smallest times, largest memory kept (default 3 on cpu, 2 on "
+       "cuda)"},
+      {"budget", true,
+       "seconds; start no run after this, keep the rows measured by then (default 0 = none on "
+       "cpu, 330 on cuda)"},
       {"help", false, "show this help"},
   };
   return specs;
@@ -79,14 +84,17 @@ constexpr WallChoice kWalls[] = {
 constexpr size_t kWallCount = sizeof kWalls / sizeof kWalls[0];
 
 // Particle radii are uniform in [r_max / 2, r_max] with r_max = 1 % of the wall's
-// longest bounding-box side (wall1: 0.5..1, as in bench detect). Tying the radius to
-// the wall keeps grid cells per wall about equal: the log has no column for them.
+// longest bounding-box side (wall1: 0.5..1, as in bench detect). The log records
+// r_max, the wall's area and its box volume, so what differs between walls at this
+// scale (how much of the box lies near the surface) is visible to the predictor.
 constexpr double kRadiusFraction = 0.01;
 
 // Sizes of one wall, measured once in a child (see survey_walls).
 struct WallSurvey {
   int64_t triangles = 0;   // as built
   double r_max = 0;        // world units
+  double area = 0;         // triangle area, world units^2
+  double box_volume = 0;   // bounding box grown by r_max on every side, world units^3
   int64_t pieces[3] = {};  // after gravity, circumcircle, midpoint4 division at r_max
 };
 struct SurveyResult {
@@ -190,6 +198,12 @@ bool run_in_child(F&& f, T* out, double* peak_host_bytes, std::string* why) {
   return true;
 }
 
+// The run log's wall_box_volume: grown by the radius, so a flat wall has a volume too
+// (the engine's grid pads its box the same way).
+double wall_box_volume(double ex, double ey, double ez, double r) {
+  return (ex + 2 * r) * (ey + 2 * r) * (ez + 2 * r);
+}
+
 // Triangle counts of every wall at its particle scale, for skipping divisions that
 // would be absurdly large. midpoint4 cuts every triangle into four similar halves until
 // the longest edge fits, so its count is 4^levels per triangle and needs no division;
@@ -208,6 +222,8 @@ SurveyResult survey_walls(bool quick) {
     ws.triangles = static_cast<int64_t>(mesh->triangles.size());
     const sim::Vec3d e = sim::mesh_bounds(*mesh).extent();
     ws.r_max = kRadiusFraction * std::max({e.x, e.y, e.z});
+    ws.area = sim::mesh_area(*mesh);
+    ws.box_volume = wall_box_volume(e.x, e.y, e.z, ws.r_max);
     double m4 = 0;
     for (size_t t = 0; t < mesh->triangles.size(); ++t) {
       double longest = 0;
@@ -308,7 +324,7 @@ struct Ranges {
 };
 Ranges ranges_for(sim::Backend b, bool quick) {
   if (quick) return {100, 2000, 2000, 2000, 2e6, 2e5, 3};
-  if (b == sim::Backend::kCuda) return {1e3, 1e7, 1e6, 0, 0, 3e6, 20};
+  if (b == sim::Backend::kCuda) return {1e3, 3e7, 3e6, 0, 0, 3e6, 20};
   return {100, 3e5, 1e5, 3e4, 2e6, 1e6, 20};
 }
 
@@ -380,13 +396,16 @@ struct Best {
   uint64_t device_bytes = 0;
 };
 
-g::RunRecord make_row(const Plan& p, const Best& b, sim::Backend backend, const std::string& device,
-                      const std::string& cpu_name) {
+g::RunRecord make_row(const Plan& p, const WallSurvey& wall, const Best& b, sim::Backend backend,
+                      const std::string& device, const std::string& cpu_name) {
   g::RunRecord row;
   g::RunConfig& c = row.config;
   c.particles = p.particles;
   c.triangles = b.fastest.triangles;
   c.triangles_original = b.fastest.triangles_original;
+  c.radius = wall.r_max;
+  c.wall_area = wall.area;
+  c.wall_box_volume = wall.box_volume;
   c.method = *g::parse_method(sim::to_string(p.method));
   c.traversal = *g::parse_traversal(sim::to_string(p.traversal));
   c.frames = p.frames;
@@ -416,12 +435,15 @@ int cmd_calibrate(const Args& args) {
   if (parsed->has("help")) {
     print_help(
         "usage: collidoscope calibrate --out RUNS.csv [--backend cpu|cuda|auto] [--configs N]\n"
-        "                              [--seed S] [--quick] [--threads T] [--repeats R]\n\n"
+        "                              [--seed S] [--quick] [--threads T] [--repeats R]\n"
+        "                              [--budget SECONDS]\n\n"
         "Runs a seeded sweep of real configurations (walls, particle counts, methods,\n"
         "traversals, frames) on this machine, each in a process of its own, and writes one\n"
         "run-log row per configuration: time per frame (mean over the run's frames), total\n"
         "time, peak host and device memory, GPU load. Repeats are whole passes over the\n"
-        "sweep. `collidoscope gvm train --logs RUNS.csv` trains on the log.\n"
+        "sweep; with --budget, no run starts after that many seconds and the log keeps\n"
+        "the configurations measured by then. `collidoscope gvm train --logs RUNS.csv`\n"
+        "trains on the log.\n"
         "Exit codes: 0 every configuration ran, 1 a run or the output failed, 2 bad arguments.",
         calibrate_flags());
     return kExitOk;
@@ -430,11 +452,16 @@ int cmd_calibrate(const Args& args) {
     return usage_error(cmd, "unexpected argument '" + parsed->positional()[0] + "'");
   if (!parsed->has("out")) return usage_error(cmd, "--out RUNS.csv is required");
   const bool quick = parsed->has("quick");
-  const int64_t configs = parsed->get_int("configs", quick ? 6 : 300, &error);
+  // The GPU sweep's defaults keep it within about six minutes on an H100 (each run is a
+  // fresh process with a CUDA context: about 0.8 s a run there).
+  const bool cuda_defaults = parsed->get("backend", "auto") == "cuda";
+  const int64_t configs = parsed->get_int("configs", quick ? 6 : cuda_defaults ? 200 : 300, &error);
   const int64_t seed = parsed->get_int("seed", 1, &error);
   const int64_t threads = parsed->get_int("threads", 0, &error);
-  const int64_t repeats = parsed->get_int("repeats", 3, &error);
+  const int64_t repeats = parsed->get_int("repeats", cuda_defaults ? 2 : 3, &error);
+  const int64_t budget_s = parsed->get_int("budget", cuda_defaults && !quick ? 330 : 0, &error);
   if (!error.empty()) return usage_error(cmd, error);
+  if (budget_s < 0) return usage_error(cmd, "--budget must be >= 0");
   if (configs < 1 || configs > 100000) return usage_error(cmd, "--configs must be in 1..100000");
   if (threads < 0 || threads > 4096) return usage_error(cmd, "--threads must be in 0..4096");
   if (repeats < 1 || repeats > 100) return usage_error(cmd, "--repeats must be in 1..100");
@@ -497,11 +524,19 @@ int cmd_calibrate(const Args& args) {
   // the GPU load of its fastest repeat) and the largest memory (a peak).
   std::vector<Best> best(plans.size());
   const std::string cpu_name = cpu_model_name();
-  for (int64_t pass = 0; pass < repeats; ++pass)
+  bool out_of_time = false;
+  for (int64_t pass = 0; pass < repeats && !out_of_time; ++pass)
     for (size_t i = 0; i < plans.size(); ++i) {
       const Plan& p = plans[i];
       Best& b = best[i];
       if (b.failed) continue;
+      if (budget_s > 0 &&
+          std::chrono::duration<double>(Clock::now() - t_start).count() > budget_s) {
+        out_of_time = true;
+        std::fprintf(stderr, "calibrate: --budget %lld s reached in pass %lld\n",
+                     static_cast<long long>(budget_s), static_cast<long long>(pass + 1));
+        break;
+      }
       const char* spec = kWalls[p.wall].spec;
       const double r_max = survey.walls[p.wall].r_max;
       // Each configuration gets its own particle seed, still fixed by --seed.
@@ -539,7 +574,8 @@ int cmd_calibrate(const Args& args) {
       std::vector<g::RunRecord> rows;
       for (size_t j = 0; j < plans.size(); ++j)
         if (best[j].measured && !best[j].failed)
-          rows.push_back(make_row(plans[j], best[j], backend, device, cpu_name));
+          rows.push_back(
+              make_row(plans[j], survey.walls[plans[j].wall], best[j], backend, device, cpu_name));
       if (auto s = g::write_run_log(out_path, rows); !s) {
         std::fprintf(stderr, "collidoscope %s: %s\n", cmd, s.message().c_str());
         return kExitFailure;
@@ -547,6 +583,11 @@ int cmd_calibrate(const Args& args) {
     }
   size_t failed = 0, measured = 0;
   for (const Best& b : best) failed += b.failed, measured += b.measured && !b.failed;
+  // Out of time: the log holds what was measured; an empty one is a failure.
+  if (measured == 0) {
+    std::fprintf(stderr, "collidoscope %s: no configuration was measured\n", cmd);
+    return kExitFailure;
+  }
   const double took = std::chrono::duration<double>(Clock::now() - t_start).count();
   std::printf("%zu configurations (%zu failed) x %lld repeats in %.1f s: %s\n", measured, failed,
               static_cast<long long>(repeats), took, out_path.c_str());

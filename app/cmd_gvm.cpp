@@ -333,7 +333,9 @@ int cmd_predict(const Args& args) {
     print_help(
         "usage: collidoscope predict CONFIG.json --model MODEL.json [--json] [--bench]\n\n"
         "CONFIG.json: {\"particles\": 1e6, \"triangles\": 99612, \"method\": \"circumcircle\",\n"
-        "  \"traversal\": \"particle\", \"frames\": 100, \"backend\": \"cuda\"}; optional\n"
+        "  \"traversal\": \"particle\", \"frames\": 100, \"backend\": \"cuda\", \"radius\": 1,\n"
+        "  \"wall_area\": 9.4e4, \"wall_box_volume\": 1.1e6} (largest particle radius, wall\n"
+        "  area, wall bounding box grown by the radius; world units); optional\n"
         "  \"triangles_original\", \"device\", \"threads\" (default: the model's usual host).\n"
         "Prints predicted time per frame, total time, peak memory and GPU load, and a\n"
         "warning for every input outside the range the model was trained on.\n"

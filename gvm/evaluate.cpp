@@ -105,6 +105,10 @@ std::vector<RunRecord> synthetic_run_log(size_t rows, uint64_t seed) {
                                                               : 1.0;
     c.triangles =
         std::max<int64_t>(c.triangles_original, std::llround(c.triangles_original * factor));
+    // Geometry of a wall of that size (this synthetic cost model does not use it).
+    c.radius = 1.0;
+    c.wall_area = 40.0 * static_cast<double>(c.triangles_original);
+    c.wall_box_volume = 0.5 * std::pow(c.wall_area, 1.5);
     c.traversal = rng.below(2) ? Traversal::kParticle : Traversal::kWall;
     c.frames = std::llround(std::pow(10.0, rng.uniform(0.0, 2.5)));
     c.backend = rng.below(2) ? Backend::kCuda : Backend::kCpu;

@@ -71,8 +71,9 @@ FeatureSpace FeatureSpace::with_devices(std::vector<std::string> devices) {
 }
 
 void FeatureSpace::build_names() {
-  names_ = {"log10_particles", "log10_triangles", "log10_triangles_original", "log10_frames",
-            "log10_threads"};
+  names_ = {"log10_particles",   "log10_triangles",           "log10_triangles_original",
+            "log10_frames",      "log10_threads",             "log10_area_per_r2",
+            "log10_box_per_r3",  "log10_near_wall_particles", "log10_triangles_per_r2"};
   for (Method m : kAllMethods) names_.push_back(std::string("method=") + method_name(m));
   names_.push_back("traversal=particle");
   names_.push_back("backend=cuda");
@@ -90,6 +91,13 @@ void FeatureSpace::encode_inputs(const RunConfig& c, double* x) const {
   x[kLogTrianglesOriginal] = lg(c.triangles_original);
   x[kLogFrames] = lg(c.frames);
   x[kLogThreads] = lg(c.threads);
+  const double r2 = c.radius * c.radius;
+  x[kLogAreaPerR2] = std::log10(c.wall_area / r2);
+  x[kLogBoxPerR3] = std::log10(c.wall_box_volume / (r2 * c.radius));
+  const double near = std::min(1.0, 2.0 * c.radius * c.wall_area / c.wall_box_volume);
+  x[kLogNearWallParticles] = std::log10(std::max(1.0, static_cast<double>(c.particles) * near));
+  x[kLogTrianglesPerR2] = std::log10(static_cast<double>(std::max<int64_t>(c.triangles, 1)) * r2 /
+                                     c.wall_area);
   for (size_t m = 0; m < 5; ++m) x[kMethodFirst + m] = c.method == kAllMethods[m] ? 1.0 : 0.0;
   x[kTraversal] = c.traversal == Traversal::kParticle ? 1.0 : 0.0;
   x[kBackend] = c.backend == Backend::kCuda ? 1.0 : 0.0;

@@ -37,8 +37,14 @@ class FeatureSpace {
   static FeatureSpace with_devices(std::vector<std::string> devices);
 
   // Input vector layout: log10 particles, log10 triangles, log10 triangles_original,
-  // log10 frames, log10 max(threads, 1), one-hot method (5), traversal == particle,
-  // backend == cuda, one-hot device (vocabulary order).
+  // log10 frames, log10 max(threads, 1), the geometry block (below), one-hot method (5),
+  // traversal == particle, backend == cuda, one-hot device (vocabulary order).
+  // Geometry, dimensionless so that a scene's unit of length does not matter (r = radius,
+  // A = wall_area, V = wall_box_volume): log10 A / r^2 (the wall's size in grid cells of
+  // its surface), log10 V / r^3 (cells of the domain box), log10 of the particles near
+  // the wall, max(1, particles * min(1, 2 r A / V)) (uniformly placed particles within
+  // r of the surface: the ones that meet triangles), log10 triangles * r^2 / A
+  // (triangles per r^2 of surface: the length of a cell's triangle list).
   size_t input_count() const { return names_.size(); }
   const std::vector<std::string>& input_names() const { return names_; }
   const std::vector<std::string>& devices() const { return devices_; }
@@ -50,8 +56,9 @@ class FeatureSpace {
 
   // Indices of the named blocks, for messages about a feature.
   static constexpr size_t kLogParticles = 0, kLogTriangles = 1, kLogTrianglesOriginal = 2,
-                          kLogFrames = 3, kLogThreads = 4, kMethodFirst = 5, kTraversal = 10,
-                          kBackend = 11, kDeviceFirst = 12;
+                          kLogFrames = 3, kLogThreads = 4, kLogAreaPerR2 = 5, kLogBoxPerR3 = 6,
+                          kLogNearWallParticles = 7, kLogTrianglesPerR2 = 8, kMethodFirst = 9,
+                          kTraversal = 14, kBackend = 15, kDeviceFirst = 16;
 
  private:
   void build_names();

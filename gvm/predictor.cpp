@@ -187,6 +187,10 @@ Expected<Prediction> ResourcePredictor::predict(const RunConfig& c) const {
       msg = std::string(count_names[i]) + " = " + std::to_string(counts[i]) + " is " +
             (issue.value < issue.min ? "below" : "above") + " the trained range [" +
             count_text(issue.min) + ", " + count_text(issue.max) + "]";
+    } else if (i < FeatureSpace::kMethodFirst) {
+      msg = features_.input_names()[i] + " = " + std::to_string(issue.value) + " is " +
+            (issue.value < issue.min ? "below" : "above") + " the trained range [" +
+            std::to_string(issue.min) + ", " + std::to_string(issue.max) + "]";
     } else if (i >= FeatureSpace::kMethodFirst && i < FeatureSpace::kTraversal) {
       if (issue.value == 1.0)
         msg = std::string("method '") + method_name(c.method) + "' is not in the training data";
@@ -377,6 +381,16 @@ Expected<RunConfig> run_config_from_json(const std::string& text, const Resource
     *out = j[key].get<std::string>();
     return Status::ok();
   };
+  // Geometry has no sensible default: the model's costs depend on it.
+  auto positive = [&](const char* key, double* out) -> Status {
+    if (!j.contains(key))
+      return invalid_argument(std::string("configuration lacks \"") + key + "\"");
+    if (!j[key].is_number() || !std::isfinite(j[key].get<double>()) || j[key].get<double>() <= 0)
+      return invalid_argument(std::string("\"") + key + "\" must be a number > 0, got " +
+                              j[key].dump());
+    *out = j[key].get<double>();
+    return Status::ok();
+  };
   std::string method, traversal, backend;
   for (Status s : {count("particles", &c.particles, true), count("triangles", &c.triangles, true),
                    count("frames", &c.frames, true), word("method", &method),
@@ -393,6 +407,9 @@ Expected<RunConfig> run_config_from_json(const std::string& text, const Resource
   c.method = *m;
   c.traversal = *t;
   c.backend = *b;
+  for (Status s : {positive("radius", &c.radius), positive("wall_area", &c.wall_area),
+                   positive("wall_box_volume", &c.wall_box_volume)})
+    if (!s) return s;
   c.triangles_original = c.triangles;
   if (Status s = count("triangles_original", &c.triangles_original, false); !s) return s;
   if (model)
@@ -422,6 +439,9 @@ std::string prediction_to_json(const RunConfig& c, const Prediction& p) {
   j["config"] = {{"particles", c.particles},
                  {"triangles", c.triangles},
                  {"triangles_original", c.triangles_original},
+                 {"radius", c.radius},
+                 {"wall_area", c.wall_area},
+                 {"wall_box_volume", c.wall_box_volume},
                  {"method", method_name(c.method)},
                  {"traversal", traversal_name(c.traversal)},
                  {"frames", c.frames},

@@ -52,6 +52,9 @@ const std::vector<std::string>& run_log_columns() {
   static const std::vector<std::string> cols = {"particles",
                                                 "triangles",
                                                 "triangles_original",
+                                                "radius",
+                                                "wall_area",
+                                                "wall_box_volume",
                                                 "method",
                                                 "traversal",
                                                 "frames",
@@ -70,6 +73,11 @@ Status validate(const RunConfig& c) {
   if (c.particles < 1) return invalid_argument("particles must be >= 1");
   if (c.triangles < 1) return invalid_argument("triangles must be >= 1");
   if (c.triangles_original < 1) return invalid_argument("triangles_original must be >= 1");
+  const std::pair<const char*, double> geometry[] = {
+      {"radius", c.radius}, {"wall_area", c.wall_area}, {"wall_box_volume", c.wall_box_volume}};
+  for (const auto& [name, v] : geometry)
+    if (!std::isfinite(v) || v <= 0.0)
+      return invalid_argument(std::string(name) + " must be a finite number > 0");
   if (c.frames < 1) return invalid_argument("frames must be >= 1");
   if (c.threads < 0) return invalid_argument("threads must be >= 0");
   return Status::ok();
@@ -259,37 +267,42 @@ Expected<std::vector<RunRecord>> parse_run_log(const std::string& text) {
       std::string s = field(k, &loc);
       if (!parse_int(s, ints[k]) || *ints[k] < 1) return bad("an integer >= 1", s);
     }
+    double* geometry[] = {&c.radius, &c.wall_area, &c.wall_box_volume};
+    for (size_t k = 0; k < 3; ++k) {
+      std::string s = field(3 + k, &loc);
+      if (!parse_double(s, geometry[k]) || *geometry[k] <= 0.0) return bad("a finite number > 0", s);
+    }
     {
-      std::string s = field(3, &loc);
+      std::string s = field(6, &loc);
       auto v = parse_method(s);
       if (!v) return bad("gravity|circumcircle|midpoint4|bin|reference", s);
       c.method = *v;
     }
     {
-      std::string s = field(4, &loc);
+      std::string s = field(7, &loc);
       auto v = parse_traversal(s);
       if (!v) return bad("wall|particle", s);
       c.traversal = *v;
     }
     {
-      std::string s = field(5, &loc);
+      std::string s = field(8, &loc);
       if (!parse_int(s, &c.frames) || c.frames < 1) return bad("an integer >= 1", s);
     }
     {
-      std::string s = field(6, &loc);
+      std::string s = field(9, &loc);
       auto v = parse_backend(s);
       if (!v) return bad("cpu|cuda", s);
       c.backend = *v;
     }
-    c.device = field(7, &loc);
+    c.device = field(10, &loc);
     {
-      std::string s = field(8, &loc);
+      std::string s = field(11, &loc);
       if (!parse_int(s, &c.threads) || c.threads < 0) return bad("an integer >= 0", s);
     }
     double* dbl[] = {&m.time_per_frame_s, &m.total_time_s, &m.peak_host_bytes, &m.peak_device_bytes,
                      &m.gpu_load};
     for (size_t k = 0; k < 5; ++k) {
-      std::string s = field(9 + k, &loc);
+      std::string s = field(12 + k, &loc);
       if (!parse_double(s, dbl[k]) || *dbl[k] < 0.0) return bad("a finite number >= 0", s);
       if (dbl[k] == &m.gpu_load && m.gpu_load > 1.0) return bad("a load in [0, 1]", s);
     }
@@ -307,7 +320,9 @@ std::string format_run_log(const std::vector<RunRecord>& rows) {
     const RunConfig& c = r.config;
     const RunMeasure& m = r.measure;
     out += std::to_string(c.particles) + "," + std::to_string(c.triangles) + "," +
-           std::to_string(c.triangles_original) + "," + method_name(c.method) + "," +
+           std::to_string(c.triangles_original) + "," + format_double(c.radius) + "," +
+           format_double(c.wall_area) + "," + format_double(c.wall_box_volume) + "," +
+           method_name(c.method) + "," +
            traversal_name(c.traversal) + "," + std::to_string(c.frames) + "," +
            backend_name(c.backend) + "," + quote_csv(c.device) + "," + std::to_string(c.threads) +
            "," + format_double(m.time_per_frame_s) + "," + format_double(m.total_time_s) + "," +

@@ -33,6 +33,12 @@ struct RunConfig {
   int64_t particles = 0;           // number of particles
   int64_t triangles = 0;           // triangles after division (= original for bin/reference)
   int64_t triangles_original = 0;  // triangles of the mesh as loaded
+  // The wall and particle geometry behind per-frame cost, all known before a run from
+  // the scene. The predictor uses them only as ratios (area / radius^2 and so on), so a
+  // scene's unit of length does not matter.
+  double radius = 1.0;           // largest particle radius, world units
+  double wall_area = 1.0;        // total triangle area of the wall as loaded, units^2
+  double wall_box_volume = 1.0;  // wall's bounding box grown by radius on every side, units^3
   Method method = Method::kBin;
   Traversal traversal = Traversal::kParticle;
   int64_t frames = 1;  // frames simulated
@@ -58,7 +64,8 @@ struct RunRecord {
 // The CSV columns in the order they are written.
 const std::vector<std::string>& run_log_columns();
 
-// Checks a configuration's values (counts >= 1, threads >= 0); names the bad field.
+// Checks a configuration's values (counts >= 1, threads >= 0, geometry finite and > 0);
+// names the bad field.
 Status validate(const RunConfig& c);
 // Checks measured values (finite, >= 0, gpu_load <= 1); names the bad field.
 Status validate(const RunMeasure& m);

@@ -25,6 +25,7 @@ TEST(CmdCalibrate, BadArgumentsExitTwo) {
   EXPECT_EQ(cmd_calibrate({"--out", out, "--threads", "-1"}), kExitUsage);
   EXPECT_EQ(cmd_calibrate({"--out", out, "--repeats", "0"}), kExitUsage);
   EXPECT_EQ(cmd_calibrate({"--out", out, "--seed", "x"}), kExitUsage);
+  EXPECT_EQ(cmd_calibrate({"--out", out, "--budget", "-1"}), kExitUsage);
   EXPECT_EQ(cmd_calibrate({"--out", out, "--bogus"}), kExitUsage);
   EXPECT_EQ(cmd_calibrate({"--out", out, "extra"}), kExitUsage);
   EXPECT_EQ(cmd_calibrate({"--out"}), kExitUsage);  // --out needs a value
@@ -68,6 +69,13 @@ TEST(CmdCalibrate, QuickSweepWritesARunLog) {
     if (c.method == gvm::Method::kBin || c.method == gvm::Method::kReference) {
       EXPECT_EQ(c.triangles, c.triangles_original);
     }
+    // Geometry: r = 1 % of the wall's longest side L, box = the wall's box grown by r,
+    // so (2r)^2 (L + 2r) <= box volume <= (L + 2r)^3.
+    const double rad = c.radius, side = 102 * rad;
+    EXPECT_GT(rad, 0.0);
+    EXPECT_GT(c.wall_area, 0.0);
+    EXPECT_LE(c.wall_box_volume, side * side * side * (1 + 1e-9));
+    EXPECT_GE(c.wall_box_volume, 4 * rad * rad * side * (1 - 1e-9));
     EXPECT_GT(m.time_per_frame_s, 0.0);
     // Total time holds the set-up and every frame.
     EXPECT_GE(m.total_time_s, m.time_per_frame_s * static_cast<double>(c.frames));
@@ -88,6 +96,9 @@ TEST(CmdCalibrate, SameSeedSameConfigurations) {
     EXPECT_EQ(a[i].config.method, b[i].config.method);
     EXPECT_EQ(a[i].config.traversal, b[i].config.traversal);
     EXPECT_EQ(a[i].config.frames, b[i].config.frames);
+    EXPECT_EQ(a[i].config.radius, b[i].config.radius);
+    EXPECT_EQ(a[i].config.wall_area, b[i].config.wall_area);
+    EXPECT_EQ(a[i].config.wall_box_volume, b[i].config.wall_box_volume);
   }
 }
 

@@ -74,7 +74,8 @@ TEST(CmdGvm, SynthTrainPredict) {
 
   const std::string config = tmp("config.json");
   std::ofstream(config) << R"({"particles": 1e9, "triangles": 5000, "method": "gravity",
-                               "traversal": "particle", "frames": 10, "backend": "cuda"})";
+                               "traversal": "particle", "frames": 10, "backend": "cuda",
+                               "radius": 1, "wall_area": 4e4, "wall_box_volume": 1e6})";
   auto pred = run([&] { return cmd_predict({config, "--model", model}); });
   ASSERT_EQ(pred.first, kExitOk) << pred.second;
   EXPECT_NE(pred.second.find("time per frame"), std::string::npos);

@@ -30,6 +30,8 @@ RunConfig typical(Backend b) {
   c.particles = 20000;
   c.triangles = 5000;
   c.triangles_original = 1000;
+  c.wall_area = 4e4;  // as synthetic_run_log makes them: 40 per triangle, box 0.5 A^1.5
+  c.wall_box_volume = 4e6;
   c.method = Method::kGravity;
   c.traversal = Traversal::kParticle;
   c.frames = 10;
@@ -83,7 +85,9 @@ TEST(Predictor, WarnsAboutEveryInputOutsideTheTrainedRange) {
   EXPECT_TRUE(contains(p->warnings, "particles = 1000000000 is above the trained range"));
   EXPECT_TRUE(contains(p->warnings, "method 'reference' is not in the training data"));
   EXPECT_TRUE(contains(p->warnings, "device 'Quantum 9000' is not in the training data"));
-  EXPECT_EQ(p->warnings.size(), 3u);
+  // A billion particles also put the near-wall particle count (a geometry feature) out.
+  EXPECT_TRUE(contains(p->warnings, "log10_near_wall_particles = "));
+  EXPECT_EQ(p->warnings.size(), 4u);
   EXPECT_TRUE(std::isfinite(p->measure.time_per_frame_s));
 
   c = typical(Backend::kCpu);
@@ -179,7 +183,8 @@ TEST(Predictor, CorruptModelFilesAreErrors) {
 TEST(Predictor, ReadsConfigurationJson) {
   auto c = run_config_from_json(
       R"({"particles": 1e6, "triangles": 99612, "method": "circumcircle",
-          "traversal": "wall", "frames": 100, "backend": "cuda", "mesh": "wall1.stl"})",
+          "traversal": "wall", "frames": 100, "backend": "cuda", "mesh": "wall1.stl",
+          "radius": 1, "wall_area": 47027.1, "wall_box_volume": 1061208})",
       &trained());
   ASSERT_TRUE(c) << c.status().message();
   EXPECT_EQ(c->particles, 1000000);
@@ -188,6 +193,26 @@ TEST(Predictor, ReadsConfigurationJson) {
   EXPECT_EQ(c->traversal, Traversal::kWall);
   EXPECT_EQ(c->device, "synthetic-gpu");  // the model's usual device for cuda
   EXPECT_EQ(c->threads, 1);
+  EXPECT_EQ(c->radius, 1.0);
+  EXPECT_EQ(c->wall_area, 47027.1);
+  EXPECT_EQ(c->wall_box_volume, 1061208.0);
+
+  // Geometry is required: the model's costs depend on it and no default fits every wall.
+  auto no_geometry = run_config_from_json(
+      R"({"particles": 10, "triangles": 1, "method": "bin", "traversal": "wall",
+          "frames": 1, "backend": "cpu", "radius": 1, "wall_area": 5})",
+      nullptr);
+  ASSERT_FALSE(no_geometry);
+  EXPECT_NE(no_geometry.status().message().find("lacks \"wall_box_volume\""), std::string::npos)
+      << no_geometry.status().message();
+  auto zero_radius = run_config_from_json(
+      R"({"particles": 10, "triangles": 1, "method": "bin", "traversal": "wall",
+          "frames": 1, "backend": "cpu", "radius": 0, "wall_area": 5, "wall_box_volume": 9})",
+      nullptr);
+  ASSERT_FALSE(zero_radius);
+  EXPECT_NE(zero_radius.status().message().find("\"radius\" must be a number > 0"),
+            std::string::npos)
+      << zero_radius.status().message();
 
   auto missing = run_config_from_json(R"({"particles": 10})", nullptr);
   ASSERT_FALSE(missing);
