@@ -120,6 +120,8 @@ class DynamicsPipeline final : public Simulation {
     *st = FrameStats{};
     st->time = time_;
     if (n_ == 0) return backend_.status();
+    // The grid as the positions are now (symplectic Euler drifted after the last build).
+    if (cfg_.particle_contacts) build_particle_grid();
     forces(0.0, /*measure=*/true);
     kinematics_stats();
     double col[kStatColumns];
