@@ -238,8 +238,9 @@ void division_methods_push_once() {
     cfg.material.restitution = 0.2;
     auto s = make_sim(floor, cfg, particles_at({{0.3, 0.2, 0.6}}, {}, r));
     ASSERT_TRUE(s);
-    if (m != Method::kBin)
+    if (m != Method::kBin) {
       EXPECT_GT(s->wall_info().triangles_used, floor.triangles.size()) << to_string(m);
+    }
     FrameStats st;
     for (int f = 0; f < 30; ++f) ASSERT_TRUE(s->advance(0.1, &st));
     ParticleSet out;
