@@ -158,7 +158,11 @@ int cmd_run(const Args& args) {
   // The backend: the GPU when asked (or auto and usable), else the CPU with a note.
   std::string why;
   const bool gpu = sim::cuda_available(&why);
-  if (scene->backend_auto) scene->dynamics.backend = gpu ? sim::Backend::kCuda : sim::Backend::kCpu;
+  if (scene->backend_auto) {
+    scene->dynamics.backend = gpu ? sim::Backend::kCuda : sim::Backend::kCpu;
+    if (!gpu && !quiet)
+      std::fprintf(stderr, "collidoscope run: note: no usable GPU (%s); running on the CPU\n", why.c_str());
+  }
   if (scene->dynamics.backend == sim::Backend::kCuda && !gpu) {
     std::fprintf(stderr, "collidoscope run: note: no usable GPU (%s); running on the CPU\n",
                  why.c_str());
