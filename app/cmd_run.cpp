@@ -161,7 +161,8 @@ int cmd_run(const Args& args) {
   if (scene->backend_auto) {
     scene->dynamics.backend = gpu ? sim::Backend::kCuda : sim::Backend::kCpu;
     if (!gpu && !quiet)
-      std::fprintf(stderr, "collidoscope run: note: no usable GPU (%s); running on the CPU\n", why.c_str());
+      std::fprintf(stderr, "collidoscope run: note: no usable GPU (%s); running on the CPU\n",
+                   why.c_str());
   }
   if (scene->dynamics.backend == sim::Backend::kCuda && !gpu) {
     std::fprintf(stderr, "collidoscope run: note: no usable GPU (%s); running on the CPU\n",

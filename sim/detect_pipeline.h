@@ -16,6 +16,7 @@
 #include <cstring>
 #include <vector>
 
+#include "sim/cell_ranges.h"
 #include "sim/detect.h"
 #include "sim/wall_index.h"
 
@@ -45,8 +46,8 @@ class GridDetector final : public Detector {
   Status set_particles(const Particles& p) override {
     const size_t n = p.size();
     if (n > capacity_)
-      return invalid_argument("frame has " + std::to_string(n) + " particles, detector was made for " +
-                              std::to_string(capacity_));
+      return invalid_argument("frame has " + std::to_string(n) +
+                              " particles, detector was made for " + std::to_string(capacity_));
     std::vector<PackedParticle>& host = staging_;
     host.resize(n);
     const float rmax = static_cast<float>(cfg_.r_max);
@@ -54,7 +55,8 @@ class GridDetector final : public Detector {
       host[i] = {static_cast<float>(p.x[i] - origin_.x), static_cast<float>(p.y[i] - origin_.y),
                  static_cast<float>(p.z[i] - origin_.z), static_cast<float>(p.r[i])};
       if (!(p.r[i] > 0) || host[i].r > rmax * (1 + 1e-6f))
-        return invalid_argument("particle " + std::to_string(i) + " has radius " + std::to_string(p.r[i]) +
+        return invalid_argument("particle " + std::to_string(i) + " has radius " +
+                                std::to_string(p.r[i]) +
                                 ", outside (0, r_max = " + std::to_string(cfg_.r_max) + "]");
     }
     n_ = n;
@@ -130,26 +132,28 @@ class GridDetector final : public Detector {
 
   // --- preparation -------------------------------------------------------------------------
  public:
-
   Status prepare(const TriangleMesh& mesh) {
     const auto t0 = clock();
     if (!(cfg_.r_max > 0) || !std::isfinite(cfg_.r_max))
       return invalid_argument("r_max must be a positive radius, got " + std::to_string(cfg_.r_max));
     if (mesh.triangles.empty()) return invalid_argument("the wall has no triangles");
     if (cfg_.grid_length < 0 || !std::isfinite(cfg_.grid_length))
-      return invalid_argument("grid length must be positive, got " + std::to_string(cfg_.grid_length));
+      return invalid_argument("grid length must be positive, got " +
+                              std::to_string(cfg_.grid_length));
     const Bounds3d box = mesh_bounds(mesh);
     source_ids_ = mesh.source_ids;
     const double cell = cfg_.grid_length > 0 ? cfg_.grid_length : 2 * cfg_.r_max;
     info_.grid_length = cell;
     const double extent = length(box.extent());
     if (extent / cell > 1e7)
-      return invalid_argument("grid length " + std::to_string(cell) + " is absurdly small for a wall " +
-                              std::to_string(extent) + " across");
+      return invalid_argument("grid length " + std::to_string(cell) +
+                              " is absurdly small for a wall " + std::to_string(extent) +
+                              " across");
 
     backend_.resize(particles_, capacity_);
     backend_.resize(counts_, std::max<size_t>(capacity_, 1));
-    Status s = wall_.prepare(backend_, mesh, cfg_.method, cfg_.r_max, cell, cfg_.max_dense_cells, capacity_, &info_);
+    Status s = wall_.prepare(backend_, mesh, cfg_.method, cfg_.r_max, cell, cfg_.max_dense_cells,
+                             capacity_, &info_);
     if (!s) return s;
     grid_ = wall_.grid;
     reach_ = wall_.reach;
@@ -178,7 +182,6 @@ class GridDetector final : public Detector {
   // Public only because nvcc's extended (host/device) lambdas may not live in
   // private member functions; nothing outside this class calls them.
  public:
-
   void hash_and_sort(DetectResult* out) {
     const GridSpec g = grid_;
     const PackedParticle* P = particles_.data();
@@ -197,25 +200,13 @@ class GridDetector final : public Detector {
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t j) { SP[j] = P[sidx[j]]; });
     lap(out->times.sort_ms);
     if (cfg_.traversal == Traversal::kWall) {
-      uint32_t* start = p_cell_start_.data();
-      uint32_t* end = p_cell_end_.data();
-      const uint32_t* skey = p_key_sorted_.data();
-      const uint32_t n = static_cast<uint32_t>(n_);
-      backend_.fill(start, grid_.buckets, 0u);
-      backend_.fill(end, grid_.buckets, 0u);
-      backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t j) {
-        const uint32_t k = skey[j];
-        if (k == kInvalidBucket) return;
-        if (j == 0 || skey[j - 1] != k) start[k] = j;
-        if (j + 1 == n || skey[j + 1] != k) end[k] = j + 1;
-      });
+      build_cell_ranges(backend_, p_key_sorted_.data(), n_, p_cell_start_.data(),
+                        p_cell_end_.data(), grid_.buckets, kInvalidBucket);
       lap(out->times.cells_ms);
     }
   }
 
-  void reset_pairs() {
-    backend_.fill(pair_counter_.data(), 1, 0u);
-  }
+  void reset_pairs() { backend_.fill(pair_counter_.data(), 1, 0u); }
   bool pairs_fit() {
     uint32_t c = 0;
     backend_.to_host(&c, pair_counter_.data(), sizeof c);
@@ -247,7 +238,8 @@ class GridDetector final : public Detector {
     }
   };
   PairSink sink() {
-    return {pair_key_.data(), pair_dist_.data(), pair_counter_.data(), static_cast<uint32_t>(pair_capacity_)};
+    return {pair_key_.data(), pair_dist_.data(), pair_counter_.data(),
+            static_cast<uint32_t>(pair_capacity_)};
   }
 
   // bin, particle traversal: a thread per particle reads its own cell's list.
@@ -377,7 +369,8 @@ class GridDetector final : public Detector {
     uint32_t* counts = counts_.data();
     const uint64_t* key = pair_key2_.data();
     backend_.fill(counts, n_, 0u);
-    backend_.parallel_for(unique, [=] COLLIDO_HD(uint32_t k) { atomic_add_u32(&counts[key[k] >> 32], 1u); });
+    backend_.parallel_for(
+        unique, [=] COLLIDO_HD(uint32_t k) { atomic_add_u32(&counts[key[k] >> 32], 1u); });
   }
 
   void download(uint32_t unique, DetectResult* out) {
@@ -396,7 +389,8 @@ class GridDetector final : public Detector {
     }
     out->contacts.resize(unique);
     for (uint32_t k = 0; k < unique; ++k)
-      out->contacts[k] = {static_cast<uint32_t>(keys[k] >> 32), source_ids_[keys[k] & 0xFFFFFFFFu], dist[k]};
+      out->contacts[k] = {static_cast<uint32_t>(keys[k] >> 32), source_ids_[keys[k] & 0xFFFFFFFFu],
+                          dist[k]};
     // Source ids follow the input file's order, which welding and dropping may
     // have permuted relative to mesh indices: sort by the ids the user sees.
     std::sort(out->contacts.begin(), out->contacts.end(), [](const Contact& a, const Contact& b) {

@@ -14,6 +14,7 @@
 #include <cmath>
 #include <vector>
 
+#include "sim/cell_ranges.h"
 #include "sim/contact_force.h"
 #include "sim/dynamics.h"
 #include "sim/wall_index.h"
@@ -257,6 +258,17 @@ class DynamicsPipeline final : public Simulation {
     return backend_.status();
   }
 
+  // The per-particle arrays as plain pointers, for the loop bodies to capture by value.
+  struct ParticleArrays {
+    Vec3d *x, *v, *w, *acc, *alpha;  // position (local frame), velocity, spin, accelerations
+    double *r, *inv_mass;
+    uint8_t *state, *flags;
+  };
+  ParticleArrays arrays() {
+    return {pos_.data(),    vel_.data(),      omega_.data(), acc_.data(),  alpha_.data(),
+            radius_.data(), inv_mass_.data(), state_.data(), flags_.data()};
+  }
+
   template <class T>
   void upload(Buf<T>& dst, const std::vector<T>& src) {
     backend_.resize(dst, std::max<size_t>(src.size(), 1));
@@ -318,87 +330,75 @@ class DynamicsPipeline final : public Simulation {
   }
 
   void kick_drift(double dt) {
-    Vec3d* x = pos_.data();
-    Vec3d* v = vel_.data();
-    const Vec3d* a = acc_.data();
-    Vec3d* w = omega_.data();
-    const Vec3d* al = alpha_.data();
-    const uint8_t* state = state_.data();
+    const ParticleArrays P = arrays();
     const bool rot = law_.mu > 0;
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
-      if (state[i] != kActive) return;
-      v[i] = v[i] + a[i] * (0.5 * dt);
-      x[i] = x[i] + v[i] * dt;
-      if (rot) w[i] = w[i] + al[i] * (0.5 * dt);
+      if (P.state[i] != kActive) return;
+      P.v[i] = P.v[i] + P.acc[i] * (0.5 * dt);
+      P.x[i] = P.x[i] + P.v[i] * dt;
+      if (rot) P.w[i] = P.w[i] + P.alpha[i] * (0.5 * dt);
     });
   }
 
   void finish_step(double dt, bool verlet) {
-    Vec3d* x = pos_.data();
-    Vec3d* v = vel_.data();
-    const Vec3d* a = acc_.data();
-    Vec3d* w = omega_.data();
-    const Vec3d* al = alpha_.data();
-    uint8_t* state = state_.data();
-    uint8_t* flags = flags_.data();
+    const ParticleArrays P = arrays();
     double* speed = speed_.data();
     const bool rot = law_.mu > 0;
     const Vec3d lo = lo_, hi = hi_;
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
-      if (state[i] != kActive) {
+      if (P.state[i] != kActive) {
         speed[i] = 0;
         return;
       }
-      Vec3d vi = v[i], xi = x[i];
+      Vec3d vi = P.v[i], xi = P.x[i];
       if (verlet) {
-        vi = vi + a[i] * (0.5 * dt);
-        if (rot) w[i] = w[i] + al[i] * (0.5 * dt);
+        vi = vi + P.acc[i] * (0.5 * dt);
+        if (rot) P.w[i] = P.w[i] + P.alpha[i] * (0.5 * dt);
       } else {
-        vi = vi + a[i] * dt;
+        vi = vi + P.acc[i] * dt;
         xi = xi + vi * dt;
-        if (rot) w[i] = w[i] + al[i] * dt;
+        if (rot) P.w[i] = P.w[i] + P.alpha[i] * dt;
       }
       const double s2 = dot(vi, vi);
       const bool finite = hd_finite(s2) && hd_finite(xi.x) && hd_finite(xi.y) && hd_finite(xi.z);
       if (!finite) {
         // Frozen where it last was finite, counted, never written as NaN.
-        state[i] = kInvalid;
-        flags[i] = kInvalid;
-        v[i] = Vec3d{0, 0, 0};
+        P.state[i] = kInvalid;
+        P.flags[i] = kInvalid;
+        P.v[i] = Vec3d{0, 0, 0};
         speed[i] = 0;
         return;
       }
-      v[i] = vi;
-      if (!verlet) x[i] = xi;  // Verlet moved it in the drift
+      P.v[i] = vi;
+      if (!verlet) P.x[i] = xi;  // Verlet moved it in the drift
       speed[i] = sqrt(s2);
       if (xi.x < lo.x || xi.y < lo.y || xi.z < lo.z || xi.x > hi.x || xi.y > hi.y || xi.z > hi.z) {
-        state[i] = kEscaped;
-        flags[i] = kEscaped;
+        P.state[i] = kEscaped;
+        P.flags[i] = kEscaped;
         speed[i] = 0;
       }
     });
   }
 
   void speeds() {
-    const Vec3d* v = vel_.data();
-    const uint8_t* state = state_.data();
+    const ParticleArrays P = arrays();
     double* speed = speed_.data();
-    backend_.parallel_for(
-        n_, [=] COLLIDO_HD(uint32_t i) { speed[i] = state[i] == kActive ? length(v[i]) : 0.0; });
+    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+      speed[i] = P.state[i] == kActive ? length(P.v[i]) : 0.0;
+    });
   }
 
   void swap_history() { hist_in_ ^= 1; }
 
   void build_particle_grid() {
+    const ParticleArrays P = arrays();
     const GridSpec g = pgrid_;
     const uint32_t none = pgrid_.buckets;  // sorts after every bucket, within the key bits
-    const Vec3d* x = pos_.data();
-    const uint8_t* state = state_.data();
     uint32_t* key = p_key_.data();
     uint32_t* idx = p_idx_.data();
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
       int cx = 0, cy = 0, cz = 0;
-      key[i] = state[i] == kActive && g.cell_of(cast3<float>(x[i]), cx, cy, cz)
+      key[i] = P.state[i] == kActive && g.cell_of(cast3<float>(P.x[i]), cx, cy, cz)
                    ? g.bucket(g.linear(cx, cy, cz))
                    : none;
       idx[i] = i;
@@ -407,25 +407,18 @@ class DynamicsPipeline final : public Simulation {
     int bits = 1;
     while (bits < 32 && (uint64_t(1) << bits) <= none) ++bits;
     backend_.sort_pairs(key, idx, p_key_sorted_.data(), p_idx_sorted_.data(), n_, bits);
-    uint32_t* start = cell_start_.data();
-    uint32_t* end = cell_end_.data();
-    const uint32_t* skey = p_key_sorted_.data();
-    const uint32_t n = static_cast<uint32_t>(n_);
-    backend_.fill(start, pgrid_.buckets, 0u);
-    backend_.fill(end, pgrid_.buckets, 0u);
-    // Cell ranges, and a float copy of each particle in cell order: the pair
-    // loop reads its neighbours' cells as contiguous 16-byte records and goes
-    // to the double state only for real contacts.
+    build_cell_ranges(backend_, p_key_sorted_.data(), n_, cell_start_.data(), cell_end_.data(),
+                      pgrid_.buckets, none);
+    // A float copy of each particle in cell order: the pair loop reads its
+    // neighbours' cells as contiguous 16-byte records and goes to the double
+    // state only for real contacts.
     PackedParticle* sp = sorted_.data();
     const uint32_t* sidx = p_idx_sorted_.data();
-    const double* rad = radius_.data();
+    const uint32_t* skey = p_key_sorted_.data();
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t j) {
-      const uint32_t k = skey[j];
-      if (k == none) return;
-      if (j == 0 || skey[j - 1] != k) start[k] = j;
-      if (j + 1 == n || skey[j + 1] != k) end[k] = j + 1;
+      if (skey[j] == none) return;
       const uint32_t i = sidx[j];
-      sp[j] = PackedParticle{float(x[i].x), float(x[i].y), float(x[i].z), float(rad[i])};
+      sp[j] = PackedParticle{float(P.x[i].x), float(P.x[i].y), float(P.x[i].z), float(P.r[i])};
     });
   }
 
@@ -448,18 +441,10 @@ class DynamicsPipeline final : public Simulation {
   }
 
   void pair_forces(double dt, bool measure) {
+    const ParticleArrays P = arrays();
     const GridSpec pg = pgrid_;
     const ContactLaw law = law_;
     const Vec3d grav = cfg_.gravity;
-    const Vec3d* x = pos_.data();
-    const Vec3d* v = vel_.data();
-    const Vec3d* w = omega_.data();
-    const double* rad = radius_.data();
-    const double* inv_mass = inv_mass_.data();
-    const uint8_t* state = state_.data();
-    uint8_t* flags = flags_.data();
-    Vec3d* acc = acc_.data();
-    Vec3d* alpha = alpha_.data();
     const FrictionSlot* hin = pair_hist_[hist_in_].data();
     FrictionSlot* hout = pair_hist_[hist_in_ ^ 1].data();
     const uint32_t* start = cell_start_.data();
@@ -471,15 +456,15 @@ class DynamicsPipeline final : public Simulation {
     const size_t n = n_;
     const bool friction = law.mu > 0;
     backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
-      if (state[i] != kActive) {
+      if (P.state[i] != kActive) {
         if (measure)
           stats[kStatElasticPair * n + i] = stats[kStatOverlapPair * n + i] =
               stats[kStatPairContacts * n + i] = stats[kStatOverflowPair * n + i] = 0;
         return;
       }
-      const Vec3d xi = x[i], vi = v[i];
-      const Vec3d wi = friction ? w[i] : Vec3d{0, 0, 0};
-      const double r = rad[i], m = 1.0 / inv_mass[i];
+      const Vec3d xi = P.x[i], vi = P.v[i];
+      const Vec3d wi = friction ? P.w[i] : Vec3d{0, 0, 0};
+      const double r = P.r[i], m = 1.0 / P.inv_mass[i];
       const Vec3f xf = cast3<float>(xi);
       const float rf = float(r);
       Vec3d f = grav * m, torque{0, 0, 0};
@@ -498,18 +483,18 @@ class DynamicsPipeline final : public Simulation {
             const uint32_t j = sidx[k];
             if (j == i) continue;
             if (pg.hashed && !pg.holds(position(q), l)) continue;
-            const Vec3d xj = x[j];
+            const Vec3d xj = P.x[j];
             const Vec3d d = xi - xj;
-            const double rs = r + rad[j];
+            const double rs = r + P.r[j];
             const double dist2 = dot(d, d);
             if (!(dist2 < rs * rs)) continue;
             const double dist = sqrt(dist2);
             // Coincident centres: separate along z, opposite ways for the two.
             const Vec3d nrm =
                 dist > 1e-12 * rs ? d * (1.0 / dist) : Vec3d{0, 0, i < j ? 1.0 : -1.0};
-            const double mj = 1.0 / inv_mass[j];
-            Vec3d vrel = vi - v[j];
-            if (friction) vrel = vrel + cross(wi, nrm * (-r)) - cross(w[j], nrm * rad[j]);
+            const double mj = 1.0 / P.inv_mass[j];
+            Vec3d vrel = vi - P.v[j];
+            if (friction) vrel = vrel + cross(wi, nrm * (-r)) - cross(P.w[j], nrm * P.r[j]);
             Vec3d spring = friction ? find_spring(old_slots, kPairSlots, j) : Vec3d{0, 0, 0};
             const ContactForce cf =
                 contact_force(law, nrm, rs - dist, vrel, m * mj / (m + mj), r, &spring, dt);
@@ -528,7 +513,7 @@ class DynamicsPipeline final : public Simulation {
           }
         });
       }
-      flags[i] = npair ? uint8_t(kActive | kFlagParticleContact) : uint8_t(kActive);
+      P.flags[i] = npair ? uint8_t(kActive | kFlagParticleContact) : uint8_t(kActive);
       if (measure) {
         stats[kStatElasticPair * n + i] = elastic;
         stats[kStatOverlapPair * n + i] = overlap_max;
@@ -536,10 +521,10 @@ class DynamicsPipeline final : public Simulation {
         stats[kStatOverflowPair * n + i] = overflow;
         return;
       }
-      acc[i] = f * (1.0 / m);
+      P.acc[i] = f * (1.0 / m);
       if (friction) {
         if (slots < uint32_t(kPairSlots)) new_slots[slots].key = kNoKey;  // terminates the list
-        alpha[i] = torque * (1.0 / (0.4 * m * r * r));
+        P.alpha[i] = torque * (1.0 / (0.4 * m * r * r));
       }
     });
   }
@@ -547,38 +532,30 @@ class DynamicsPipeline final : public Simulation {
   // Wall contacts, one per touched feature. add: on top of pair_forces' accelerations, else from
   // gravity.
   void wall_forces(double dt, bool measure, bool add) {
+    const ParticleArrays P = arrays();
     const WallView wall = wall_.view();
     const PlanarTriangleD* tris_d = wall_.tris_d.data();
     const ContactLaw law = law_;
     const Vec3d grav = cfg_.gravity;
-    const Vec3d* x = pos_.data();
-    const Vec3d* v = vel_.data();
-    const Vec3d* w = omega_.data();
-    const double* rad = radius_.data();
-    const double* inv_mass = inv_mass_.data();
-    const uint8_t* state = state_.data();
-    uint8_t* flags = flags_.data();
-    Vec3d* acc = acc_.data();
-    Vec3d* alpha = alpha_.data();
     const FrictionSlot* hin = wall_hist_[hist_in_].data();
     FrictionSlot* hout = wall_hist_[hist_in_ ^ 1].data();
     double* stats = scratch_.data();
     const size_t n = n_;
     const bool friction = law.mu > 0;
     backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
-      const uint8_t st = state[i];
+      const uint8_t st = P.state[i];
       if (st != kActive) {
         if (measure)
           stats[kStatElasticWall * n + i] = stats[kStatOverlapWall * n + i] =
               stats[kStatWallContacts * n + i] = stats[kStatTouching * n + i] =
                   stats[kStatOverflowWall * n + i] = 0;
         else
-          acc[i] = Vec3d{0, 0, 0};
-        flags[i] = st;
+          P.acc[i] = Vec3d{0, 0, 0};
+        P.flags[i] = st;
         return;
       }
-      const Vec3d xi = x[i];
-      const double r = rad[i];
+      const Vec3d xi = P.x[i];
+      const double r = P.r[i];
       // Candidates from the prepared wall; most particles have none and stop here.
       WallContactSet<kMaxWallContacts> set;
       const double r2 = r * r, tol = 1e-9 * r;
@@ -600,13 +577,13 @@ class DynamicsPipeline final : public Simulation {
         }
         set.offer(WallContact{q, nrm, d, orig}, tol);
       });
-      const double m = 1.0 / inv_mass[i];
+      const double m = 1.0 / P.inv_mass[i];
       const FrictionSlot* old_slots = hin + size_t(i) * kWallSlots;
       FrictionSlot* new_slots = hout + size_t(i) * kWallSlots;
       Vec3d f{0, 0, 0}, torque{0, 0, 0};
       double elastic = 0, overlap_max = 0;
-      const Vec3d vi = v[i];
-      const Vec3d wi = friction ? w[i] : Vec3d{0, 0, 0};
+      const Vec3d vi = P.v[i];
+      const Vec3d wi = friction ? P.w[i] : Vec3d{0, 0, 0};
       for (int k = 0; k < set.n; ++k) {
         const Vec3d nrm = set.c[k].n;
         const double overlap = r - set.c[k].dist;
@@ -621,8 +598,8 @@ class DynamicsPipeline final : public Simulation {
         if (friction && !measure)
           new_slots[k] = FrictionSlot{key, float(spring.x), float(spring.y), float(spring.z)};
       }
-      const uint8_t base = add ? flags[i] : uint8_t(kActive);
-      flags[i] = set.n ? uint8_t(base | kFlagWallContact) : base;
+      const uint8_t base = add ? P.flags[i] : uint8_t(kActive);
+      P.flags[i] = set.n ? uint8_t(base | kFlagWallContact) : base;
       if (measure) {
         stats[kStatElasticWall * n + i] = elastic;
         stats[kStatOverlapWall * n + i] = overlap_max;
@@ -632,37 +609,32 @@ class DynamicsPipeline final : public Simulation {
         return;
       }
       const Vec3d a = f * (1.0 / m);
-      acc[i] = add ? acc[i] + a : a + grav;
+      P.acc[i] = add ? P.acc[i] + a : a + grav;
       if (friction) {
         if (set.n < kWallSlots) new_slots[set.n].key = kNoKey;  // terminates the list
         const Vec3d al = torque * (1.0 / (0.4 * m * r * r));
-        alpha[i] = add ? alpha[i] + al : al;
+        P.alpha[i] = add ? P.alpha[i] + al : al;
       }
     });
   }
 
   // Kinetic and potential energy, speed and state counts for the measuring pass.
   void kinematics_stats() {
-    const Vec3d* x = pos_.data();
-    const Vec3d* v = vel_.data();
-    const Vec3d* w = omega_.data();
-    const double* rad = radius_.data();
-    const double* inv_mass = inv_mass_.data();
-    const uint8_t* state = state_.data();
+    const ParticleArrays P = arrays();
     double* stats = scratch_.data();
     const size_t n = n_;
     const bool rot = law_.mu > 0;
     const Vec3d g = cfg_.gravity;
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
-      const uint8_t st = state[i];
+      const uint8_t st = P.state[i];
       const bool active = st == kActive;
-      const double m = 1.0 / inv_mass[i];
+      const double m = 1.0 / P.inv_mass[i];
       double ke = 0, pe = 0, sp = 0;
       if (active) {
-        ke = 0.5 * m * dot(v[i], v[i]);
-        if (rot) ke += 0.5 * 0.4 * m * rad[i] * rad[i] * dot(w[i], w[i]);
-        pe = -m * dot(g, x[i]);
-        sp = length(v[i]);
+        ke = 0.5 * m * dot(P.v[i], P.v[i]);
+        if (rot) ke += 0.5 * 0.4 * m * P.r[i] * P.r[i] * dot(P.w[i], P.w[i]);
+        pe = -m * dot(g, P.x[i]);
+        sp = length(P.v[i]);
       }
       stats[kStatKinetic * n + i] = ke;
       stats[kStatPotential * n + i] = pe;
