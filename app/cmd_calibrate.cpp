@@ -19,6 +19,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -50,6 +51,9 @@ const std::vector<FlagSpec>& calibrate_flags() {
       {"backend", true, "cpu | cuda | auto (default auto: cuda when a GPU is usable)"},
       {"configs", true, "number of configurations (default 300 on cpu, 200 on cuda, 6 with --quick)"},
       {"seed", true, "seed of the sweep and of the particles (default 1)"},
+      {"radius", true,
+       "largest particle radius, % of the wall's longest side: P, or LO:HI for one drawn "
+       "log-uniform per configuration (default 1)"},
       {"quick", false, "tiny sweep (small walls, <= 2000 particles, <= 3 frames) for tests"},
       {"threads", true,
        "CPU threads of every run (default 0 = all cores; 1 is steadier on "
@@ -83,19 +87,34 @@ constexpr WallChoice kWalls[] = {
 };
 constexpr size_t kWallCount = sizeof kWalls / sizeof kWalls[0];
 
-// Particle radii are uniform in [r_max / 2, r_max] with r_max = 1 % of the wall's
-// longest bounding-box side (wall1: 0.5..1, as in bench detect). The log records
-// r_max, the wall's area and its box volume, so what differs between walls at this
-// scale (how much of the box lies near the surface) is visible to the predictor.
-constexpr double kRadiusFraction = 0.01;
+// Particle radii are uniform in [r_max / 2, r_max]. r_max is a fraction of the wall's
+// longest bounding-box side: by default 1 % (wall1: 0.5..1, as in bench detect), or,
+// with --radius LO:HI, drawn per configuration log-uniform in [LO, HI] %, so that the
+// geometry ratios the predictor sees (area / r^2, box volume / r^3, ...) span a range
+// for every wall instead of one point per wall. The log records r_max, the wall's area
+// and its box volume grown by r_max.
+struct RadiusRange {
+  double lo = 0.01, hi = 0.01;  // fractions of the longest side
+  bool fixed() const { return lo == hi; }
+};
+// Bisection (gravity, circumcircle) is counted by dividing once, at this fraction
+// clamped into the range; other radii scale its count by area.
+constexpr double kRadiusRef = 0.01;
+double radius_ref(const RadiusRange& rr) { return std::clamp(kRadiusRef, rr.lo, rr.hi); }
+// midpoint4 counts at kRadiusSteps fractions log-spaced over [lo, hi].
+constexpr int kRadiusSteps = 16;
+double radius_step(const RadiusRange& rr, int i) {
+  return rr.lo * std::pow(rr.hi / rr.lo, static_cast<double>(i) / (kRadiusSteps - 1));
+}
 
 // Sizes of one wall, measured once in a child (see survey_walls).
 struct WallSurvey {
-  int64_t triangles = 0;   // as built
-  double r_max = 0;        // world units
-  double area = 0;         // triangle area, world units^2
-  double box_volume = 0;   // bounding box grown by r_max on every side, world units^3
-  int64_t pieces[3] = {};  // after gravity, circumcircle, midpoint4 division at r_max
+  int64_t triangles = 0;     // as built
+  double longest = 0;        // longest bounding-box side, world units
+  double extent[3] = {};     // bounding-box sides, world units
+  double area = 0;           // triangle area, world units^2
+  int64_t bisect_ref[2] = {};  // after gravity, circumcircle division at radius_ref
+  int64_t m4[kRadiusSteps] = {};  // after midpoint4 division at radius_step(i)
 };
 struct SurveyResult {
   int ok = 0;
@@ -110,6 +129,7 @@ int division_index(sim::Method m) {
 // One configuration of the sweep.
 struct Plan {
   size_t wall = 0;
+  double r_max = 0;  // world units
   sim::Method method = sim::Method::kBin;
   sim::Traversal traversal = sim::Traversal::kParticle;
   int64_t particles = 0, frames = 0;
@@ -204,12 +224,13 @@ double wall_box_volume(double ex, double ey, double ez, double r) {
   return (ex + 2 * r) * (ey + 2 * r) * (ez + 2 * r);
 }
 
-// Triangle counts of every wall at its particle scale, for skipping divisions that
-// would be absurdly large. midpoint4 cuts every triangle into four similar halves until
+// Triangle counts of every wall at its particle scales, for keeping divisions from
+// growing absurdly large. midpoint4 cuts every triangle into four similar halves until
 // the longest edge fits, so its count is 4^levels per triangle and needs no division;
 // bisection (gravity, circumcircle) stops each piece as soon as it fits and makes far
-// fewer (wall1: 0.36 and 0.16 million against 2.2), so it is counted by dividing.
-SurveyResult survey_walls(bool quick) {
+// fewer (wall1 at 1 %: 0.36 and 0.16 million against 2.2), so it is counted by dividing,
+// once, at radius_ref.
+SurveyResult survey_walls(bool quick, const RadiusRange& rr) {
   SurveyResult s;
   for (size_t w = 0; w < kWallCount; ++w) {
     if (quick && !kWalls[w].quick) continue;
@@ -221,28 +242,37 @@ SurveyResult survey_walls(bool quick) {
     WallSurvey& ws = s.walls[w];
     ws.triangles = static_cast<int64_t>(mesh->triangles.size());
     const sim::Vec3d e = sim::mesh_bounds(*mesh).extent();
-    ws.r_max = kRadiusFraction * std::max({e.x, e.y, e.z});
+    ws.longest = std::max({e.x, e.y, e.z});
+    ws.extent[0] = e.x, ws.extent[1] = e.y, ws.extent[2] = e.z;
     ws.area = sim::mesh_area(*mesh);
-    ws.box_volume = wall_box_volume(e.x, e.y, e.z, ws.r_max);
-    double m4 = 0;
-    for (size_t t = 0; t < mesh->triangles.size(); ++t) {
-      double longest = 0;
-      for (int k = 0; k < 3; ++k)
-        longest = std::max(longest, sim::length(mesh->corner(t, (k + 1) % 3) - mesh->corner(t, k)));
-      double n = 1;
-      for (; longest > ws.r_max; longest *= 0.5) n *= 4;
-      m4 += n;
+    double m4_ref = 0;
+    for (int i = 0; i <= kRadiusSteps; ++i) {  // i == kRadiusSteps: at radius_ref
+      const double r = (i < kRadiusSteps ? radius_step(rr, i) : radius_ref(rr)) * ws.longest;
+      double m4 = 0;
+      for (size_t t = 0; t < mesh->triangles.size(); ++t) {
+        double longest = 0;
+        for (int k = 0; k < 3; ++k)
+          longest =
+              std::max(longest, sim::length(mesh->corner(t, (k + 1) % 3) - mesh->corner(t, k)));
+        double n = 1;
+        for (; longest > r; longest *= 0.5) n *= 4;
+        m4 += n;
+      }
+      if (i < kRadiusSteps)
+        ws.m4[i] = static_cast<int64_t>(std::min(m4, 9e18));
+      else
+        m4_ref = m4;
     }
-    ws.pieces[2] = static_cast<int64_t>(std::min(m4, 9e18));
     // A wall whose four-way count is astronomical is not divided at all: too large.
     for (int d = 0; d < 2; ++d)
-      ws.pieces[d] =
-          m4 > 5e7 ? ws.pieces[2]
-                   : static_cast<int64_t>(sim::divide(*mesh,
-                                                      d == 0 ? sim::DivisionMethod::kGravity
-                                                             : sim::DivisionMethod::kCircumcircle,
-                                                      ws.r_max)
-                                              .pieces.size());
+      ws.bisect_ref[d] =
+          m4_ref > 5e7 ? static_cast<int64_t>(std::min(m4_ref, 9e18))
+                       : static_cast<int64_t>(
+                             sim::divide(*mesh,
+                                         d == 0 ? sim::DivisionMethod::kGravity
+                                                : sim::DivisionMethod::kCircumcircle,
+                                         radius_ref(rr) * ws.longest)
+                                 .pieces.size());
   }
   s.ok = 1;
   return s;
@@ -252,7 +282,7 @@ SurveyResult survey_walls(bool quick) {
 // the particles (converted and, on the GPU, uploaded) and detect with the contact list
 // collected. Every frame sees the same particles; the simulation steps of
 // `collidoscope run` (sim/dynamics.h) are not what this sweep measures.
-RunResult run_config(const std::string& wall_spec, double r_max, const Plan& p,
+RunResult run_config(const std::string& wall_spec, const Plan& p,
                      sim::Backend backend, int threads, uint64_t seed) {
   RunResult r;
   const auto t0 = Clock::now();
@@ -266,6 +296,7 @@ RunResult run_config(const std::string& wall_spec, double r_max, const Plan& p,
     copy_text(r.error, wall.status().message());
     return r;
   }
+  const double r_max = p.r_max;
   const sim::Particles particles = sim::random_particles(
       static_cast<size_t>(p.particles), sim::mesh_bounds(*wall), 0.5 * r_max, r_max, seed);
   sim::DetectConfig cfg;
@@ -332,11 +363,36 @@ int64_t log_uniform(g::Rng& rng, double lo, double hi) {
   return std::llround(std::pow(10.0, rng.uniform(std::log10(lo), std::log10(hi))));
 }
 
+// Pieces after dividing wall ws by method m at radius fraction radius_step(i), as the
+// survey counted them (midpoint4) or estimated from radius_ref by area (bisection, never
+// below the wall's own count). Counts fall as the radius grows, so the count at step i
+// bounds every radius in [radius_step(i), radius_step(i + 1)).
+double pieces_at(const WallSurvey& ws, const RadiusRange& rr, sim::Method m, int i) {
+  const int d = division_index(m);
+  if (d == 2) return static_cast<double>(ws.m4[i]);
+  if (rr.fixed()) return static_cast<double>(ws.bisect_ref[d]);
+  const double s = radius_ref(rr) / radius_step(rr, i);
+  return std::max(static_cast<double>(ws.triangles), static_cast<double>(ws.bisect_ref[d]) * s * s);
+}
+
+// The smallest radius step at which method m divides wall ws into at most max_pieces,
+// or -1 when none does.
+int first_radius_step(const WallSurvey& ws, const RadiusRange& rr, sim::Method m,
+                      double max_pieces) {
+  const bool divided = m != sim::Method::kBin && m != sim::Method::kReference;
+  for (int i = 0; i < kRadiusSteps; ++i)
+    if (!divided || pieces_at(ws, rr, m, i) <= max_pieces) return i;
+  return -1;
+}
+
 // Draws the whole sweep up front from the seed, so a failed run changes no other. The
 // pipelines (method and traversal) take turns in a shuffled order, so each gets an
-// equal share of the rows; wall, particle count and frames are drawn for each.
+// equal share of the rows; wall, radius, particle count and frames are drawn for each.
+// The radius is log-uniform in the range's [lo, hi] of the wall's longest side, its
+// lower end raised where a smaller radius would divide the wall into more than
+// max_pieces; a fixed radius draws nothing (the sweep of a seed stays as it was).
 std::vector<Plan> draw_plans(size_t count, uint64_t seed, const SurveyResult& survey,
-                             sim::Backend backend, bool quick) {
+                             const RadiusRange& rr, sim::Backend backend, bool quick) {
   const Ranges rg = ranges_for(backend, quick);
   std::vector<std::pair<sim::Method, sim::Traversal>> pipelines;
   for (sim::Method m : {sim::Method::kBin, sim::Method::kGravity, sim::Method::kCircumcircle,
@@ -361,7 +417,7 @@ std::vector<Plan> draw_plans(size_t count, uint64_t seed, const SurveyResult& su
       for (size_t w = 0; w < kWallCount; ++w) {
         const WallSurvey& ws = survey.walls[w];
         if (ws.triangles == 0) continue;  // not surveyed (--quick)
-        if (divided && ws.pieces[division_index(method)] > rg.max_pieces) continue;
+        if (first_radius_step(ws, rr, method, rg.max_pieces) < 0) continue;
         if (method == sim::Method::kReference &&
             rg.reference_pairs / static_cast<double>(ws.triangles) < 10 * rg.lo)
           continue;
@@ -374,6 +430,14 @@ std::vector<Plan> draw_plans(size_t count, uint64_t seed, const SurveyResult& su
                                               : rg.hi_reference;
       if (method == sim::Method::kReference)
         hi = std::min(hi, rg.reference_pairs / static_cast<double>(survey.walls[p.wall].triangles));
+      const WallSurvey& ws = survey.walls[p.wall];
+      if (rr.fixed()) {
+        p.r_max = rr.lo * ws.longest;
+      } else {
+        const double f_lo = radius_step(rr, first_radius_step(ws, rr, method, rg.max_pieces));
+        p.r_max =
+            ws.longest * std::pow(10.0, rng.uniform(std::log10(f_lo), std::log10(rr.hi)));
+      }
       p.particles = log_uniform(rng, rg.lo, hi);
       p.frames = log_uniform(rng, 1, rg.max_frames);
       plans.push_back(p);
@@ -403,9 +467,9 @@ g::RunRecord make_row(const Plan& p, const WallSurvey& wall, const Best& b, sim:
   c.particles = p.particles;
   c.triangles = b.fastest.triangles;
   c.triangles_original = b.fastest.triangles_original;
-  c.radius = wall.r_max;
+  c.radius = p.r_max;
   c.wall_area = wall.area;
-  c.wall_box_volume = wall.box_volume;
+  c.wall_box_volume = wall_box_volume(wall.extent[0], wall.extent[1], wall.extent[2], p.r_max);
   c.method = *g::parse_method(sim::to_string(p.method));
   c.traversal = *g::parse_traversal(sim::to_string(p.traversal));
   c.frames = p.frames;
@@ -436,7 +500,7 @@ int cmd_calibrate(const Args& args) {
     print_help(
         "usage: collidoscope calibrate --out RUNS.csv [--backend cpu|cuda|auto] [--configs N]\n"
         "                              [--seed S] [--quick] [--threads T] [--repeats R]\n"
-        "                              [--budget SECONDS]\n\n"
+        "                              [--budget SECONDS] [--radius P|LO:HI]\n\n"
         "Runs a seeded sweep of real configurations (walls, particle counts, methods,\n"
         "traversals, frames) on this machine, each in a process of its own, and writes one\n"
         "run-log row per configuration: time per frame (mean over the run's frames), total\n"
@@ -465,6 +529,25 @@ int cmd_calibrate(const Args& args) {
   if (configs < 1 || configs > 100000) return usage_error(cmd, "--configs must be in 1..100000");
   if (threads < 0 || threads > 4096) return usage_error(cmd, "--threads must be in 0..4096");
   if (repeats < 1 || repeats > 100) return usage_error(cmd, "--repeats must be in 1..100");
+  RadiusRange radius;
+  {
+    const std::string text = parsed->get("radius", "1");
+    const auto colon = text.find(':');
+    char* end = nullptr;
+    const std::string a = text.substr(0, colon);
+    const double lo = std::strtod(a.c_str(), &end);
+    bool ok = !a.empty() && end && *end == 0;
+    double hi = lo;
+    if (colon != std::string::npos) {
+      const std::string b = text.substr(colon + 1);
+      hi = std::strtod(b.c_str(), &end);
+      ok = ok && !b.empty() && end && *end == 0;
+    }
+    if (!ok || !(lo >= 0.01) || !(hi >= lo) || !(hi <= 50))
+      return usage_error(cmd, "--radius must be P or LO:HI percent, 0.01 <= LO <= HI <= 50, got '" +
+                                  text + "'");
+    radius.lo = lo / 100, radius.hi = hi / 100;
+  }
   const std::string want = parsed->get("backend", "auto");
   if (want != "cpu" && want != "cuda" && want != "auto")
     return usage_error(cmd, "unknown --backend '" + want + "' (cpu, cuda, auto)");
@@ -506,14 +589,16 @@ int cmd_calibrate(const Args& args) {
   }
   const auto t_start = Clock::now();
   SurveyResult survey;
-  if (!run_in_child([quick] { return survey_walls(quick); }, &survey, nullptr, &why) ||
+  if (!run_in_child([quick, radius] { return survey_walls(quick, radius); }, &survey, nullptr,
+                    &why) ||
       !survey.ok) {
     std::fprintf(stderr, "collidoscope %s: wall survey failed: %s\n", cmd,
                  survey.error[0] ? survey.error : why.c_str());
     return kExitFailure;
   }
   const std::vector<Plan> plans =
-      draw_plans(static_cast<size_t>(configs), static_cast<uint64_t>(seed), survey, backend, quick);
+      draw_plans(static_cast<size_t>(configs), static_cast<uint64_t>(seed), survey, radius,
+                 backend, quick);
   std::fprintf(stderr, "calibrate: %lld configurations on %s (%s), seed %lld -> %s\n",
                static_cast<long long>(configs), sim::to_string(backend), device.c_str(),
                static_cast<long long>(seed), out_path.c_str());
@@ -538,7 +623,6 @@ int cmd_calibrate(const Args& args) {
         break;
       }
       const char* spec = kWalls[p.wall].spec;
-      const double r_max = survey.walls[p.wall].r_max;
       // Each configuration gets its own particle seed, still fixed by --seed.
       const uint64_t particle_seed = static_cast<uint64_t>(seed) * 1000003u + i;
       RunResult r;
@@ -546,14 +630,14 @@ int cmd_calibrate(const Args& args) {
       std::string fail;
       bool ok = run_in_child(
           [&] {
-            return run_config(spec, r_max, p, backend, static_cast<int>(threads), particle_seed);
+            return run_config(spec, p, backend, static_cast<int>(threads), particle_seed);
           },
           &r, &peak_host, &fail);
       if (ok && !r.ok) ok = false, fail = r.error;
-      std::fprintf(stderr, "[%lld/%lld %3zu/%zu] %s/%s %s, %lld particles x %lld frames: ",
+      std::fprintf(stderr, "[%lld/%lld %3zu/%zu] %s/%s %s r=%.3g, %lld particles x %lld frames: ",
                    static_cast<long long>(pass + 1), static_cast<long long>(repeats), i + 1,
                    plans.size(), sim::to_string(p.method), sim::to_string(p.traversal), spec,
-                   static_cast<long long>(p.particles), static_cast<long long>(p.frames));
+                   p.r_max, static_cast<long long>(p.particles), static_cast<long long>(p.frames));
       if (!ok) {
         b.failed = true;
         std::fprintf(stderr, "FAILED: %s\n", fail.c_str());

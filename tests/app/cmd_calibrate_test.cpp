@@ -2,6 +2,8 @@
 // argument errors. No wall-clock assertions: the machine running the tests is shared.
 #include <gtest/gtest.h>
 
+#include <map>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -26,6 +28,10 @@ TEST(CmdCalibrate, BadArgumentsExitTwo) {
   EXPECT_EQ(cmd_calibrate({"--out", out, "--repeats", "0"}), kExitUsage);
   EXPECT_EQ(cmd_calibrate({"--out", out, "--seed", "x"}), kExitUsage);
   EXPECT_EQ(cmd_calibrate({"--out", out, "--budget", "-1"}), kExitUsage);
+  EXPECT_EQ(cmd_calibrate({"--out", out, "--radius", "x"}), kExitUsage);
+  EXPECT_EQ(cmd_calibrate({"--out", out, "--radius", "3:0.3"}), kExitUsage);
+  EXPECT_EQ(cmd_calibrate({"--out", out, "--radius", "0.3:"}), kExitUsage);
+  EXPECT_EQ(cmd_calibrate({"--out", out, "--radius", "0"}), kExitUsage);
   EXPECT_EQ(cmd_calibrate({"--out", out, "--bogus"}), kExitUsage);
   EXPECT_EQ(cmd_calibrate({"--out", out, "extra"}), kExitUsage);
   EXPECT_EQ(cmd_calibrate({"--out"}), kExitUsage);  // --out needs a value
@@ -39,10 +45,11 @@ TEST(CmdCalibrate, UnwritableOutputExitsOne) {
             kExitFailure);
 }
 
-std::vector<gvm::RunRecord> quick_sweep(const std::string& path, const char* configs) {
+std::vector<gvm::RunRecord> quick_sweep(const std::string& path, const char* configs,
+                                        const char* radius = "1") {
   testing::internal::CaptureStdout();
-  const int code = cmd_calibrate(
-      {"--out", path, "--quick", "--backend", "cpu", "--configs", configs, "--seed", "7"});
+  const int code = cmd_calibrate({"--out", path, "--quick", "--backend", "cpu", "--configs", configs,
+                                  "--seed", "7", "--radius", radius});
   testing::internal::GetCapturedStdout();
   EXPECT_EQ(code, kExitOk);
   auto rows = gvm::read_run_log(path);
@@ -83,6 +90,25 @@ TEST(CmdCalibrate, QuickSweepWritesARunLog) {
     EXPECT_EQ(m.peak_device_bytes, 0.0);
     EXPECT_EQ(m.gpu_load, 0.0);
   }
+}
+
+// With --radius LO:HI the radius is drawn per configuration, not tied to the wall:
+// rows of one wall see different radii, and so different geometry ratios.
+TEST(CmdCalibrate, RadiusRangeVariesPerConfiguration) {
+  const auto rows = quick_sweep(tmp("radius.csv"), "9", "0.3:3");
+  ASSERT_EQ(rows.size(), 9u);
+  std::map<int64_t, std::set<double>> radii;  // by wall (its original triangles)
+  for (const auto& r : rows) {
+    const auto& c = r.config;
+    radii[c.triangles_original].insert(c.radius);
+    // r = 0.3..3 % of the longest side L: r / 0.03 <= L <= r / 0.003.
+    const double lo = c.radius / 0.03 + 2 * c.radius, hi = c.radius / 0.003 + 2 * c.radius;
+    EXPECT_LE(c.wall_box_volume, hi * hi * hi * (1 + 1e-9));
+    EXPECT_GE(c.wall_box_volume, 4 * c.radius * c.radius * lo * (1 - 1e-9));
+  }
+  size_t walls_with_two = 0;
+  for (const auto& [wall, rs] : radii) walls_with_two += rs.size() >= 2;
+  EXPECT_GE(walls_with_two, 1u);
 }
 
 TEST(CmdCalibrate, SameSeedSameConfigurations) {
