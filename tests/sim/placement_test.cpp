@@ -79,7 +79,9 @@ TEST(Placement, PourReleasesLayersThatNeverOverlap) {
   std::vector<size_t> first_layer;
   for (size_t i = 0; i < p->size(); ++i) {
     if (p->release[i] == 0) first_layer.push_back(i);
-    if (i) EXPECT_GE(p->release[i], p->release[i - 1]);
+    if (i) {
+      EXPECT_GE(p->release[i], p->release[i - 1]);
+    }
     EXPECT_LT(p->vz[i], 0);  // leaving downwards, along gravity
   }
   ASSERT_GT(first_layer.size(), 1u);
