@@ -158,15 +158,12 @@ int cmd_run(const Args& args) {
   // The backend: the GPU when asked (or auto and usable), else the CPU with a note.
   std::string why;
   const bool gpu = sim::cuda_available(&why);
-  if (scene->backend_auto) {
-    scene->dynamics.backend = gpu ? sim::Backend::kCuda : sim::Backend::kCpu;
-    if (!gpu && !quiet)
+  if (scene->backend_auto) scene->dynamics.backend = sim::Backend::kCuda;
+  if (scene->dynamics.backend == sim::Backend::kCuda && !gpu) {
+    // Asked for the GPU by name: always say so; by "auto": unless --quiet.
+    if (!(scene->backend_auto && quiet))
       std::fprintf(stderr, "collidoscope run: note: no usable GPU (%s); running on the CPU\n",
                    why.c_str());
-  }
-  if (scene->dynamics.backend == sim::Backend::kCuda && !gpu) {
-    std::fprintf(stderr, "collidoscope run: note: no usable GPU (%s); running on the CPU\n",
-                 why.c_str());
     scene->dynamics.backend = sim::Backend::kCpu;
   }
 
