@@ -52,8 +52,9 @@ class GridDetector final : public Detector {
     host.resize(n);
     const float rmax = static_cast<float>(cfg_.r_max);
     for (size_t i = 0; i < n; ++i) {
-      host[i] = {static_cast<float>(p.x[i] - origin_.x), static_cast<float>(p.y[i] - origin_.y),
-                 static_cast<float>(p.z[i] - origin_.z), static_cast<float>(p.r[i])};
+      host[i] = {static_cast<float>(p.x[i] - wall_.origin.x),
+                 static_cast<float>(p.y[i] - wall_.origin.y),
+                 static_cast<float>(p.z[i] - wall_.origin.z), static_cast<float>(p.r[i])};
       if (!(p.r[i] > 0) || host[i].r > rmax * (1 + 1e-6f))
         return invalid_argument("particle " + std::to_string(i) + " has radius " +
                                 std::to_string(p.r[i]) +
@@ -155,9 +156,6 @@ class GridDetector final : public Detector {
     Status s = wall_.prepare(backend_, mesh, cfg_.method, cfg_.r_max, cell, cfg_.max_dense_cells,
                              capacity_, &info_);
     if (!s) return s;
-    grid_ = wall_.grid;
-    reach_ = wall_.reach;
-    origin_ = wall_.origin;
     if (cfg_.traversal == Traversal::kWall || cfg_.method != Method::kBin) {
       backend_.resize(p_key_, capacity_);
       backend_.resize(p_idx_, capacity_);
@@ -165,8 +163,8 @@ class GridDetector final : public Detector {
       backend_.resize(p_idx_sorted_, capacity_);
       backend_.resize(sorted_particles_, capacity_);
       if (cfg_.traversal == Traversal::kWall) {
-        backend_.resize(p_cell_start_, grid_.buckets);
-        backend_.resize(p_cell_end_, grid_.buckets);
+        backend_.resize(p_cell_start_, wall_.grid.buckets);
+        backend_.resize(p_cell_end_, wall_.grid.buckets);
       }
     }
     grow_pairs(std::max<size_t>(capacity_ / 4, 4096));
@@ -183,7 +181,7 @@ class GridDetector final : public Detector {
   // private member functions; nothing outside this class calls them.
  public:
   void hash_and_sort(DetectResult* out) {
-    const GridSpec g = grid_;
+    const GridSpec g = wall_.grid;
     const PackedParticle* P = particles_.data();
     uint32_t* key = p_key_.data();
     uint32_t* idx = p_idx_.data();
@@ -201,7 +199,7 @@ class GridDetector final : public Detector {
     lap(out->times.sort_ms);
     if (cfg_.traversal == Traversal::kWall) {
       build_cell_ranges(backend_, p_key_sorted_.data(), n_, p_cell_start_.data(),
-                        p_cell_end_.data(), grid_.buckets, kInvalidBucket);
+                        p_cell_end_.data(), wall_.grid.buckets, kInvalidBucket);
       lap(out->times.cells_ms);
     }
   }
@@ -244,7 +242,7 @@ class GridDetector final : public Detector {
 
   // bin, particle traversal: a thread per particle reads its own cell's list.
   void bin_particle_traversal(bool collect) {
-    const GridSpec g = grid_;
+    const GridSpec g = wall_.grid;
     const PackedParticle* P = particles_.data();
     const PlanarTriangle* T = wall_.tris.data();
     const uint32_t* start = wall_.bin_start.data();
@@ -277,7 +275,7 @@ class GridDetector final : public Detector {
   // bin, wall traversal: a thread per (cell, triangle) entry loops over the
   // particles of that cell. Each pair is met once, so no deduplication is needed.
   void bin_wall_traversal() {
-    const GridSpec g = grid_;
+    const GridSpec g = wall_.grid;
     const PackedParticle* SP = sorted_particles_.data();
     const uint32_t* sidx = p_idx_sorted_.data();
     const PlanarTriangle* T = wall_.tris.data();
@@ -306,8 +304,8 @@ class GridDetector final : public Detector {
   // deduplicated afterwards, as for the wall traversal, which keeps the
   // smallest distance and needs no per-thread memory however many originals meet.
   void pieces_particle_traversal() {
-    const GridSpec g = grid_;
-    const int reach = reach_;
+    const GridSpec g = wall_.grid;
+    const int reach = wall_.reach;
     const PackedParticle* SP = sorted_particles_.data();
     const uint32_t* skey = p_key_sorted_.data();
     const uint32_t* sidx = p_idx_sorted_.data();
@@ -339,8 +337,8 @@ class GridDetector final : public Detector {
   // particles of its neighbouring cells and emits every hit; pieces of one
   // original meet the same particle, so the pairs are deduplicated afterwards.
   void pieces_wall_traversal() {
-    const GridSpec g = grid_;
-    const int reach = reach_;
+    const GridSpec g = wall_.grid;
+    const int reach = wall_.reach;
     const PackedParticle* SP = sorted_particles_.data();
     const uint32_t* sidx = p_idx_sorted_.data();
     const PlanarTriangle* T = wall_.tris.data();
@@ -402,11 +400,8 @@ class GridDetector final : public Detector {
   DetectConfig cfg_;
   PrepareInfo info_;
   size_t capacity_ = 0, n_ = 0;
-  Vec3d origin_{0, 0, 0};
   std::vector<uint32_t> source_ids_;
   std::vector<PackedParticle> staging_;  // host copy of a frame's particles, reused
-  GridSpec grid_;
-  int reach_ = 1;
 
   WallIndex<B> wall_;
 

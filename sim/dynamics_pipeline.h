@@ -157,8 +157,8 @@ class DynamicsPipeline final : public Simulation {
     }
     out->resize(n_);
     for (size_t i = 0; i < n_; ++i) {
-      out->x[i] = p[i].x + origin_.x, out->y[i] = p[i].y + origin_.y,
-      out->z[i] = p[i].z + origin_.z;
+      out->x[i] = p[i].x + wall_.origin.x, out->y[i] = p[i].y + wall_.origin.y,
+      out->z[i] = p[i].z + wall_.origin.z;
       out->vx[i] = v[i].x, out->vy[i] = v[i].y, out->vz[i] = v[i].z;
       out->r[i] = radius_host_[i];
       out->release[i] = release_host_[i];
@@ -184,8 +184,7 @@ class DynamicsPipeline final : public Simulation {
                                  /*double_triangles=*/true);
         !e)
       return e;
-    origin_ = wall_.origin;
-    lo_ = domain_lo - origin_, hi_ = domain_hi - origin_;
+    lo_ = domain_lo - wall_.origin, hi_ = domain_hi - wall_.origin;
     law_.k = ts_.stiffness;
     law_.zeta = ts_.damping_ratio;
     law_.kt = 2.0 / 7.0 * ts_.stiffness;
@@ -198,7 +197,7 @@ class DynamicsPipeline final : public Simulation {
     std::vector<double> inv_mass(n_);
     std::vector<uint8_t> state(n_);
     for (size_t i = 0; i < n_; ++i) {
-      p[i] = Vec3d{ps.x[i], ps.y[i], ps.z[i]} - origin_;
+      p[i] = Vec3d{ps.x[i], ps.y[i], ps.z[i]} - wall_.origin;
       v[i] = {ps.vx[i], ps.vy[i], ps.vz[i]};
       inv_mass[i] = 1.0 / (cfg_.material.density * 4.0 / 3.0 * M_PI * ps.r[i] * ps.r[i] * ps.r[i]);
       state[i] = ps.release[i] > 0 ? kWaiting : kActive;
@@ -277,7 +276,7 @@ class DynamicsPipeline final : public Simulation {
 
   // --- one step -------------------------------------------------------------------------------
   void one_step(double dt) {
-    lap_ = std::chrono::steady_clock::now();
+    if (timing_) lap_ = std::chrono::steady_clock::now();
     if (!all_released_) {
       release(time_);
       all_released_ = time_ >= last_release_;
@@ -653,7 +652,7 @@ class DynamicsPipeline final : public Simulation {
   ContactLaw law_;
   WallIndex<B> wall_;
   GridSpec pgrid_;
-  Vec3d origin_{0, 0, 0}, lo_{0, 0, 0}, hi_{0, 0, 0};  // domain in the local frame
+  Vec3d lo_{0, 0, 0}, hi_{0, 0, 0};  // the domain, in the local frame (origin: the wall's centre)
   size_t n_ = 0;
   double time_ = 0;
   double last_release_ = 0;  // s: no particle waits after this
