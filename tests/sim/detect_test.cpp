@@ -9,6 +9,7 @@
 #include "sim/narrow_phase.h"
 #include "sim/particles.h"
 #include "sim/shapes.h"
+#include "tests/sim/gpu_suite.h"
 
 namespace collido::sim {
 namespace {
@@ -121,12 +122,11 @@ Particles scene_near(const TriangleMesh& mesh, size_t n, double r_lo, double r_h
   return p;
 }
 
-Backend g_backend = Backend::kCpu;  // the backend under test (see the DetectCuda suite)
 
 void check_all_methods(const TriangleMesh& mesh, const Particles& p, const std::string& what,
                        uint64_t max_dense_cells = 1ull << 24, double grid_length = 0) {
   DetectConfig cfg;
-  cfg.backend = g_backend;
+  cfg.backend = backend_under_test();
   cfg.r_max = max_radius(p);
   cfg.max_dense_cells = max_dense_cells;
   cfg.grid_length = grid_length;
@@ -219,7 +219,7 @@ void slivers_and_zero_area() {
   // Contacts name the input file's triangle indices, which skip the dropped ones.
   DetectConfig cfg;
   cfg.r_max = max_radius(p);
-  cfg.backend = g_backend;
+  cfg.backend = backend_under_test();
   const DetectResult r = run(mesh, p, cfg);
   for (const auto& c : r.contacts) EXPECT_NE(c.triangle % 11, 1u) << "a dropped triangle's id was reported";
 }
@@ -251,7 +251,7 @@ void outside_and_empty() {
   check_all_methods(wall, p, "outside");
   DetectConfig cfg;
   cfg.r_max = 1;
-  cfg.backend = g_backend;
+  cfg.backend = backend_under_test();
   auto det = Detector::create(wall, cfg, 10);
   ASSERT_TRUE(det);
   DetectResult r;
@@ -270,15 +270,7 @@ TEST(Detect, ParticlesOutsideTheGridAndEmptyFrames) { outside_and_empty(); }
 
 // The same scenes on the GPU: identical contact sets to the reference (and so
 // to the CPU) under the accuracy contract. Skipped where no GPU is usable.
-class DetectCuda : public ::testing::Test {
- protected:
-  void SetUp() override {
-    std::string why;
-    if (!cuda_available(&why)) GTEST_SKIP() << "no GPU: " << why;
-    g_backend = Backend::kCuda;
-  }
-  void TearDown() override { g_backend = Backend::kCpu; }
-};
+class DetectCuda : public GpuSuite {};
 TEST_F(DetectCuda, TwentyRandomScenesMatchTheReference) { twenty_random_scenes(); }
 TEST_F(DetectCuda, AdversarialPlacementsMatchTheReference) { adversarial_placements(); }
 TEST_F(DetectCuda, SliversAndZeroAreaTrianglesInTheInput) { slivers_and_zero_area(); }

@@ -10,11 +10,11 @@
 #include "sim/dynamics.h"
 #include "sim/particles.h"
 #include "sim/shapes.h"
+#include "tests/sim/gpu_suite.h"
 
 namespace collido::sim {
 namespace {
 
-Backend g_backend = Backend::kCpu;  // the backend under test (see the DynamicsCuda suite)
 
 ParticleSet particles_at(const std::vector<Vec3d>& pos, const std::vector<Vec3d>& vel, double r) {
   ParticleSet p;
@@ -44,7 +44,7 @@ ParticleSet lattice(int per_side, double h, double z0, double r, double speed, u
 
 std::unique_ptr<Simulation> make_sim(const TriangleMesh& wall, DynamicsConfig cfg,
                                      const ParticleSet& p) {
-  cfg.backend = g_backend;
+  cfg.backend = backend_under_test();
   auto s = Simulation::create(wall, cfg, p);
   EXPECT_TRUE(s.has_value()) << s.status().message();
   return s.has_value() ? std::move(s.value()) : nullptr;
@@ -404,15 +404,7 @@ TEST(Dynamics, BadSettingsNameTheKey) {
 }
 
 // The GPU suite: the same scenes, and trajectories that follow the CPU's.
-class DynamicsCuda : public ::testing::Test {
- protected:
-  void SetUp() override {
-    std::string why;
-    if (!cuda_available(&why)) GTEST_SKIP() << "no GPU: " << why;
-    g_backend = Backend::kCuda;
-  }
-  void TearDown() override { g_backend = Backend::kCpu; }
-};
+class DynamicsCuda : public GpuSuite {};
 TEST_F(DynamicsCuda, ElasticBoxKeepsItsEnergy) {
   elastic_box_energy();
 }
