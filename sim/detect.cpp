@@ -53,7 +53,7 @@ namespace {
 // precision, with only an exact bounding-box rejection in front.
 class ReferenceDetector final : public Detector {
  public:
-  ReferenceDetector(const TriangleMesh& mesh, const DetectConfig& cfg) : cfg_(cfg), mesh_(mesh) {
+  ReferenceDetector(const TriangleMesh& mesh, const DetectConfig& cfg) : Detector(cfg), mesh_(mesh) {
     const auto t0 = std::chrono::steady_clock::now();
     info_.triangles_original = info_.triangles_used = mesh.triangles.size();
     for (size_t t = 0; t < mesh.triangles.size(); ++t) {
@@ -63,12 +63,6 @@ class ReferenceDetector final : public Detector {
     }
     info_.prepare_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   }
-  void set_frame_options(bool collect_contacts, bool time_stages) override {
-    cfg_.collect_contacts = collect_contacts;
-    cfg_.time_stages = time_stages;
-  }
-  const PrepareInfo& info() const override { return info_; }
-  const DetectConfig& config() const override { return cfg_; }
   Status set_particles(const Particles& p) override {
     for (size_t i = 0; i < p.size(); ++i)
       if (!(p.r[i] > 0) || !std::isfinite(p.x[i]) || !std::isfinite(p.y[i]) || !std::isfinite(p.z[i]))
@@ -108,8 +102,6 @@ class ReferenceDetector final : public Detector {
   }
 
  private:
-  DetectConfig cfg_;
-  PrepareInfo info_;
   const TriangleMesh mesh_;
   std::vector<Bounds3d> boxes_;
   Particles particles_;

@@ -41,8 +41,8 @@ struct DetectConfig {
   Method method = Method::kBin;
   Traversal traversal = Traversal::kParticle;  // the paper's two traversals; bin reads its own cell
   Backend backend = Backend::kCpu;
-  double r_max = 0;          // largest particle radius of the run, world units (> 0)
-  double grid_length = 0;    // cell edge, world units; 0 = method default (2 r_max)
+  double r_max = 0;              // largest particle radius of the run, world units (> 0)
+  double grid_length = 0;        // cell edge, world units; 0 = method default (2 r_max)
   bool collect_contacts = true;  // false: only counts per particle (benchmarks)
   bool time_stages = true;       // synchronise between stages to time each one
   // Dense cell arrays above this many cells switch to a hashed table whose
@@ -59,13 +59,13 @@ struct Contact {
 
 // Milliseconds spent in each stage of one frame.
 struct StageTimes {
-  double upload_ms = 0, hash_ms = 0, sort_ms = 0, cells_ms = 0, traverse_ms = 0,
-         finalize_ms = 0, download_ms = 0, frame_ms = 0;
+  double upload_ms = 0, hash_ms = 0, sort_ms = 0, cells_ms = 0, traverse_ms = 0, finalize_ms = 0,
+         download_ms = 0, frame_ms = 0;
 };
 
 struct DetectResult {
-  std::vector<Contact> contacts;     // sorted by particle, then triangle (collect_contacts)
-  std::vector<uint32_t> counts;      // contacts per particle
+  std::vector<Contact> contacts;  // sorted by particle, then triangle (collect_contacts)
+  std::vector<uint32_t> counts;   // contacts per particle
   uint64_t contact_count = 0;
   uint64_t colliding_particles = 0;
   StageTimes times;
@@ -76,13 +76,13 @@ struct PrepareInfo {
   size_t triangles_original = 0;
   size_t triangles_used = 0;  // after division (= original for bin and reference)
   double max_sphere_radius = 0;
-  double area_error = 0;      // division's relative area error (Eq. 6), double
+  double area_error = 0;  // division's relative area error (Eq. 6), double
   double grid_length = 0;
-  int reach = 0;              // neighbour cells searched in each direction
-  uint64_t cells = 0;         // cells of the domain box
-  uint32_t buckets = 0;       // table entries actually stored
+  int reach = 0;         // neighbour cells searched in each direction
+  uint64_t cells = 0;    // cells of the domain box
+  uint32_t buckets = 0;  // table entries actually stored
   bool hashed = false;
-  uint64_t bin_entries = 0;   // bin: (cell, triangle) pairs stored
+  uint64_t bin_entries = 0;  // bin: (cell, triangle) pairs stored
   double prepare_ms = 0;
   uint64_t device_bytes = 0;  // scratch and prepared data held by the backend
 };
@@ -101,9 +101,17 @@ class Detector {
   virtual Status detect(DetectResult* out) = 0;
   // Per-frame choices that need no new preparation: collect the contact list
   // (else counts only) and time each stage (a sync between stages).
-  virtual void set_frame_options(bool collect_contacts, bool time_stages) = 0;
-  virtual const PrepareInfo& info() const = 0;
-  virtual const DetectConfig& config() const = 0;
+  void set_frame_options(bool collect_contacts, bool time_stages) {
+    cfg_.collect_contacts = collect_contacts;
+    cfg_.time_stages = time_stages;
+  }
+  const PrepareInfo& info() const { return info_; }
+  const DetectConfig& config() const { return cfg_; }
+
+ protected:
+  explicit Detector(const DetectConfig& config) : cfg_(config) {}
+  DetectConfig cfg_;  // as created, with the frame options last set
+  PrepareInfo info_;  // filled by the implementation's preparation
 };
 
 // True when a CUDA device is usable; otherwise *why says what failed.

@@ -36,13 +36,6 @@ class GridDetector final : public Detector {
     return std::unique_ptr<Detector>(std::move(d));
   }
 
-  void set_frame_options(bool collect_contacts, bool time_stages) override {
-    cfg_.collect_contacts = collect_contacts;
-    cfg_.time_stages = time_stages;
-  }
-  const PrepareInfo& info() const override { return info_; }
-  const DetectConfig& config() const override { return cfg_; }
-
   Status set_particles(const Particles& p) override {
     const size_t n = p.size();
     if (n > capacity_)
@@ -114,7 +107,7 @@ class GridDetector final : public Detector {
   }
 
  private:
-  GridDetector(const DetectConfig& cfg, size_t cap) : cfg_(cfg), capacity_(cap) {}
+  GridDetector(const DetectConfig& cfg, size_t cap) : Detector(cfg), capacity_(cap) {}
 
   using Clock = std::chrono::steady_clock;
   // Adds the time since the previous lap to `slot` (with a device sync) when stages are timed.
@@ -397,8 +390,6 @@ class GridDetector final : public Detector {
   }
 
   B backend_;
-  DetectConfig cfg_;
-  PrepareInfo info_;
   size_t capacity_ = 0, n_ = 0;
   std::vector<uint32_t> source_ids_;
   std::vector<PackedParticle> staging_;  // host copy of a frame's particles, reused
