@@ -140,7 +140,8 @@ struct RunResult {
   int ok = 0;
   char error[256] = {};
   int64_t triangles = 0, triangles_original = 0, threads = 0;
-  double total_s = 0, frames_s = 0, gpu_busy_s = 0;
+  double total_s = 0, gpu_busy_s = 0;
+  double frame_s = 0;  // steady time per frame: median of the frames after the first
   uint64_t device_bytes = 0;
 };
 
@@ -312,19 +313,50 @@ RunResult run_config(const std::string& wall_spec, const Plan& p,
     return r;
   }
   sim::DetectResult res;
-  for (int64_t f = 0; f < p.frames; ++f) {
+  auto frame = [&](double* took) {
     const auto tf = Clock::now();
     sim::Status s = (*det)->set_particles(particles);
     if (s) s = (*det)->detect(&res);
-    if (!s) {
-      copy_text(r.error, s.message());
-      return r;
-    }
-    r.frames_s += seconds(tf);
+    *took = seconds(tf);
+    if (!s) copy_text(r.error, s.message());
+    return bool(s);
+  };
+  std::vector<double> timed;  // the frames that measure the steady time per frame
+  for (int64_t f = 0; f < p.frames; ++f) {
+    double took = 0;
+    if (!frame(&took)) return r;
+    if (f > 0) timed.push_back(took);
     // detect() syncs the device before it stops its clock, so frame_ms is GPU-busy time.
     r.gpu_busy_s += res.times.frame_ms * 1e-3;
   }
   r.total_s = seconds(t0);
+  // Time per frame is the steady cost, the one a run of many frames pays: the first
+  // frame also pays first-touch allocation (and, for the wall traversals, a rerun after
+  // the contact buffer grows), which total time already holds. So the first frame is
+  // left out, and frames beyond the run's own are timed (not counted in total time)
+  // until there are enough of them that a run of one or two short frames is not one
+  // noisy sample: at least kMinTimedSeconds, and kMinTimedFrames unless that many would
+  // take longer than kEnoughSeconds (one frame of a slow configuration is precise
+  // enough). The median keeps a burst of other work on the machine out of it.
+  constexpr size_t kMinTimedFrames = 5, kMaxTimedFrames = 1000;
+  constexpr double kMinTimedSeconds = 0.02, kEnoughSeconds = 0.25;
+  double timed_s = 0;
+  for (double t : timed) timed_s += t;
+  auto need_more = [&] {
+    const size_t n = timed.size();
+    if (n == 0) return true;
+    if (n >= kMaxTimedFrames) return false;
+    return timed_s < kMinTimedSeconds || (n < kMinTimedFrames && timed_s < kEnoughSeconds);
+  };
+  while (need_more()) {
+    double took = 0;
+    if (!frame(&took)) return r;
+    timed.push_back(took);
+    timed_s += took;
+  }
+  std::sort(timed.begin(), timed.end());
+  const size_t n = timed.size();
+  r.frame_s = n % 2 ? timed[n / 2] : 0.5 * (timed[n / 2 - 1] + timed[n / 2]);
   r.triangles = static_cast<int64_t>((*det)->info().triangles_used);
   r.triangles_original = static_cast<int64_t>((*det)->info().triangles_original);
   r.device_bytes = (*det)->info().device_bytes;
@@ -456,7 +488,7 @@ std::string mib(double bytes) {
 struct Best {
   bool measured = false, failed = false;
   RunResult fastest;  // the repeat with the smallest total time
-  double frames_s = 0, peak_host = 0;
+  double frame_s = 0, peak_host = 0;
   uint64_t device_bytes = 0;
 };
 
@@ -479,7 +511,7 @@ g::RunRecord make_row(const Plan& p, const WallSurvey& wall, const Best& b, sim:
   c.device = on_gpu ? device : cpu_name;
   c.threads = b.fastest.threads;
   g::RunMeasure& m = row.measure;
-  m.time_per_frame_s = b.frames_s / static_cast<double>(p.frames);
+  m.time_per_frame_s = b.frame_s;
   m.total_time_s = b.fastest.total_s;
   m.peak_host_bytes = b.peak_host;
   m.peak_device_bytes = on_gpu ? static_cast<double>(b.device_bytes) : 0.0;
@@ -503,8 +535,9 @@ int cmd_calibrate(const Args& args) {
         "                              [--budget SECONDS] [--radius P|LO:HI]\n\n"
         "Runs a seeded sweep of real configurations (walls, particle counts, methods,\n"
         "traversals, frames) on this machine, each in a process of its own, and writes one\n"
-        "run-log row per configuration: time per frame (mean over the run's frames), total\n"
-        "time, peak host and device memory, GPU load. Repeats are whole passes over the\n"
+        "run-log row per configuration: time per frame (the steady cost: median of the\n"
+        "frames after the first, timing extra frames where the run has too few), total\n"
+        "time (set-up and the run's frames), peak host and device memory, GPU load. Repeats are whole passes over the\n"
         "sweep; with --budget, no run starts after that many seconds and the log keeps\n"
         "the configurations measured by then. `collidoscope gvm train --logs RUNS.csv`\n"
         "trains on the log.\n"
@@ -644,13 +677,13 @@ int cmd_calibrate(const Args& args) {
         continue;
       }
       std::fprintf(stderr, "%lld triangles, %.3f ms/frame, total %.3f s, host %s",
-                   static_cast<long long>(r.triangles), 1e3 * r.frames_s / p.frames, r.total_s,
+                   static_cast<long long>(r.triangles), 1e3 * r.frame_s, r.total_s,
                    mib(peak_host).c_str());
       if (backend == sim::Backend::kCuda)
         std::fprintf(stderr, ", device %s", mib(static_cast<double>(r.device_bytes)).c_str());
       std::fprintf(stderr, "\n");
       if (!b.measured || r.total_s < b.fastest.total_s) b.fastest = r;
-      b.frames_s = b.measured ? std::min(b.frames_s, r.frames_s) : r.frames_s;
+      b.frame_s = b.measured ? std::min(b.frame_s, r.frame_s) : r.frame_s;
       b.peak_host = std::max(b.peak_host, peak_host);
       b.device_bytes = std::max(b.device_bytes, r.device_bytes);
       b.measured = true;
