@@ -25,6 +25,16 @@ const std::vector<std::string>& measure_names() {
   return names;
 }
 
+bool output_uses_input(size_t output, size_t input) {
+  const bool per_run = output == 1 || output == 4;  // total time, GPU load
+  return input != FeatureSpace::kLogFrames || per_run;
+}
+
+void mask_inputs(size_t output, double* x, size_t n) {
+  for (size_t i = 0; i < n; ++i)
+    if (!output_uses_input(output, i)) x[i] = 0.0;
+}
+
 void measure_to_array(const RunMeasure& m, double* out) {
   out[0] = m.time_per_frame_s;
   out[1] = m.total_time_s;

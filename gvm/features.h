@@ -29,6 +29,16 @@ RunMeasure array_to_measure(const double* a);
 void encode_outputs(const RunMeasure& m, Backend b, double* y);
 RunMeasure decode_outputs(const double* y, Backend b);
 
+// Whether output k reads input i of FeatureSpace's layout. Time per frame is the steady
+// cost of one frame and the memory peaks are reached in the first frame, so none of the
+// three depends on how many frames a run has: their machines never see the frame count
+// (an input a target does not depend on only lets a model fit noise along it). Total
+// time and GPU load (busy time over total time) do.
+bool output_uses_input(size_t output, size_t input);
+// Zeroes, in x[0..n), the inputs output k does not read (a constant input is frozen
+// in training and contributes nothing to a prediction).
+void mask_inputs(size_t output, double* x, size_t n);
+
 class FeatureSpace {
  public:
   FeatureSpace() = default;

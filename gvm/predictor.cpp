@@ -63,23 +63,30 @@ Expected<ResourcePredictor> ResourcePredictor::train(const std::vector<RunRecord
   // One task per (output, member); an output no training row has a value for (device
   // memory in a CPU-only log) gets no machines and predicts 0.
   struct Task {
-    Task(size_t k, int m, const Matrix& yk, const Matrix& vyk)
-        : output(k), member(m), y(yk), vy(vyk) {}
+    Task(size_t k, int m, const Matrix& xk, const Matrix& yk, const Matrix& vxk, const Matrix& vyk)
+        : output(k), member(m), x(xk), y(yk), vx(vxk), vy(vyk) {}
     size_t output;
     int member;
-    Matrix y, vy;
+    const Matrix &x, &y, &vx, &vy;  // the output's inputs (masked) and its one target
     Expected<Machine> machine = invalid_argument("not trained");
     TrainReport report;
   };
+  std::vector<Matrix> xs(kOutputCount), ys(kOutputCount), vxs(kOutputCount), vys(kOutputCount);
   std::vector<Task> tasks;
   for (size_t k = 0; k < kOutputCount; ++k) {
     bool any = false;
     for (size_t r = 0; r < y.rows(); ++r) any = any || !std::isnan(y(r, k));
     if (!any) continue;
-    Matrix yk(y.rows(), 1), vyk(vy.rows(), 1);
-    for (size_t r = 0; r < y.rows(); ++r) yk(r, 0) = y(r, k);
-    for (size_t r = 0; r < vy.rows(); ++r) vyk(r, 0) = vy(r, k);
-    for (int m = 0; m < options.ensemble; ++m) tasks.emplace_back(k, m, yk, vyk);
+    xs[k] = x;
+    vxs[k] = vx;
+    for (size_t r = 0; r < x.rows(); ++r) mask_inputs(k, xs[k].row(r), x.cols());
+    for (size_t r = 0; r < vx.rows(); ++r) mask_inputs(k, vxs[k].row(r), vx.cols());
+    ys[k] = Matrix(y.rows(), 1);
+    vys[k] = Matrix(vy.rows(), 1);
+    for (size_t r = 0; r < y.rows(); ++r) ys[k](r, 0) = y(r, k);
+    for (size_t r = 0; r < vy.rows(); ++r) vys[k](r, 0) = vy(r, k);
+    for (int m = 0; m < options.ensemble; ++m)
+      tasks.emplace_back(k, m, xs[k], ys[k], vxs[k], vys[k]);
   }
   const auto t0 = std::chrono::steady_clock::now();
   // Each task owns its seed and its slot, so threads change the wall time, not the result.
@@ -89,7 +96,7 @@ Expected<ResourcePredictor> ResourcePredictor::train(const std::vector<RunRecord
       Task& t = tasks[i];
       GvmOptions o = options;
       o.seed = member_seed(options.seed, t.output, t.member);
-      t.machine = Machine::train(x, t.y, vx, t.vy, o, &t.report, p.features_.input_names(),
+      t.machine = Machine::train(t.x, t.y, t.vx, t.vy, o, &t.report, p.features_.input_names(),
                                  {output_feature_names()[t.output]});
     }
   };
@@ -146,22 +153,28 @@ Expected<ResourcePredictor> ResourcePredictor::train(const std::vector<RunRecord
 }
 
 RunMeasure ResourcePredictor::predict_measure(const RunConfig& c) const {
-  double x[64];
+  // The inputs and, per output, a copy with the inputs it does not read zeroed; on the
+  // stack unless the device vocabulary is large.
+  const size_t n = features_.input_count();
+  double buf[128];
   std::vector<double> big;
-  double* xp = x;
-  if (features_.input_count() > 64) {
-    big.resize(features_.input_count());
+  double* xp = buf;
+  if (2 * n > 128) {
+    big.resize(2 * n);
     xp = big.data();
   }
+  double* xmp = xp + n;
   features_.encode_inputs(c, xp);
   double y[kOutputCount];
   // An output without machines (never trained, or no values in training) predicts 0.
   for (size_t k = 0; k < kOutputCount; ++k) {
     y[k] = 0.0;
     if (k >= machines_.size() || machines_[k].empty()) continue;
+    std::copy(xp, xp + n, xmp);
+    mask_inputs(k, xmp, n);
     for (const Machine& m : machines_[k]) {
       double yk;
-      m.predict(xp, &yk);
+      m.predict(xmp, &yk);
       y[k] += yk;
     }
     y[k] /= static_cast<double>(machines_[k].size());
@@ -171,7 +184,8 @@ RunMeasure ResourcePredictor::predict_measure(const RunConfig& c) const {
 
 Expected<Prediction> ResourcePredictor::predict(const RunConfig& c) const {
   if (Status s = validate(c); !s) return s;
-  if (machines_.empty() || machines_[0].empty())
+  // Total time reads every input (output_uses_input), so its machines know every range.
+  if (machines_.size() <= 1 || machines_[1].empty())
     return invalid_argument("the predictor has not been trained");
   Prediction out;
   out.measure = predict_measure(c);
@@ -179,8 +193,7 @@ Expected<Prediction> ResourcePredictor::predict(const RunConfig& c) const {
   const char* count_names[] = {"particles", "triangles", "triangles_original", "frames", "threads"};
   const int64_t counts[] = {c.particles, c.triangles, c.triangles_original, c.frames,
                             std::max<int64_t>(c.threads, 1)};
-  // Every machine saw the same training rows, so any one knows the input ranges.
-  for (const RangeIssue& issue : machines_[0][0].check_range(x.data())) {
+  for (const RangeIssue& issue : machines_[1][0].check_range(x.data())) {
     const size_t i = issue.input;
     std::string msg;
     if (i <= FeatureSpace::kLogThreads) {
@@ -226,7 +239,7 @@ std::optional<RunConfig> ResourcePredictor::usual_host(Backend b) const {
 std::string ResourcePredictor::to_json() const {
   nlohmann::json j;
   j["kind"] = "collidoscope-resource-predictor";
-  j["version"] = 2;
+  j["version"] = 3;
   j["devices"] = features_.devices();
   j["usual"] = nlohmann::json::array();
   for (const auto& u : usual_)
@@ -262,8 +275,9 @@ Expected<ResourcePredictor> ResourcePredictor::from_json(const std::string& text
   try {
     if (!j.is_object() || j.value("kind", "") != "collidoscope-resource-predictor")
       return parse_error("not a collidoscope resource-predictor model");
-    // Version 1 held one machine for all outputs; such models must be retrained.
-    if (j.at("version").get<int>() != 2)
+    // Version 1 held one machine for all outputs, version 2 fed the frame count to every
+    // output (see output_uses_input); such models must be retrained.
+    if (j.at("version").get<int>() != 3)
       return parse_error("unsupported model version " + j.at("version").dump() +
                          " (retrain with `collidoscope gvm train`)");
     p.features_ = FeatureSpace::with_devices(j.at("devices").get<std::vector<std::string>>());
@@ -305,8 +319,8 @@ Expected<ResourcePredictor> ResourcePredictor::from_json(const std::string& text
       p.machines_[k].push_back(std::move(*m));
     }
   }
-  if (p.machines_[0].empty())
-    return parse_error("model JSON has no machine for the time per frame");
+  if (p.machines_[0].empty() || p.machines_[1].empty())
+    return parse_error("model JSON has no machine for the time per frame or the total time");
   return p;
 }
 

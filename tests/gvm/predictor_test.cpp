@@ -159,17 +159,33 @@ TEST(Predictor, SaveAndLoadGiveBitIdenticalPredictions) {
   EXPECT_EQ(back->features().devices(), trained().features().devices());
 }
 
+// Time per frame (the steady cost of a frame) and the memory peaks do not depend on how
+// many frames a run has, so their machines never read it; total time does.
+TEST(Predictor, OnlyPerRunOutputsReadTheFrameCount) {
+  RunConfig c = typical(Backend::kCuda);
+  c.frames = 2;
+  const RunMeasure few = trained().predict_measure(c);
+  c.frames = 200;
+  const RunMeasure many = trained().predict_measure(c);
+  EXPECT_EQ(few.time_per_frame_s, many.time_per_frame_s);
+  EXPECT_EQ(few.peak_host_bytes, many.peak_host_bytes);
+  EXPECT_EQ(few.peak_device_bytes, many.peak_device_bytes);
+  EXPECT_NE(few.total_time_s, many.total_time_s);
+}
+
 TEST(Predictor, CorruptModelFilesAreErrors) {
   EXPECT_FALSE(ResourcePredictor::from_json("[1, 2"));
   EXPECT_FALSE(ResourcePredictor::from_json(R"({"kind": "something else"})"));
   std::string text = trained().to_json();
-  // Version 1 models (one machine for every output) must be retrained.
-  const size_t v = text.find("\"version\": 2");
+  // Version 1 models (one machine for every output) and version 2 ones (the frame count
+  // fed to every output) must be retrained.
+  const size_t v = text.find("\"version\": 3");
   ASSERT_NE(v, std::string::npos);
-  auto old =
-      ResourcePredictor::from_json(text.substr(0, v) + "\"version\": 1" + text.substr(v + 12));
-  ASSERT_FALSE(old);
-  EXPECT_NE(old.status().message().find("retrain"), std::string::npos);
+  for (const char* old_version : {"\"version\": 1", "\"version\": 2"}) {
+    auto old = ResourcePredictor::from_json(text.substr(0, v) + old_version + text.substr(v + 12));
+    ASSERT_FALSE(old);
+    EXPECT_NE(old.status().message().find("retrain"), std::string::npos);
+  }
   // A device list that no longer matches the machine's inputs.
   const size_t at = text.find("\"synthetic-cpu\"");
   ASSERT_NE(at, std::string::npos);
