@@ -239,8 +239,16 @@ Expected<MlpFit> MlpFit::fit(const std::vector<RunRecord>& rows, const FeatureSp
   const size_t P = params.size();
   std::vector<double> grad(P), mom(P, 0.0), vel(P, 0.0), h(N * H), dh(H);
   const double b1 = 0.9, b2 = 0.999, eps = 1e-8;
+  // Full-batch Adam at a fixed rate does not settle: the loss spikes now and then, and
+  // where a run stops decides the model (on one real log, 300 / 3000 / 10000 epochs
+  // gave 42 / 94 / 18 % time-per-frame error). So the rate decays on a cosine from
+  // learning_rate to 1 % of it, and the parameters with the lowest training loss seen
+  // are the ones kept (training rows only; the validation rows stay unseen).
+  double best_loss = std::numeric_limits<double>::infinity();
+  std::vector<double> best(P);
   for (int e = 1; e <= opt.epochs; ++e) {
     std::fill(grad.begin(), grad.end(), 0.0);
+    double loss = 0.0;
     double* gw1 = grad.data();
     double* gb1 = gw1 + H * I;
     double* gw2 = gb1 + H;
@@ -257,6 +265,7 @@ Expected<MlpFit> MlpFit::fit(const std::vector<RunRecord>& rows, const FeatureSp
         double o = m.b2_[k];
         for (size_t j = 0; j < H; ++j) o += m.w2_[k * H + j] * h[n * H + j];
         const double d = 2.0 * (o - ys(n, k)) / (present[k] * static_cast<double>(K));
+        loss += (o - ys(n, k)) * (o - ys(n, k)) / (present[k] * static_cast<double>(K));
         gb2[k] += d;
         for (size_t j = 0; j < H; ++j) {
           gw2[k * H + j] += d * h[n * H + j];
@@ -269,13 +278,22 @@ Expected<MlpFit> MlpFit::fit(const std::vector<RunRecord>& rows, const FeatureSp
         for (size_t i = 0; i < I; ++i) gw1[j * I + i] += dz * xs(n, i);
       }
     }
+    if (loss < best_loss) {  // the loss of the parameters before this step
+      best_loss = loss;
+      for (size_t q = 0; q < P; ++q) best[q] = *params[q];
+    }
     const double c1 = 1.0 - std::pow(b1, e), c2 = 1.0 - std::pow(b2, e);
+    const double lr_min = 0.01 * opt.learning_rate;
+    const double lr = lr_min + 0.5 * (opt.learning_rate - lr_min) *
+                                   (1.0 + std::cos(M_PI * (e - 1) / std::max(1, opt.epochs)));
     for (size_t q = 0; q < P; ++q) {
       mom[q] = b1 * mom[q] + (1 - b1) * grad[q];
       vel[q] = b2 * vel[q] + (1 - b2) * grad[q] * grad[q];
-      *params[q] -= opt.learning_rate * (mom[q] / c1) / (std::sqrt(vel[q] / c2) + eps);
+      *params[q] -= lr * (mom[q] / c1) / (std::sqrt(vel[q] / c2) + eps);
     }
   }
+  if (opt.epochs > 0)
+    for (size_t q = 0; q < P; ++q) *params[q] = best[q];
   return m;
 }
 

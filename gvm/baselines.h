@@ -52,7 +52,7 @@ class LeastSquaresFit {
 
 struct MlpOptions {
   int hidden = 16;    // tanh neurons in the one hidden layer
-  int epochs = 3000;  // full-batch Adam steps
+  int epochs = 10000;  // full-batch Adam steps (cosine-decayed rate)
   double learning_rate = 0.01;
   uint64_t seed = 1;
 };
