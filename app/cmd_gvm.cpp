@@ -90,7 +90,8 @@ const std::vector<FlagSpec>& train_flags() {
       {"activation", true, "tanh or sigmoid (default tanh)"},
       {"split-seed", true, "seed of the 70/30 train/validation split (default 1)"},
       {"curve", true, "write every epoch's train/validation loss to this CSV"},
-      {"mlp-epochs", true, "epochs of the back-propagation baseline (default 3000)"},
+      {"predictions", true, "write the validation rows with every model's predictions to this CSV"},
+      {"mlp-epochs", true, "epochs of the back-propagation baseline (default 10000)"},
       {"help", false, "show this help"},
   };
   return specs;
@@ -156,7 +157,7 @@ int gvm_train(const Args& args) {
     return kExitFailure;
   }
   const auto& rep = cmp->gvm_report;
-  const auto& mp = cmp->gvm.machines()[0][0].params();  // every machine has the same inputs
+  const auto& mp = cmp->gvm.machines()[1][0].params();  // total time reads every input
   size_t machines = 0;
   for (const auto& ms : cmp->gvm.machines()) machines += ms.size();
   size_t varying = 0;
@@ -205,6 +206,37 @@ int gvm_train(const Args& args) {
   }
 
   const auto& names = g::measure_names();
+  if (parsed->has("predictions")) {
+    // The validation rows as run-log rows, then MODEL_OUTPUT columns: what each model
+    // predicted for them, to look at the misses row by row (or chart them).
+    const std::string path = parsed->get("predictions");
+    const auto& va = cmp->split.validation;
+    std::istringstream log(g::format_run_log(va));
+    std::ofstream out(path, std::ios::trunc);
+    std::string line;
+    for (size_t i = 0; std::getline(log, line); ++i) {
+      out << line;
+      for (const auto& s : cmp->scores) {
+        double p[g::kOutputCount];
+        if (i > 0) g::measure_to_array(s.validation_predictions[i - 1], p);
+        for (size_t k = 0; k < names.size(); ++k) {
+          char cell[64];
+          if (i == 0)
+            std::snprintf(cell, sizeof cell, ",%s_%s", s.name.c_str(), names[k].c_str());
+          else
+            std::snprintf(cell, sizeof cell, ",%.9g", p[k]);
+          out << cell;
+        }
+      }
+      out << '\n';
+    }
+    if (!out.flush()) {
+      std::fprintf(stderr, "collidoscope %s: cannot write %s\n", cmd, path.c_str());
+      return kExitFailure;
+    }
+    std::printf("validation predictions: %s (%zu rows)\n", path.c_str(), va.size());
+  }
+
   auto table = [&](const char* title, bool validation) {
     std::printf("\n%s MAPE %% (rows with a nonzero value)\n%-15s", title, "model");
     for (const auto& nm : names) std::printf(" %17s", nm.c_str());

@@ -62,8 +62,14 @@ Expected<Comparison> train_and_compare(const std::vector<RunRecord>& rows,
   if (!gvm) return gvm.status();
   c.gvm = std::move(*gvm);
   auto score = [&](std::string name, double seconds, auto predict) {
-    c.scores.push_back({std::move(name), mean_abs_percent_error(tr, predict),
-                        mean_abs_percent_error(va, predict), seconds});
+    ModelScore s{std::move(name),
+                 mean_abs_percent_error(tr, predict),
+                 mean_abs_percent_error(va, predict),
+                 seconds,
+                 {}};
+    s.validation_predictions.reserve(va.size());
+    for (const auto& r : va) s.validation_predictions.push_back(predict(r.config));
+    c.scores.push_back(std::move(s));
   };
   score("gvm", c.gvm_report.seconds, [&](const RunConfig& x) { return c.gvm.predict_measure(x); });
 

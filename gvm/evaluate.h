@@ -39,6 +39,7 @@ struct ModelScore {
   std::string name;
   ErrorRow train, validation;
   double fit_seconds = 0.0;
+  std::vector<RunMeasure> validation_predictions;  // one per RowSplit::validation row
 };
 
 struct CompareOptions {
