@@ -81,13 +81,13 @@ const std::vector<FlagSpec>& train_flags() {
       {"logs", true, "run log CSV to train on (required; see docs/gvm.md)"},
       {"out", true, "where to write the model JSON (required)"},
       {"hidden", true, "hidden neurons (default 16)"},
-      {"epochs", true, "epochs; one epoch = one proposal per parameter (default 500)"},
+      {"epochs", true, "epochs; one epoch = one proposal per parameter (default 2000)"},
       {"seed", true, "seed of the machine's signs, start and proposals (default 1)"},
       {"delta", true, "largest Monte Carlo step, fraction of a parameter's range (default 0.1)"},
       {"fixed-delta", false, "keep the step at --delta instead of adapting it per epoch"},
       {"beta-max", true, "gain range [-B, B] of each hidden neuron (default 3)"},
-      {"ensemble", true, "machines per output, from different seeds, averaged (default 5)"},
-      {"activation", true, "tanh or sigmoid (default tanh)"},
+      {"ensemble", true, "machines per output, from different seeds, averaged (default 3)"},
+      {"activation", true, "softsign, tanh or sigmoid (default softsign)"},
       {"split-seed", true, "seed of the 70/30 train/validation split (default 1)"},
       {"curve", true, "write every epoch's train/validation loss to this CSV"},
       {"predictions", true, "write the validation rows with every model's predictions to this CSV"},
@@ -130,7 +130,7 @@ int gvm_train(const Args& args) {
   opt.gvm.adaptive_delta = !parsed->has("fixed-delta");
   if (parsed->has("activation")) {
     auto a = g::parse_activation(parsed->get("activation"));
-    if (!a) return usage_error(cmd, "--activation must be tanh or sigmoid");
+    if (!a) return usage_error(cmd, "--activation must be softsign, tanh or sigmoid");
     opt.gvm.activation = *a;
   }
   if (opt.gvm.hidden < 1 || opt.gvm.hidden > 4096)

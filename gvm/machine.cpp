@@ -12,10 +12,11 @@
 namespace collido::gvm {
 
 const char* activation_name(Activation a) {
-  return a == Activation::kTanh ? "tanh" : "sigmoid";
+  return a == Activation::kSoftsign ? "softsign" : a == Activation::kTanh ? "tanh" : "sigmoid";
 }
 
 std::optional<Activation> parse_activation(const std::string& name) {
+  if (name == "softsign") return Activation::kSoftsign;
   if (name == "tanh") return Activation::kTanh;
   if (name == "sigmoid") return Activation::kSigmoid;
   return std::nullopt;
@@ -26,8 +27,15 @@ namespace {
 // tanh through one exp: 1 - 2 / (1 + e^2z) is within 4e-16 of std::tanh (absolute) and
 // about 3x faster with glibc, and the activation is most of a Monte Carlo proposal's cost.
 inline double activate(Activation a, double z) {
-  return a == Activation::kTanh ? 1.0 - 2.0 / (1.0 + std::exp(2.0 * z))
-                                : 1.0 / (1.0 + std::exp(-z));
+  switch (a) {
+    case Activation::kSoftsign:
+      return z / (1.0 + std::fabs(z));
+    case Activation::kTanh:
+      return 1.0 - 2.0 / (1.0 + std::exp(2.0 * z));
+    case Activation::kSigmoid:
+      break;
+  }
+  return 1.0 / (1.0 + std::exp(-z));
 }
 
 // Inputs equal on every training row carry no information; they are scaled to 0 and
