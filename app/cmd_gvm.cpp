@@ -370,7 +370,9 @@ int cmd_predict(const Args& args) {
         "  area, wall bounding box grown by the radius; world units); optional\n"
         "  \"triangles_original\", \"device\", \"threads\" (default: the model's usual host).\n"
         "Prints predicted time per frame, total time, peak memory and GPU load, and a\n"
-        "warning for every input outside the range the model was trained on.\n"
+        "warning for every input outside the range the model was trained on. The model\n"
+        "costs detection frames; a scene file of `collidoscope run` is refused (runs are\n"
+        "not calibrated yet, docs/gvm.md).\n"
         "Exit codes: 0 predicted (even with warnings), 1 a file could not be read,\n"
         "2 bad arguments or configuration values.",
         predict_flags());

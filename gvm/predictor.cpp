@@ -376,6 +376,14 @@ Expected<RunConfig> run_config_from_json(const std::string& text, const Resource
   nlohmann::json j = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
   if (j.is_discarded()) return parse_error("configuration is not valid JSON");
   if (!j.is_object()) return parse_error("configuration must be a JSON object");
+  // A scene file of `collidoscope run` describes a simulation; the predictor is
+  // calibrated on detection frames (docs/gvm.md), so it must not pretend to cost one.
+  if (j.contains("wall") || j.contains("placement"))
+    return invalid_argument(
+        "this is a scene file of `collidoscope run`; the predictor is calibrated on "
+        "detection frames, not on simulation runs, so it reads a detection configuration "
+        "(particles, triangles, method, traversal, frames, backend, radius, wall_area, "
+        "wall_box_volume; see `collidoscope predict --help`)");
   RunConfig c;
   auto count = [&](const char* key, int64_t* out, bool required) -> Status {
     if (!j.contains(key))

@@ -57,12 +57,13 @@ TEST(CmdGvm, UnreadableFilesExitOne) {
 }
 
 TEST(CmdGvm, SynthTrainPredict) {
-  const std::string log = tmp("runs.csv"), model = tmp("model.json"), curve = tmp("curve.csv");
+  const std::string log = tmp("runs.csv"), model = tmp("model.json"), curve = tmp("curve.csv"),
+                    predictions = tmp("predictions.csv");
   auto synth = run([&] { return cmd_gvm({"synth", "--out", log, "--rows", "100"}); });
   ASSERT_EQ(synth.first, kExitOk) << synth.second;
   auto train = run([&] {
     return cmd_gvm({"train", "--logs", log, "--out", model, "--epochs", "40", "--mlp-epochs", "100",
-                    "--curve", curve});
+                    "--curve", curve, "--predictions", predictions});
   });
   ASSERT_EQ(train.first, kExitOk) << train.second;
   for (const char* s : {"70 train, 30 validation", "validation MAPE", "gvm", "paper-linear",
@@ -71,6 +72,15 @@ TEST(CmdGvm, SynthTrainPredict) {
   const std::string c = slurp(curve);
   EXPECT_EQ(c.rfind("epoch,train_loss,validation_loss,acceptance\n", 0), 0u);
   EXPECT_EQ(std::count(c.begin(), c.end(), '\n'), 41);
+  // The validation rows as run-log rows, then each model's prediction of each output.
+  auto rows = gvm::read_run_log(predictions);
+  ASSERT_TRUE(rows) << rows.status().message();
+  EXPECT_EQ(rows->size(), 30u);
+  const std::string p = slurp(predictions);
+  const std::string header = p.substr(0, p.find('\n'));
+  for (const char* col : {"gvm_time_per_frame_s", "mlp-backprop_peak_host_bytes",
+                          "paper-linear_gpu_load", "least-squares_total_time_s"})
+    EXPECT_NE(header.find(col), std::string::npos) << col;
 
   const std::string config = tmp("config.json");
   std::ofstream(config) << R"({"particles": 1e9, "triangles": 5000, "method": "gravity",
@@ -87,6 +97,12 @@ TEST(CmdGvm, SynthTrainPredict) {
 
   std::ofstream(config) << R"({"particles": 100, "method": "gravity"})";
   EXPECT_EQ(cmd_predict({config, "--model", model}), kExitUsage);  // lacks "triangles"
+
+  // A scene file is a simulation, which the detection-frame model does not cost.
+  std::ofstream(config) << R"({"wall": "wall1", "particles": {"count": 3000, "radius": 1}})";
+  testing::internal::CaptureStderr();
+  EXPECT_EQ(cmd_predict({config, "--model", model}), kExitUsage);
+  EXPECT_NE(testing::internal::GetCapturedStderr().find("scene file"), std::string::npos);
 }
 
 }  // namespace
