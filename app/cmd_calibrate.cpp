@@ -537,10 +537,11 @@ int cmd_calibrate(const Args& args) {
         "traversals, frames) on this machine, each in a process of its own, and writes one\n"
         "run-log row per configuration: time per frame (the steady cost: median of the\n"
         "frames after the first, timing extra frames where the run has too few), total\n"
-        "time (set-up and the run's frames), peak host and device memory, GPU load. Repeats are whole passes over the\n"
-        "sweep; with --budget, no run starts after that many seconds and the log keeps\n"
-        "the configurations measured by then. `collidoscope gvm train --logs RUNS.csv`\n"
-        "trains on the log.\n"
+        "time (set-up and the run's frames), peak host and device memory, GPU load.\n"
+        "Repeats are whole passes over the sweep; with --budget, no run starts after that\n"
+        "many seconds and the log keeps the configurations measured by then. Measure on an\n"
+        "otherwise idle machine: other work slows runs unevenly (docs/gvm.md).\n"
+        "`collidoscope gvm train --logs RUNS.csv` trains on the log.\n"
         "Exit codes: 0 every configuration ran, 1 a run or the output failed, 2 bad arguments.",
         calibrate_flags());
     return kExitOk;

@@ -31,9 +31,9 @@ struct GvmOptions {
   // Between epochs the step shrinks x0.8 after an epoch that kept < 10% of proposals
   // and grows x1.25 (up to delta) after one that kept > 20%; floor delta / 100.
   bool adaptive_delta = true;
-  // softsign z / (1 + |z|): no exp, so a proposal costs about a third of tanh's, and on
-  // the calibration sweeps it fit as well or better at the same number of proposals
-  // (docs/gvm.md "Activation").
+  // softsign z / (1 + |z|): no exp, so a proposal costs less than half of tanh's, and on
+  // the calibration sweeps it fit time per frame and memory better (total time a little
+  // worse) at the same number of proposals (docs/gvm.md "Activation").
   Activation activation = Activation::kSoftsign;
   double w_max = 1.0;  // w in [-w_max, w_max]
   // beta in [-beta_max, beta_max]. It bounds how sharp a neuron can be, Zhao's margin
