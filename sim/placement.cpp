@@ -87,8 +87,11 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
   return Status::ok();
 }
 
-// Layers of a disc lattice leaving an inlet one after another, each released
-// once the layer before has moved 1.2 lattice spacings on.
+// A disc lattice of slots across the inlet. Each slot releases a particle every tau,
+// the time a particle takes to move 1.2 lattice spacings on, so two particles of one
+// slot never overlap; different slots are a lattice spacing apart. Each slot starts at
+// its own random phase within tau: the particles leave as a stream, not as flat layers
+// one after another (which the videos showed as falling slabs).
 Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl,
              Vec3d gravity, SplitMix64& rng, ParticleSet* out) {
   const Bounds3d box = mesh_bounds(wall);
@@ -135,14 +138,17 @@ Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSp
   }
   if (pl.rate > 0) tau = std::max(tau, double(disc.size()) / pl.rate);
   out->resize(ps.count);
+  std::vector<double> phase(disc.size());
+  for (double& f : phase) f = rng.uniform(0.0, 1.0);
   const double jitter = 0.02 * r;
   for (uint64_t i = 0; i < ps.count; ++i) {
-    const Vec3d p = centre + disc[i % disc.size()];
+    const size_t slot = i % disc.size();
+    const Vec3d p = centre + disc[slot];
     out->x[i] = p.x + rng.uniform(-jitter, jitter);
     out->y[i] = p.y + rng.uniform(-jitter, jitter);
     out->z[i] = p.z + rng.uniform(-jitter, jitter);
     out->vx[i] = v.x, out->vy[i] = v.y, out->vz[i] = v.z;
-    out->release[i] = double(i / disc.size()) * tau;
+    out->release[i] = (double(i / disc.size()) + phase[slot]) * tau;
   }
   return Status::ok();
 }
