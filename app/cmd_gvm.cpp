@@ -319,11 +319,58 @@ int gvm_synth(const Args& args) {
   return kExitOk;
 }
 
+// ---- gvm merge -------------------------------------------------------------------------
+
+const std::vector<FlagSpec>& merge_flags() {
+  static const std::vector<FlagSpec> specs = {
+      {"out", true, "where to write the merged run log CSV (required)"},
+      {"help", false, "show this help"},
+  };
+  return specs;
+}
+
+int gvm_merge(const Args& args) {
+  const char* cmd = "gvm merge";
+  std::string error;
+  auto parsed = parse_args(args, merge_flags(), &error);
+  if (!parsed) return usage_error(cmd, error);
+  if (parsed->has("help")) {
+    print_help(
+        "usage: collidoscope gvm merge RUNS.csv... --out MERGED.csv\n\n"
+        "Concatenates run logs and combines the rows of one configuration (equal in every\n"
+        "input column), as `calibrate` combines its repeats: the smallest time per frame,\n"
+        "the fastest run's total time and GPU load, the largest memory. Two sweeps with the\n"
+        "same seed on one machine become one log with two passes.",
+        merge_flags());
+    return kExitOk;
+  }
+  if (parsed->positional().empty()) return usage_error(cmd, "expects one or more RUNS.csv");
+  if (!parsed->has("out")) return usage_error(cmd, "--out MERGED.csv is required");
+  std::vector<g::RunRecord> all;
+  for (const std::string& path : parsed->positional()) {
+    auto rows = g::read_run_log(path);
+    if (!rows) {
+      std::fprintf(stderr, "collidoscope %s: %s\n", cmd, rows.status().message().c_str());
+      return kExitFailure;
+    }
+    all.insert(all.end(), rows->begin(), rows->end());
+  }
+  const auto merged = g::merge_repeats(all);
+  if (auto s = g::write_run_log(parsed->get("out"), merged); !s) {
+    std::fprintf(stderr, "collidoscope %s: %s\n", cmd, s.message().c_str());
+    return kExitFailure;
+  }
+  std::printf("%zu rows from %zu logs -> %zu configurations: %s\n", all.size(),
+              parsed->positional().size(), merged.size(), parsed->get("out").c_str());
+  return kExitOk;
+}
+
 void print_gvm_usage() {
   std::printf(
       "usage: collidoscope gvm SUBCOMMAND [options]   (SUBCOMMAND --help for its options)\n\n"
       "  train   train the resource predictor on a run log and compare it with baselines\n"
-      "  synth   write a synthetic run log (made-up costs) to try train with\n");
+      "  synth   write a synthetic run log (made-up costs) to try train with\n"
+      "  merge   combine run logs; repeated configurations become one row\n");
 }
 
 // ---- predict ---------------------------------------------------------------------------
@@ -353,7 +400,8 @@ int cmd_gvm(const Args& args) {
   const Args rest(args.begin() + 1, args.end());
   if (sub == "train") return gvm_train(rest);
   if (sub == "synth") return gvm_synth(rest);
-  return usage_error("gvm", "unknown subcommand '" + sub + "' (train, synth)");
+  if (sub == "merge") return gvm_merge(rest);
+  return usage_error("gvm", "unknown subcommand '" + sub + "' (train, synth, merge)");
 }
 
 int cmd_predict(const Args& args) {

@@ -1,5 +1,6 @@
 #include "gvm/run_log.h"
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -328,6 +329,38 @@ std::string format_run_log(const std::vector<RunRecord>& rows) {
            "," + format_double(m.time_per_frame_s) + "," + format_double(m.total_time_s) + "," +
            format_double(m.peak_host_bytes) + "," + format_double(m.peak_device_bytes) + "," +
            format_double(m.gpu_load) + "\n";
+  }
+  return out;
+}
+
+namespace {
+bool same_config(const RunConfig& a, const RunConfig& b) {
+  return a.particles == b.particles && a.triangles == b.triangles &&
+         a.triangles_original == b.triangles_original && a.radius == b.radius &&
+         a.wall_area == b.wall_area && a.wall_box_volume == b.wall_box_volume &&
+         a.method == b.method && a.traversal == b.traversal && a.frames == b.frames &&
+         a.backend == b.backend && a.device == b.device && a.threads == b.threads;
+}
+}  // namespace
+
+std::vector<RunRecord> merge_repeats(const std::vector<RunRecord>& rows) {
+  std::vector<RunRecord> out;
+  for (const RunRecord& r : rows) {
+    auto it = std::find_if(out.begin(), out.end(),
+                           [&](const RunRecord& o) { return same_config(o.config, r.config); });
+    if (it == out.end()) {
+      out.push_back(r);
+      continue;
+    }
+    RunMeasure& m = it->measure;
+    const RunMeasure& n = r.measure;
+    m.time_per_frame_s = std::min(m.time_per_frame_s, n.time_per_frame_s);
+    if (n.total_time_s < m.total_time_s) {
+      m.total_time_s = n.total_time_s;
+      m.gpu_load = n.gpu_load;
+    }
+    m.peak_host_bytes = std::max(m.peak_host_bytes, n.peak_host_bytes);
+    m.peak_device_bytes = std::max(m.peak_device_bytes, n.peak_device_bytes);
   }
   return out;
 }

@@ -77,6 +77,13 @@ Expected<std::vector<RunRecord>> parse_run_log(const std::string& text);
 // Writes CSV text with a header line; doubles with 17 significant digits (round trip).
 std::string format_run_log(const std::vector<RunRecord>& rows);
 
+// Combines repeated measurements of one configuration (rows whose RunConfig is equal in
+// every field, e.g. two sweeps with the same seed) into one row, as `calibrate` combines
+// its repeats: other work on a machine only adds time, so the smallest time per frame
+// and the fastest run's total time and GPU load are kept, and the largest memory (a
+// peak). Rows keep the order of their configuration's first appearance.
+std::vector<RunRecord> merge_repeats(const std::vector<RunRecord>& rows);
+
 // File versions of the two above.
 Expected<std::vector<RunRecord>> read_run_log(const std::string& path);
 Status write_run_log(const std::string& path, const std::vector<RunRecord>& rows);

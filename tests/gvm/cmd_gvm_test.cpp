@@ -82,6 +82,16 @@ TEST(CmdGvm, SynthTrainPredict) {
                           "paper-linear_gpu_load", "least-squares_total_time_s"})
     EXPECT_NE(header.find(col), std::string::npos) << col;
 
+  // Merging a log with itself changes nothing but the row count read.
+  const std::string merged = tmp("merged.csv");
+  auto merge = run([&] { return cmd_gvm({"merge", log, log, "--out", merged}); });
+  ASSERT_EQ(merge.first, kExitOk) << merge.second;
+  EXPECT_NE(merge.second.find("200 rows from 2 logs -> 100 configurations"), std::string::npos)
+      << merge.second;
+  EXPECT_EQ(slurp(merged), slurp(log));
+  EXPECT_EQ(cmd_gvm({"merge", "--out", merged}), kExitUsage);  // no logs
+  EXPECT_EQ(cmd_gvm({"merge", log, "--out", merged, "/nonexistent.csv"}), kExitFailure);
+
   const std::string config = tmp("config.json");
   std::ofstream(config) << R"({"particles": 1e9, "triangles": 5000, "method": "gravity",
                                "traversal": "particle", "frames": 10, "backend": "cuda",

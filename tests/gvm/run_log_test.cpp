@@ -171,6 +171,33 @@ TEST(RunLog, StructuralErrorsNameTheLine) {
   EXPECT_NE(after.find("line 2"), std::string::npos) << after;
 }
 
+// Two passes of one sweep become one row per configuration, combined as calibrate's
+// repeats are; a configuration that differs in any input stays a row of its own.
+TEST(RunLog, MergeRepeatsKeepsFastestTimesAndLargestMemory) {
+  auto rows = synthetic_run_log(6, 4);
+  std::vector<RunRecord> second = rows;
+  second[0].measure.time_per_frame_s *= 0.5;  // faster per frame,
+  second[0].measure.total_time_s *= 2.0;      // slower in total,
+  second[0].measure.gpu_load = 0.5;           // (whose load must not be taken)
+  second[0].measure.peak_host_bytes *= 1.1;   // a larger peak
+  second[1].measure.total_time_s *= 0.5;      // faster in total, with its load
+  second[1].measure.gpu_load = 0.25;
+  second[2].config.frames += 1;  // another configuration
+  std::vector<RunRecord> both = rows;
+  both.insert(both.end(), second.begin(), second.end());
+  const auto merged = merge_repeats(both);
+  ASSERT_EQ(merged.size(), rows.size() + 1);
+  EXPECT_EQ(merged[0].measure.time_per_frame_s, second[0].measure.time_per_frame_s);
+  EXPECT_EQ(merged[0].measure.total_time_s, rows[0].measure.total_time_s);
+  EXPECT_EQ(merged[0].measure.gpu_load, rows[0].measure.gpu_load);
+  EXPECT_EQ(merged[0].measure.peak_host_bytes, second[0].measure.peak_host_bytes);
+  EXPECT_EQ(merged[1].measure.total_time_s, second[1].measure.total_time_s);
+  EXPECT_EQ(merged[1].measure.gpu_load, 0.25);
+  EXPECT_EQ(merged[1].measure.time_per_frame_s, rows[1].measure.time_per_frame_s);
+  for (size_t i = 3; i < rows.size(); ++i) expect_equal(merged[i], rows[i]);
+  expect_equal(merged.back(), second[2]);
+}
+
 TEST(RunLog, ValidateNamesTheField) {
   RunConfig c;
   c.particles = 10;
