@@ -35,8 +35,9 @@ RunMeasure decode_outputs(const double* y, Backend b);
 // (an input a target does not depend on only lets a model fit noise along it). Total
 // time and GPU load (busy time over total time) do.
 bool output_uses_input(size_t output, size_t input);
-// Zeroes, in x[0..n), the inputs output k does not read (a constant input is frozen
-// in training and contributes nothing to a prediction).
+// Zeroes, in x[0..n), the inputs output k does not read. Applied to the training rows
+// only: an input constant there is frozen in training, and the trained machine scales it
+// to 0 at prediction whatever its value, so predictions need no mask.
 void mask_inputs(size_t output, double* x, size_t n);
 
 class FeatureSpace {

@@ -153,28 +153,25 @@ Expected<ResourcePredictor> ResourcePredictor::train(const std::vector<RunRecord
 }
 
 RunMeasure ResourcePredictor::predict_measure(const RunConfig& c) const {
-  // The inputs and, per output, a copy with the inputs it does not read zeroed; on the
-  // stack unless the device vocabulary is large.
-  const size_t n = features_.input_count();
-  double buf[128];
+  double x[64];
   std::vector<double> big;
-  double* xp = buf;
-  if (2 * n > 128) {
-    big.resize(2 * n);
+  double* xp = x;
+  if (features_.input_count() > 64) {
+    big.resize(features_.input_count());
     xp = big.data();
   }
-  double* xmp = xp + n;
   features_.encode_inputs(c, xp);
   double y[kOutputCount];
   // An output without machines (never trained, or no values in training) predicts 0.
+  // The inputs an output does not read (mask_inputs) need no masking here: they were
+  // constant in its training rows, and a machine scales a constant input to 0 whatever
+  // its value.
   for (size_t k = 0; k < kOutputCount; ++k) {
     y[k] = 0.0;
     if (k >= machines_.size() || machines_[k].empty()) continue;
-    std::copy(xp, xp + n, xmp);
-    mask_inputs(k, xmp, n);
     for (const Machine& m : machines_[k]) {
       double yk;
-      m.predict(xmp, &yk);
+      m.predict(xp, &yk);
       y[k] += yk;
     }
     y[k] /= static_cast<double>(machines_[k].size());
