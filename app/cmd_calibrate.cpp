@@ -226,9 +226,8 @@ double wall_box_volume(double ex, double ey, double ez, double r) {
 }
 
 // Triangle counts of every wall at its particle scales, for keeping divisions from
-// growing absurdly large. midpoint4 cuts every triangle into four similar halves until
-// the longest edge fits, so its count is 4^levels per triangle and needs no division;
-// bisection (gravity, circumcircle) stops each piece as soon as it fits and makes far
+// growing absurdly large. midpoint4's count needs no division
+// (sim::midpoint4_piece_count); bisection (gravity, circumcircle) stops each piece as soon as it fits and makes far
 // fewer (wall1 at 1 %: 0.36 and 0.16 million against 2.2), so it is counted by dividing,
 // once, at radius_ref.
 SurveyResult survey_walls(bool quick, const RadiusRange& rr) {
@@ -249,16 +248,7 @@ SurveyResult survey_walls(bool quick, const RadiusRange& rr) {
     double m4_ref = 0;
     for (int i = 0; i <= kRadiusSteps; ++i) {  // i == kRadiusSteps: at radius_ref
       const double r = (i < kRadiusSteps ? radius_step(rr, i) : radius_ref(rr)) * ws.longest;
-      double m4 = 0;
-      for (size_t t = 0; t < mesh->triangles.size(); ++t) {
-        double longest = 0;
-        for (int k = 0; k < 3; ++k)
-          longest =
-              std::max(longest, sim::length(mesh->corner(t, (k + 1) % 3) - mesh->corner(t, k)));
-        double n = 1;
-        for (; longest > r; longest *= 0.5) n *= 4;
-        m4 += n;
-      }
+      const double m4 = sim::midpoint4_piece_count(*mesh, r);
       if (i < kRadiusSteps)
         ws.m4[i] = static_cast<int64_t>(std::min(m4, 9e18));
       else

@@ -107,6 +107,18 @@ void centroid_sphere(const Tri& t, Vec3d& centre, double& radius) {
 
 }  // namespace
 
+double midpoint4_piece_count(const TriangleMesh& mesh, double r_max) {
+  const double limit2 = r_max * r_max;  // midpoint4()'s stopping rule
+  double count = 0;
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+    const Tri tri{mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2)};
+    double n = 1;
+    for (double e2 = edge2(tri, longest_edge(tri)); e2 > limit2; e2 *= 0.25) n *= 4;
+    count += n;
+  }
+  return count;
+}
+
 DividedMesh divide(const TriangleMesh& mesh, DivisionMethod method, double r_max) {
   DividedMesh out;
   std::vector<Tri> pieces, right;

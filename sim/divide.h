@@ -31,6 +31,12 @@ struct DividedMesh {
 // Pieces are produced per original triangle, in order, so each original's pieces are contiguous.
 DividedMesh divide(const TriangleMesh& mesh, DivisionMethod method, double r_max);
 
+// The number of pieces divide(mesh, kMidpoint4, r_max) makes, without making them: a
+// four-way split halves every edge, so a triangle becomes 4^levels pieces, levels being
+// how often its longest edge halves before it fits. A double, because it can be
+// astronomical (a large wall for small particles) where dividing would never finish.
+double midpoint4_piece_count(const TriangleMesh& mesh, double r_max);
+
 // Relative difference between the total area of the pieces and of the mesh,
 // both summed in double (paper Eq. 6).
 double division_area_error(const TriangleMesh& mesh, const DividedMesh& divided);

@@ -68,5 +68,16 @@ TEST(Divide, Wall1CountsMatchThePaper) {
   EXPECT_LT(2 * c_closed, g_closed + g_closed / 10);
 }
 
+// The count calibrate uses to skip walls whose division would be absurdly large is the
+// count divide() makes, on a wall with slivers (the caps) and at several scales.
+TEST(Divide, Midpoint4CountWithoutDividingMatchesDivide) {
+  const TriangleMesh wall = make_cylinder(50, 100, 40, Caps::kBoth);
+  for (double r : {200.0, 20.0, 7.0, 3.0}) {
+    const size_t made = divide(wall, DivisionMethod::kMidpoint4, r).pieces.size();
+    EXPECT_EQ(midpoint4_piece_count(wall, r), static_cast<double>(made)) << "r_max " << r;
+  }
+  EXPECT_EQ(midpoint4_piece_count(wall, 1e9), static_cast<double>(wall.triangles.size()));
+}
+
 }  // namespace
 }  // namespace collido::sim
