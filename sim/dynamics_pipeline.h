@@ -502,12 +502,17 @@ class DynamicsPipeline final : public Simulation {
             elastic += 0.5 * cf.elastic;  // each side holds half the pair's springs
             overlap_max = hd_max(overlap_max, (rs - dist) / r);
             ++npair;
-            if (friction && !measure) {
-              if (slots < uint32_t(kPairSlots))
-                new_slots[slots++] =
-                    FrictionSlot{j, float(spring.x), float(spring.y), float(spring.z)};
-              else
+            // Slots are counted on the measuring pass too (it writes none), so that the
+            // neighbours beyond kPairSlots reach the frame's statistics.
+            if (friction) {
+              if (slots < uint32_t(kPairSlots)) {
+                if (!measure)
+                  new_slots[slots] =
+                      FrictionSlot{j, float(spring.x), float(spring.y), float(spring.z)};
+                ++slots;
+              } else {
                 ++overflow;
+              }
             }
           }
         });

@@ -347,6 +347,33 @@ void pour_into(const TriangleMesh& wall, int per_layer_side, int layers, uint64_
   EXPECT_LT(st.max_overlap, 0.05);
 }
 
+// A particle of radius 3 touched by 14 of radius 1 (6 along the axes, 8 on the
+// diagonals, 3.9 from its centre and clear of each other) has more frictional contacts
+// than its 8 history slots (kPairSlots); the frame's statistics count the 6 without one.
+void friction_history_overflow_is_counted() {
+  const Vec3d c{0, 0, 50};
+  std::vector<Vec3d> pos{c};
+  for (const Vec3d& d : {Vec3d{1, 0, 0}, Vec3d{-1, 0, 0}, Vec3d{0, 1, 0}, Vec3d{0, -1, 0},
+                         Vec3d{0, 0, 1}, Vec3d{0, 0, -1}})
+    pos.push_back(c + d * 3.9);
+  for (double x : {-1.0, 1.0})
+    for (double y : {-1.0, 1.0})
+      for (double z : {-1.0, 1.0}) pos.push_back(c + Vec3d{x, y, z} * (3.9 / std::sqrt(3.0)));
+  ParticleSet p = particles_at(pos, {}, 1.0);
+  p.r[0] = 3.0;
+  DynamicsConfig cfg;
+  cfg.gravity = {0, 0, 0};
+  cfg.particle_contacts = true;
+  cfg.material.friction = 0.3;
+  auto s = make_sim(make_cylinder(50, 100, 40), cfg, p);
+  ASSERT_TRUE(s);
+  ASSERT_TRUE(s->step(1, s->time_step_info().spring_step));
+  const FrameStats st = measure(*s);
+  EXPECT_EQ(st.particle_contacts, 14u);
+  EXPECT_EQ(st.history_overflow, 6u);
+}
+
+TEST(Dynamics, FrictionHistoryOverflowIsCounted) { friction_history_overflow_is_counted(); }
 TEST(Dynamics, ElasticBoxKeepsItsEnergy) {
   elastic_box_energy();
 }
@@ -405,6 +432,9 @@ TEST(Dynamics, BadSettingsNameTheKey) {
 
 // The GPU suite: the same scenes, and trajectories that follow the CPU's.
 class DynamicsCuda : public GpuSuite {};
+TEST_F(DynamicsCuda, FrictionHistoryOverflowIsCounted) {
+  friction_history_overflow_is_counted();
+}
 TEST_F(DynamicsCuda, ElasticBoxKeepsItsEnergy) {
   elastic_box_energy();
 }
