@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <set>
+#include <string>
 
 #include "sim/placement.h"
 #include "sim/shapes.h"
@@ -61,10 +62,15 @@ TEST(Placement, FillRefusesWhatDoesNotFitAndSaysHowManyDo) {
   auto p = place_particles(wall, ps, PlacementSpec{}, {0, 0, -9.81}, 1);
   ASSERT_FALSE(p);
   EXPECT_NE(p.status().message().find("holds only"), std::string::npos) << p.status().message();
+  // An inverted region is refused for itself, even for one particle that would fit.
+  ps.count = 1;
   PlacementSpec region;
   region.has_region = true;
   region.region_lo = {1, 1, 1}, region.region_hi = {0, 2, 2};
-  EXPECT_FALSE(place_particles(wall, ps, region, {0, 0, -9.81}, 1));
+  auto inverted = place_particles(wall, ps, region, {0, 0, -9.81}, 1);
+  ASSERT_FALSE(inverted);
+  EXPECT_EQ(inverted.status().message().rfind("placement.region", 0), 0u)
+      << inverted.status().message();
 }
 
 TEST(Placement, PourReleasesAStreamThatNeverOverlaps) {
@@ -103,6 +109,14 @@ TEST(Placement, PourReleasesAStreamThatNeverOverlaps) {
   EXPECT_GT(closest, 2.0 * ps.r_max);
 }
 
+// The message a refused placement gives ("" when it was not refused).
+std::string refusal(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl,
+                    Vec3d gravity) {
+  auto p = place_particles(wall, ps, pl, gravity, 1);
+  return p ? "" : p.status().message();
+}
+
+// Each refusal names its own cause, so a case cannot pass on another one's error.
 TEST(Placement, JetNeedsVelocityAndInletsNeedRoom) {
   const TriangleMesh wall = make_cylinder(20, 60, 40);
   ParticleSpec ps;
@@ -110,6 +124,8 @@ TEST(Placement, JetNeedsVelocityAndInletsNeedRoom) {
   PlacementSpec pl;
   pl.kind = PlacementKind::kJet;
   EXPECT_FALSE(place_particles(wall, ps, pl, {0, 0, -9.81}, 1));
+  EXPECT_NE(refusal(wall, ps, pl, {0, 0, -9.81}).find("a jet needs a non-zero velocity"),
+            std::string::npos);
   pl.velocity = {10, 0, 0};
   pl.has_inlet = true;
   pl.inlet = {-15, 0, 30};
@@ -119,14 +135,19 @@ TEST(Placement, JetNeedsVelocityAndInletsNeedRoom) {
   EXPECT_DOUBLE_EQ(p->vx[0], 10);
   pl.inlet_radius = 0.1;  // smaller than one particle
   EXPECT_FALSE(place_particles(wall, ps, pl, {0, 0, -9.81}, 1));
+  EXPECT_EQ(refusal(wall, ps, pl, {0, 0, -9.81}).rfind("placement.inlet_radius", 0), 0u);
   // A jet straight up too slow to climb one layer's spacing against gravity.
   pl.inlet_radius = 2;
   pl.velocity = {0, 0, 0.1};
   EXPECT_FALSE(place_particles(wall, ps, pl, {0, 0, -9.81}, 1));
+  EXPECT_NE(refusal(wall, ps, pl, {0, 0, -9.81}).find("too slow against gravity"),
+            std::string::npos);
   // A pour with neither gravity nor a velocity has nowhere to go.
   PlacementSpec pour;
   pour.kind = PlacementKind::kPour;
   EXPECT_FALSE(place_particles(wall, ps, pour, {0, 0, 0}, 1));
+  EXPECT_NE(refusal(wall, ps, pour, {0, 0, 0}).find("a pour without gravity needs a velocity"),
+            std::string::npos);
 }
 
 }  // namespace
