@@ -145,12 +145,10 @@ int cmd_run(const Args& args) {
       return usage_error("run", "--backend must be auto, cpu or cuda");
   }
   if (p->has("duration")) {
-    const double d = p->get_double("duration", 0, &err);
-    if (!err.empty() || !(d > 0 && d <= 1e5))
-      return usage_error("run", "--duration must be in (0, 1e5] seconds");
-    scene->duration = d;
-    if (scene->frames() > 1000000)
-      return usage_error("run", "--duration x the scene's fps gives over 10^6 frames");
+    scene->duration = p->get_double("duration", 0, &err);
+    if (!err.empty()) return usage_error("run", err);
+    if (auto st = scene::check_timing(*scene); !st)
+      return usage_error("run", "--duration: " + st.message());
   }
   const std::string out_dir = p->get("out", "results/" + fs::path(scene_path).stem().string());
   const bool quiet = p->has("quiet");

@@ -28,6 +28,13 @@ struct Scene {
   uint64_t frames() const;
 };
 
+// Limits on a scene's timing, one place for the parser and `run --duration`.
+inline constexpr double kMaxDuration = 1e5;      // simulated seconds
+inline constexpr uint64_t kMaxFrames = 1000000;  // duration x fps
+// Checks duration in (0, kMaxDuration] and at most kMaxFrames frames; the message
+// names the key ("duration: ..." or "fps: ...").
+Status check_timing(const Scene& s);
+
 // Parses and validates a scene document. Unknown keys, wrong types and
 // impossible values are errors that name the key ("material.restitution: ...").
 Expected<Scene> parse_scene(const std::string& json_text);

@@ -13,6 +13,14 @@ uint64_t Scene::frames() const {
   return static_cast<uint64_t>(std::ceil(duration * fps - 1e-9));
 }
 
+Status check_timing(const Scene& s) {
+  if (!(s.duration > 0 && s.duration <= kMaxDuration))
+    return invalid_argument("duration: must lie in (0, 1e5] s");
+  if (s.frames() > kMaxFrames)
+    return invalid_argument("fps: duration x fps gives more than 10^6 frames");
+  return Status::ok();
+}
+
 namespace {
 
 std::string join(const std::string& where, const std::string& key) {
@@ -217,10 +225,9 @@ Expected<Scene> parse_scene(const std::string& text) {
   if (r.has("placement")) COLLIDO_TRY(read_placement(r.at("placement"), &s));
   if (r.has("material")) COLLIDO_TRY(read_material(r.at("material"), &s));
   COLLIDO_TRY(r.vec3("gravity", &s.dynamics.gravity, 1e4));
-  COLLIDO_TRY(r.number("duration", &s.duration, 1e-9, 1e5));
+  COLLIDO_TRY(r.number("duration", &s.duration, 1e-9, kMaxDuration));
   COLLIDO_TRY(r.number("fps", &s.fps, 1e-3, 1e4));
-  if (s.frames() > 1000000)
-    return invalid_argument("fps: duration x fps gives more than 10^6 frames");
+  COLLIDO_TRY(check_timing(s));
   std::string method = sim::to_string(s.dynamics.method), backend = "auto",
               integrator = sim::to_string(s.dynamics.integrator);
   COLLIDO_TRY(r.string("method", &method));

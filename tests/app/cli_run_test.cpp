@@ -89,6 +89,9 @@ TEST(CliRun, BadScenesExitTwoAndImpossibleRunsExitOne) {
   const std::string ok =
       write_scene("ok.json", R"({"wall": "wall1", "particles": {"count": 5}, "duration": 0.01})");
   EXPECT_EQ(cmd_run({ok, "--backend", "quantum"}), kExitUsage);
+  // --duration is held to the scene's own timing limits (scene::check_timing).
+  for (const char* d : {"0", "-1", "1e6", "nan"})
+    EXPECT_EQ(cmd_run({ok, "--duration", d}), kExitUsage) << d;
   // A wall that does not exist, and more particles than the vessel holds.
   const std::string dir = ::testing::TempDir() + "/run_fail";
   EXPECT_EQ(cmd_run({write_scene("nowall.json", R"({"wall": {"file": "missing.stl"}})"), "--out",

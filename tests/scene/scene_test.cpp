@@ -15,7 +15,7 @@ const char* kFull = R"({
   "particles": {"count": 500, "radius": [0.5, 1.0], "density": 1200},
   "placement": {"kind": "pour", "inlet": [0, 0, 90], "inlet_radius": 20, "rate": 1000, "velocity": [0, 0, -5]},
   "gravity": [0, 0, -3.7],
-  "material": {"restitution": 0.8, "friction": 0.2, "stiffness": 1e7},
+  "material": {"restitution": 0.8, "friction": 0.2, "stiffness": 1e7, "impact_speed": 12},
   "duration": 1.5, "fps": 20,
   "method": "circumcircle", "backend": "cpu",
   "particle_contacts": true, "integrator": "symplectic_euler", "time_step": 1e-5, "seed": 42,
@@ -51,6 +51,7 @@ TEST(Scene, EveryKeyIsRead) {
   EXPECT_DOUBLE_EQ(s->dynamics.material.restitution, 0.8);
   EXPECT_DOUBLE_EQ(s->dynamics.material.friction, 0.2);
   EXPECT_DOUBLE_EQ(s->dynamics.material.stiffness, 1e7);
+  EXPECT_DOUBLE_EQ(s->dynamics.impact_speed, 12);
   EXPECT_EQ(s->frames(), 30u);
   EXPECT_EQ(s->dynamics.method, sim::Method::kCircumcircle);
   EXPECT_FALSE(s->backend_auto);
