@@ -88,20 +88,12 @@ class CudaBackend {
 
   template <class F>
   void parallel_for(size_t n, F f) {
-    if (n == 0 || !ok_) return;
-    constexpr uint32_t kBlock = 256;
-    const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
-    cuda_detail::for_each_kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f);
-    check(cudaGetLastError(), "kernel launch");
+    launch(cuda_detail::for_each_kernel<F>, n, f);
   }
   // parallel_for for loop bodies with many live values (the force kernels).
   template <class F>
   void parallel_for_heavy(size_t n, F f) {
-    if (n == 0 || !ok_) return;
-    constexpr uint32_t kBlock = 256;
-    const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
-    cuda_detail::for_each_kernel_heavy<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f);
-    check(cudaGetLastError(), "kernel launch");
+    launch(cuda_detail::for_each_kernel_heavy<F>, n, f);
   }
   template <class T>
   void fill(T* p, size_t n, T v) {
@@ -195,6 +187,16 @@ class CudaBackend {
   }
 
  private:
+  // One thread per index in 256-thread blocks, for either loop kernel.
+  template <class F>
+  void launch(void (*kernel)(uint32_t, F), size_t n, F f) {
+    if (n == 0 || !ok_) return;
+    constexpr uint32_t kBlock = 256;
+    const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
+    kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f);
+    check(cudaGetLastError(), "kernel launch");
+  }
+
   bool check(cudaError_t e, const char* what) {
     if (e == cudaSuccess) return true;
     if (ok_) error_ = std::string("CUDA ") + what + ": " + cudaGetErrorString(e);
