@@ -98,4 +98,16 @@ int usage_error(const std::string& command, const std::string& message) {
 
 bool stderr_is_terminal() { return isatty(fileno(stderr)) != 0; }
 
+std::string human_bytes(double b) {
+  const char* units[] = {"B", "KiB", "MiB", "GiB", "TiB"};
+  int u = 0;
+  while (b >= 1024.0 && u < 4) {
+    b /= 1024.0;
+    ++u;
+  }
+  char buf[32];
+  std::snprintf(buf, sizeof buf, u ? "%.1f %s" : "%.0f %s", b, units[u]);
+  return buf;
+}
+
 }  // namespace collido::app

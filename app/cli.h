@@ -48,6 +48,9 @@ void print_help(const std::string& usage, const std::vector<FlagSpec>& specs);
 // Prints "collidoscope <command>: <message>" to stderr and returns kExitUsage.
 int usage_error(const std::string& command, const std::string& message);
 
+// Bytes for people: "512 B", "86.9 MiB", "1.4 GiB".
+std::string human_bytes(double bytes);
+
 // True when stdout/stderr is a terminal (progress bars) rather than a pipe or file.
 bool stderr_is_terminal();
 

@@ -468,12 +468,6 @@ std::vector<Plan> draw_plans(size_t count, uint64_t seed, const SurveyResult& su
   return plans;
 }
 
-std::string mib(double bytes) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.1f MiB", bytes / (1024.0 * 1024.0));
-  return buf;
-}
-
 // The best of a configuration's repeats so far.
 struct Best {
   bool measured = false, failed = false;
@@ -669,9 +663,9 @@ int cmd_calibrate(const Args& args) {
       }
       std::fprintf(stderr, "%lld triangles, %.3f ms/frame, total %.3f s, host %s",
                    static_cast<long long>(r.triangles), 1e3 * r.frame_s, r.total_s,
-                   mib(peak_host).c_str());
+                   human_bytes(peak_host).c_str());
       if (backend == sim::Backend::kCuda)
-        std::fprintf(stderr, ", device %s", mib(static_cast<double>(r.device_bytes)).c_str());
+        std::fprintf(stderr, ", device %s", human_bytes(static_cast<double>(r.device_bytes)).c_str());
       std::fprintf(stderr, "\n");
       if (!b.measured || r.total_s < b.fastest.total_s) b.fastest = r;
       b.frame_s = b.measured ? std::min(b.frame_s, r.frame_s) : r.frame_s;
