@@ -109,7 +109,7 @@ int bench_run(const Args& args) {
   struct Breakdown {
     uint64_t n;
     bool pairs;
-    double drift, grid, pair, wall, kick;
+    sim::StepTimes t;  // summed over t.steps
   };
   std::vector<Breakdown> breakdown;
   for (uint64_t n : counts) {
@@ -142,10 +142,7 @@ int bench_run(const Args& args) {
       if (p->has("stages")) {
         (*s)->set_stage_timing(true);
         (*s)->step(uint64_t(steps), dt);
-        const sim::StepTimes& t = (*s)->stage_times();
-        const double k = 1.0 / double(t.steps);
-        breakdown.push_back({n, with_pairs, t.drift_ms * k, t.grid_ms * k, t.pair_ms * k,
-                             t.wall_ms * k, t.kick_ms * k});
+        breakdown.push_back({n, with_pairs, (*s)->stage_times()});
       }
       std::printf("| %llu | %s | %.4g | %.4g | %.3g | %llu | %llu | %.1f |\n",
                   (unsigned long long)n, with_pairs ? "yes" : "no", ms, 1e3 / ms,
@@ -160,9 +157,12 @@ int bench_run(const Args& args) {
         "| particles | pair contacts | release + drift | grid (hash, sort, cells) | pair forces | "
         "wall forces | "
         "kick + checks |\n|---:|:---:|---:|---:|---:|---:|---:|\n");
-    for (const Breakdown& b : breakdown)
+    for (const Breakdown& b : breakdown) {
+      const double k = 1.0 / double(b.t.steps);
       std::printf("| %llu | %s | %.4f | %.4f | %.4f | %.4f | %.4f |\n", (unsigned long long)b.n,
-                  b.pairs ? "yes" : "no", b.drift, b.grid, b.pair, b.wall, b.kick);
+                  b.pairs ? "yes" : "no", b.t.drift_ms * k, b.t.grid_ms * k, b.t.pair_ms * k,
+                  b.t.wall_ms * k, b.t.kick_ms * k);
+    }
   }
   return kExitOk;
 }
