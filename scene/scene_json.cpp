@@ -3,6 +3,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "common/number_text.h"
 #include "scene/scene.h"
 
 namespace collido::scene {
@@ -54,8 +55,8 @@ class ObjectReader {
     if (!v.is_number()) return invalid_argument(name(key) + ": expected a number");
     const double d = v.get<double>();
     if (!std::isfinite(d) || d < lo || d > hi)
-      return invalid_argument(name(key) + ": " + v.dump() + " is outside [" + num(lo) + ", " +
-                              num(hi) + "]");
+      return invalid_argument(name(key) + ": " + v.dump() + " is outside [" + number_text(lo) +
+                              ", " + number_text(hi) + "]");
     *out = d;
     return Status::ok();
   }
@@ -94,7 +95,7 @@ class ObjectReader {
       c[i] = v[i].get<double>();
       if (!std::isfinite(c[i]) || std::fabs(c[i]) > limit)
         return invalid_argument(name(key) + ": components must be finite and within +-" +
-                                num(limit));
+                                number_text(limit));
     }
     *out = {c[0], c[1], c[2]};
     if (set) *set = true;
@@ -102,11 +103,6 @@ class ObjectReader {
   }
 
  private:
-  static std::string num(double v) {
-    std::ostringstream s;
-    s << v;
-    return s.str();
-  }
   const json& o_;
   std::string where_;
 };

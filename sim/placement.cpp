@@ -2,8 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <sstream>
 
+#include "common/number_text.h"
 #include "sim/particles.h"
 
 namespace collido::sim {
@@ -20,13 +20,6 @@ bool parse_placement_kind(const std::string& s, PlacementKind* out) {
 }
 
 namespace {
-
-// A length or speed for a message: "0.5", not "0.500000".
-std::string num(double v) {
-  std::ostringstream s;
-  s << v;
-  return s.str();
-}
 
 bool finite3(Vec3d v) {
   return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
@@ -83,7 +76,7 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
   if (out->size() < ps.count)
     return invalid_argument("placement: the region holds only " + std::to_string(out->size()) +
                             " of the " + std::to_string(ps.count) + " particles of radius " +
-                            num(r) + " m; use fewer or smaller particles, or a pour");
+                            number_text(r) + " m; use fewer or smaller particles, or a pour");
   return Status::ok();
 }
 
@@ -124,15 +117,15 @@ Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSp
       if (std::sqrt(a * a + b * b) <= radius - r) disc.push_back(u * a + w * b);
     }
   if (disc.empty())
-    return invalid_argument("placement.inlet_radius: " + num(radius) +
-                            " m holds no particle of radius " + num(r) + " m");
+    return invalid_argument("placement.inlet_radius: " + number_text(radius) +
+                            " m holds no particle of radius " + number_text(r) + " m");
   // Time for a layer to move D = 1.2 s along dir with speed v0 and acceleration a = g . dir.
   const double D = 1.2 * s, a = dot(gravity, dir);
   double tau = D / v0;
   if (std::fabs(a) > 1e-12) {
     const double disc2 = v0 * v0 + 2 * a * D;
     if (disc2 < 0)
-      return invalid_argument("placement.velocity: " + num(v0) +
+      return invalid_argument("placement.velocity: " + number_text(v0) +
                               " m/s is too slow against gravity to leave the inlet");
     tau = (std::sqrt(disc2) - v0) / a;
   }
