@@ -241,6 +241,9 @@ class DynamicsPipeline final : public Simulation {
       backend_.resize(cell_start_, pgrid_.buckets);
       backend_.resize(cell_end_, pgrid_.buckets);
       backend_.resize(sorted_, std::max<size_t>(n_, 1));
+      // Radix passes over the bits a bucket number (or the `none` key, buckets) needs.
+      pkey_bits_ = 1;
+      while (pkey_bits_ < 32 && (uint64_t(1) << pkey_bits_) <= pgrid_.buckets) ++pkey_bits_;
       // Float filter slack: rounding of coordinates up to the domain's size, and of the radii.
       const Vec3d ext = hi_ - lo_;
       filter_slack_ =
@@ -287,11 +290,8 @@ class DynamicsPipeline final : public Simulation {
     if (cfg_.particle_contacts) {
       build_particle_grid();
       lap(times_.grid_ms);
-      pair_forces(dt, false);
-      lap(times_.pair_ms);
     }
-    wall_forces(dt, false, /*add=*/cfg_.particle_contacts);
-    lap(times_.wall_ms);
+    forces(dt, false);
     if (law_.mu > 0) swap_history();
     finish_step(dt, verlet);
     lap(times_.kick_ms);
@@ -402,10 +402,7 @@ class DynamicsPipeline final : public Simulation {
                    : none;
       idx[i] = i;
     });
-    // Radix passes over the bits a bucket number needs, not all 32.
-    int bits = 1;
-    while (bits < 32 && (uint64_t(1) << bits) <= none) ++bits;
-    backend_.sort_pairs(key, idx, p_key_sorted_.data(), p_idx_sorted_.data(), n_, bits);
+    backend_.sort_pairs(key, idx, p_key_sorted_.data(), p_idx_sorted_.data(), n_, pkey_bits_);
     build_cell_ranges(backend_, p_key_sorted_.data(), n_, cell_start_.data(), cell_end_.data(),
                       pgrid_.buckets, none);
     // A float copy of each particle in cell order: the pair loop reads its
@@ -426,9 +423,14 @@ class DynamicsPipeline final : public Simulation {
   // with gravity first, then the wall's contacts added on top. measure: write
   // statistics only (no accelerations, no friction memory), so measuring
   // never changes the run.
+  // The laps time a step's stages; the measuring pass is not a step.
   void forces(double dt, bool measure) {
-    if (cfg_.particle_contacts) pair_forces(dt, measure);
-    wall_forces(dt, measure, /*add=*/cfg_.particle_contacts);
+    if (cfg_.particle_contacts) {
+      pair_forces(dt, measure);
+      if (!measure) lap(times_.pair_ms);
+    }
+    wall_forces(dt, measure);
+    if (!measure) lap(times_.wall_ms);
   }
 
   // Looks up a contact's spring in last step's terminated slot list.
@@ -533,9 +535,10 @@ class DynamicsPipeline final : public Simulation {
     });
   }
 
-  // Wall contacts, one per touched feature. add: on top of pair_forces' accelerations, else from
-  // gravity.
-  void wall_forces(double dt, bool measure, bool add) {
+  // Wall contacts, one per touched feature: on top of pair_forces' accelerations when the
+  // scene has particle contacts, else from gravity.
+  void wall_forces(double dt, bool measure) {
+    const bool add = cfg_.particle_contacts;
     const ParticleArrays P = arrays();
     const WallView wall = wall_.view();
     const PlanarTriangleD* tris_d = wall_.tris_d.data();
@@ -657,6 +660,7 @@ class DynamicsPipeline final : public Simulation {
   ContactLaw law_;
   WallIndex<B> wall_;
   GridSpec pgrid_;
+  int pkey_bits_ = 32;  // radix sort bits of a particle bucket key, set with pgrid_
   Vec3d lo_{0, 0, 0}, hi_{0, 0, 0};  // the domain, in the local frame (origin: the wall's centre)
   size_t n_ = 0;
   double time_ = 0;
