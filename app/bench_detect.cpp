@@ -178,7 +178,7 @@ int bench_detect(const Args& args) {
   std::printf("# bench detect: wall %s (%zu triangles), radii %g..%g, %.0f%% of particles within 1.5 r_max of the "
               "wall and the rest uniform in its bounding box, backend %s (%s), %d CPU threads, median of %lld frames\n",
               base.wall_spec.c_str(), base.wall.triangles.size(), r_lo, r_hi, 100 * near,
-              sim::to_string(base.config.backend), device.c_str(), sim::cpu_threads(), static_cast<long long>(repeats));
+              sim::to_string(base.config.backend), device.c_str(), base.pool->size(), static_cast<long long>(repeats));
   if (cuda) std::printf("# measured device-to-device copy: %.0f GB/s (read + write)\n", copy_gbs);
   std::printf("| method | traversal | triangles | prepare ms |");
   for (size_t n : sizes) std::printf(" %.0e |", static_cast<double>(n));

@@ -63,19 +63,17 @@ int bench_run(const Args& args) {
   sim::Backend backend = sim::Backend::kCpu;
   if (!sim::parse_backend(p->get("backend", "cpu"), &backend))
     return usage_error("bench run", "--backend must be cpu or cuda");
-  std::string why;
-  if (backend == sim::Backend::kCuda && !sim::cuda_available(&why)) {
-    std::fprintf(stderr, "collidoscope bench run: note: no usable GPU (%s); running on the CPU\n",
-                 why.c_str());
-    backend = sim::Backend::kCpu;
-  }
+  std::string note;
+  backend = sim::usable_backend(backend, &note);
+  if (!note.empty()) std::fprintf(stderr, "collidoscope bench run: note: %s\n", note.c_str());
   const int64_t steps = p->get_int("steps", 50, &err), warmup = p->get_int("warmup", 5, &err);
   const double friction = p->get_double("friction", 0.3, &err);
   const int64_t threads = p->get_int("threads", 0, &err);
   if (!err.empty()) return usage_error("bench run", err);
   if (steps < 1 || warmup < 0 || !(friction >= 0 && friction <= 10))
     return usage_error("bench run", "--steps >= 1, --warmup >= 0, --friction in [0, 10]");
-  if (threads > 0) sim::set_cpu_threads(int(threads));
+  if (threads < 0 || threads > 4096) return usage_error("bench run", "--threads must be in [0, 4096]");
+  sim::ThreadPool pool{int(threads)};
   const std::string pairs = p->get("pairs", "both");
   std::vector<bool> pair_modes;
   if (pairs == "both")
@@ -119,6 +117,7 @@ int bench_run(const Args& args) {
     for (bool with_pairs : pair_modes) {
       sim::DynamicsConfig cfg;
       cfg.backend = backend;
+      cfg.pool = &pool;
       cfg.particle_contacts = with_pairs;
       cfg.material.friction = friction;
       cfg.material.stiffness = 1e9;

@@ -7,6 +7,8 @@
 #include <string>
 #include <vector>
 
+#include "common/status.h"
+
 namespace collido::app {
 
 // Exit codes of the command line: 0 success, 1 the work failed, 2 bad arguments.
@@ -41,6 +43,13 @@ class ParsedArgs {
 // Parses args against specs; unknown flags and missing values give nullopt and *error.
 std::optional<ParsedArgs> parse_args(const std::vector<std::string>& args,
                                      const std::vector<FlagSpec>& specs, std::string* error);
+
+// The one rule for exit codes: input errors (invalid argument, not found,
+// unparsable) give kExitUsage, every other failure kExitFailure.
+inline int exit_code(const Status& s) {
+  if (s.is_ok()) return kExitOk;
+  return is_input_error(s.code()) ? kExitUsage : kExitFailure;
+}
 
 // Prints "usage" followed by one line per flag.
 void print_help(const std::string& usage, const std::vector<FlagSpec>& specs);

@@ -280,8 +280,8 @@ RunResult run_config(const std::string& wall_spec, const Plan& p,
   auto seconds = [](Clock::time_point a) {
     return std::chrono::duration<double>(Clock::now() - a).count();
   };
-  sim::set_cpu_threads(threads);
-  r.threads = sim::cpu_threads();
+  sim::ThreadPool pool(threads);
+  r.threads = pool.size();
   auto wall = sim::make_shape(wall_spec);
   if (!wall) {
     copy_text(r.error, wall.status().message());
@@ -294,6 +294,7 @@ RunResult run_config(const std::string& wall_spec, const Plan& p,
   cfg.method = p.method;
   cfg.traversal = p.traversal;
   cfg.backend = p.method == sim::Method::kReference ? sim::Backend::kCpu : backend;
+  cfg.pool = &pool;
   cfg.r_max = r_max;
   cfg.collect_contacts = true;
   cfg.time_stages = false;  // a sync between stages would slow the frames it measures

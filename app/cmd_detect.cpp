@@ -4,6 +4,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "common/atomic_file.h"
 #include "app/cli.h"
 #include "app/commands.h"
 #include "app/detect_setup.h"
@@ -83,7 +84,7 @@ int cmd_detect(const Args& args) {
 
   if (parsed->has("out")) {
     const std::string path = parsed->get("out");
-    const std::string tmp = path + ".tmp";
+    const std::string tmp = temp_path_for(path);
     {
       std::ofstream out(tmp);
       out << "particle,triangle,distance\n";

@@ -20,9 +20,8 @@
 
 #include "app/cli.h"
 #include "app/commands.h"
+#include "job/render_run.h"
 #include "render/render.h"
-#include "sim/mesh.h"
-#include "sim/snapshot.h"
 
 namespace collido::app {
 namespace {
@@ -44,106 +43,38 @@ const std::vector<FlagSpec> kRenderFlags = {
     {"color", true, "speed | contact (default speed)"},
     {"wall", true, "glass | cutaway | hidden (default glass)"},
     {"speed-max", true, "speed at the top of the colour map (default: from the frames)"},
-    {"video", true, "mp4,webm | mp4 | webm | none (default mp4,webm)"},
+    {"video", true, "comma list of mp4, webm, gif, or none (default mp4,webm)"},
     {"msaa", true, "multisample anti-aliasing of the wall edges: 0 (default) or 2..16"},
     {"no-overlay", false, "no time/frame text and no legend"},
     {"no-cull", false, "draw every particle (the occlusion test never changes the image)"},
     {"help", false, "show this help"},
 };
 
-struct FrameFile {
-  uint64_t index;
-  std::string path;
-};
+}  // namespace
 
-// The frames of a run, ordered by frame index (not by name, so frame 1000000
-// comes after 999999).
-std::vector<FrameFile> list_frames(const std::string& run_dir, std::string* error) {
-  std::vector<FrameFile> out;
-  const fs::path dir = fs::path(run_dir) / "frames";
-  std::error_code ec;
-  if (!fs::is_directory(dir, ec)) {
-    *error = dir.string() + " is not a directory (expected DIR/frames/frame_NNNNNN.snap)";
-    return out;
+bool parse_video_list(const std::string& list, job::RenderSettings* rs, std::string* error) {
+  rs->mp4 = rs->webm = rs->gif = false;
+  if (list == "none") return true;
+  size_t start = 0;
+  while (start <= list.size()) {
+    const size_t comma = std::min(list.find(',', start), list.size());
+    const std::string item = list.substr(start, comma - start);
+    if (item == "mp4")
+      rs->mp4 = true;
+    else if (item == "webm")
+      rs->webm = true;
+    else if (item == "gif")
+      rs->gif = true;
+    else {
+      *error = "--video takes a comma list of mp4, webm and gif, or none; got '" + list + "'";
+      return false;
+    }
+    start = comma + 1;
   }
-  for (const auto& entry : fs::directory_iterator(dir, ec)) {
-    const std::string name = entry.path().filename().string();
-    if (name.size() < 12 || name.compare(0, 6, "frame_") != 0 ||
-        name.compare(name.size() - 5, 5, ".snap") != 0)
-      continue;
-    const std::string digits = name.substr(6, name.size() - 11);
-    if (digits.empty() || digits.find_first_not_of("0123456789") != std::string::npos) continue;
-    out.push_back({std::strtoull(digits.c_str(), nullptr, 10), entry.path().string()});
-  }
-  if (ec) *error = "cannot list " + dir.string() + ": " + ec.message();
-  std::sort(out.begin(), out.end(),
-            [](const FrameFile& a, const FrameFile& b) { return a.index < b.index; });
-  return out;
+  return true;
 }
 
-// The wall in render coordinates: world minus the render origin, in float.
-render::WallMesh to_render_wall(const sim::TriangleMesh& mesh, sim::Vec3d origin) {
-  render::WallMesh w;
-  w.vertices.reserve(mesh.vertices.size() * 3);
-  for (const auto& v : mesh.vertices) {
-    w.vertices.push_back(float(v.x - origin.x));
-    w.vertices.push_back(float(v.y - origin.y));
-    w.vertices.push_back(float(v.z - origin.z));
-  }
-  w.indices.reserve(mesh.triangles.size() * 3);
-  for (const auto& t : mesh.triangles) w.indices.insert(w.indices.end(), t.begin(), t.end());
-  return w;
-}
-
-// Particles of one engine snapshot into the render snapshot (the wall and the
-// bounds of *out are left as they are). Speed is |v| in world units/s.
-void fill_particles(const sim::Snapshot& s, sim::Vec3d origin, render::Snapshot* out) {
-  const size_t n = s.size();
-  // The offset between the two origins is applied in double, then the small
-  // relative positions are rounded to float once.
-  const double ox = s.origin.x - origin.x, oy = s.origin.y - origin.y, oz = s.origin.z - origin.z;
-  out->positions.resize(3 * n);
-  out->radius.resize(n);
-  out->scalar.resize(n);
-  out->contact.assign(s.contact.begin(), s.contact.end());
-  for (size_t i = 0; i < n; ++i) {
-    out->positions[3 * i] = float(ox + s.x[i]);
-    out->positions[3 * i + 1] = float(oy + s.y[i]);
-    out->positions[3 * i + 2] = float(oz + s.z[i]);
-    out->radius[i] = s.r[i];
-    out->scalar[i] = std::sqrt(s.vx[i] * s.vx[i] + s.vy[i] * s.vy[i] + s.vz[i] * s.vz[i]);
-  }
-  out->time = s.time;
-  out->frame = s.frame;
-}
-
-// Top of the colour map: the largest 99.5th-percentile speed over up to 16
-// frames spread through the run, so a few outliers do not wash out the rest
-// and the scale stays the same in every frame of the video.
-float estimate_speed_max(const std::vector<FrameFile>& frames) {
-  const size_t samples = std::min<size_t>(16, frames.size());
-  float best = 0;
-  std::vector<float> speed;
-  for (size_t k = 0; k < samples; ++k) {
-    const size_t i = samples == 1 ? 0 : k * (frames.size() - 1) / (samples - 1);
-    auto s = sim::read_snapshot(frames[i].path);
-    if (!s) continue;  // the render loop reports unreadable frames
-    speed.resize(s->size());
-    for (size_t p = 0; p < s->size(); ++p)
-      speed[p] = std::sqrt(s->vx[p] * s->vx[p] + s->vy[p] * s->vy[p] + s->vz[p] * s->vz[p]);
-    if (speed.empty()) continue;
-    const size_t q = std::min(speed.size() - 1, size_t(0.995 * double(speed.size())));
-    std::nth_element(speed.begin(), speed.begin() + q, speed.end());
-    best = std::max(best, speed[q]);
-  }
-  return render::round_up_nicely(best);
-}
-
-std::string frame_png_name(uint64_t index) {
-  char name[40];
-  std::snprintf(name, sizeof name, "frame_%06llu.png", static_cast<unsigned long long>(index));
-  return name;
-}
+namespace {
 
 // Integer flag in [lo, hi]; false with *error set otherwise.
 bool int_flag(const ParsedArgs& p, const std::string& name, int64_t fallback, int64_t lo,
@@ -163,102 +94,6 @@ bool int_flag(const ParsedArgs& p, const std::string& name, int64_t fallback, in
   return true;
 }
 
-// Encodes and writes finished frames on a second thread, so rendering the
-// next frame overlaps encoding this one. At most kDepth frames wait in the
-// queue, so memory stays flat however long the run; images are recycled.
-class OutputWorker {
- public:
-  struct Job {
-    render::Image image;
-    std::vector<std::string> png_paths;  // PNG files to write this frame to
-  };
-
-  OutputWorker(render::VideoWriter* mp4, render::VideoWriter* webm)
-      : mp4_(mp4), webm_(webm), thread_([this] { run(); }) {}
-  ~OutputWorker() {
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      closing_ = true;
-    }
-    cv_.notify_all();
-    thread_.join();
-  }
-
-  // An image buffer to render into (a recycled one when available).
-  render::Image take_image() {
-    std::lock_guard<std::mutex> lock(mu_);
-    if (spare_.empty()) return {};
-    render::Image img = std::move(spare_.back());
-    spare_.pop_back();
-    return img;
-  }
-
-  // Queues a frame, waiting while the queue is full. Returns the first error
-  // the worker has met so far (the frame is dropped then).
-  render::Status push(Job job) {
-    std::unique_lock<std::mutex> lock(mu_);
-    cv_.wait(lock, [&] { return queue_.size() < kDepth || !error_.is_ok(); });
-    if (!error_.is_ok()) return error_;
-    queue_.push_back(std::move(job));
-    cv_.notify_all();
-    return render::Status::ok();
-  }
-
-  // Waits until every queued frame is written; returns the first error.
-  render::Status drain() {
-    std::unique_lock<std::mutex> lock(mu_);
-    cv_.wait(lock, [&] { return (queue_.empty() && !busy_) || !error_.is_ok(); });
-    return error_;
-  }
-
-  double encode_s() const { return encode_s_; }  // read after drain()
-  double png_s() const { return png_s_; }
-
- private:
-  static constexpr size_t kDepth = 2;
-
-  void run() {
-    for (;;) {
-      Job job;
-      {
-        std::unique_lock<std::mutex> lock(mu_);
-        cv_.wait(lock, [&] { return !queue_.empty() || closing_; });
-        if (queue_.empty()) return;
-        job = std::move(queue_.front());
-        queue_.pop_front();
-        busy_ = true;
-      }
-      render::Status st;
-      auto t0 = Clock::now();
-      for (auto* w : {mp4_, webm_})
-        if (st && w) st = w->add_frame(job.image);
-      encode_s_ += seconds_since(t0);
-      t0 = Clock::now();
-      for (const auto& path : job.png_paths)
-        if (st) st = render::write_png(path, job.image);
-      png_s_ += seconds_since(t0);
-      {
-        std::lock_guard<std::mutex> lock(mu_);
-        busy_ = false;
-        if (!st && error_.is_ok()) error_ = st;
-        spare_.push_back(std::move(job.image));
-      }
-      cv_.notify_all();
-    }
-  }
-
-  render::VideoWriter* mp4_;
-  render::VideoWriter* webm_;
-  std::mutex mu_;
-  std::condition_variable cv_;
-  std::deque<Job> queue_;
-  std::vector<render::Image> spare_;
-  render::Status error_;
-  bool busy_ = false, closing_ = false;
-  double encode_s_ = 0, png_s_ = 0;
-  std::thread thread_;  // last: starts after everything it uses exists
-};
-
 }  // namespace
 
 int cmd_render(const Args& args) {
@@ -270,7 +105,8 @@ int cmd_render(const Args& args) {
         "usage: collidoscope render DIR [--out OUTDIR] [--width 1280 --height 720 --fps 30 "
         "--png-every K --camera front|iso|top|orbit --color speed|contact]\n\n"
         "Reads DIR/wall.stl and DIR/frames/frame_NNNNNN.snap and writes OUTDIR/frames/*.png,\n"
-        "OUTDIR/poster.png, OUTDIR/video.mp4 (H.264) and OUTDIR/video.webm (VP9).",
+        "OUTDIR/poster.png, OUTDIR/video.mp4 (H.264), OUTDIR/video.webm (VP9) and, with\n"
+        "--video including gif, OUTDIR/loop.gif.",
         kRenderFlags);
     return kExitOk;
   }
@@ -280,190 +116,56 @@ int cmd_render(const Args& args) {
                                                                p->positional()[1] + "' as well");
   const std::string run_dir = p->positional()[0];
 
-  render::RenderOptions ro;
-  int fps = 30, png_every = 10;
-  if (!int_flag(*p, "width", 1280, 16, 8192, &ro.width, &err) ||
-      !int_flag(*p, "height", 720, 16, 8192, &ro.height, &err) ||
-      !int_flag(*p, "fps", 30, 1, 240, &fps, &err) ||
-      !int_flag(*p, "png-every", 10, 0, 1000000000, &png_every, &err) ||
-      !int_flag(*p, "msaa", 0, 0, 16, &ro.msaa_samples, &err))
+  job::RenderSettings rs;
+  if (!int_flag(*p, "width", 1280, 16, 8192, &rs.width, &err) ||
+      !int_flag(*p, "height", 720, 16, 8192, &rs.height, &err) ||
+      !int_flag(*p, "fps", 30, 1, 240, &rs.fps, &err) ||
+      !int_flag(*p, "png-every", 10, 0, 1000000000, &rs.png_every, &err) ||
+      !int_flag(*p, "msaa", 0, 0, 16, &rs.msaa, &err))
     return usage_error("render", err);
-  if (!render::parse_camera(p->get("camera", "iso"), &ro.camera))
-    return usage_error("render", "--camera must be front, iso, top or orbit");
-  if (!render::parse_color_mode(p->get("color", "speed"), &ro.color))
-    return usage_error("render", "--color must be speed or contact");
-  if (!render::parse_wall_style(p->get("wall", "glass"), &ro.wall))
-    return usage_error("render", "--wall must be glass, cutaway or hidden");
-  ro.overlay = !p->has("no-overlay");
-  ro.cull_hidden = !p->has("no-cull");
-  bool want_mp4 = false, want_webm = false;
-  {
-    const std::string v = p->get("video", "mp4,webm");
-    if (v == "mp4,webm" || v == "webm,mp4")
-      want_mp4 = want_webm = true;
-    else if (v == "mp4")
-      want_mp4 = true;
-    else if (v == "webm")
-      want_webm = true;
-    else if (v != "none")
-      return usage_error("render", "--video must be mp4,webm, mp4, webm or none");
-  }
-  if ((want_mp4 || want_webm) && (ro.width % 2 || ro.height % 2))
-    return usage_error("render", "video needs an even --width and --height (yuv420p)");
-  float speed_max = 0;
+  rs.camera = p->get("camera", "iso");
+  rs.color = p->get("color", "speed");
+  rs.wall = p->get("wall", "glass");
+  rs.overlay = !p->has("no-overlay");
+  rs.cull = !p->has("no-cull");
+  if (!parse_video_list(p->get("video", "mp4,webm"), &rs, &err)) return usage_error("render", err);
   if (p->has("speed-max")) {
-    speed_max = float(p->get_double("speed-max", 0, &err));
+    rs.speed_max = float(p->get_double("speed-max", 0, &err));
     if (!err.empty()) return usage_error("render", err);
-    if (!(speed_max > 0)) return usage_error("render", "--speed-max must be positive");
+    if (!(rs.speed_max > 0)) return usage_error("render", "--speed-max must be positive");
   }
-
-  const auto frames = list_frames(run_dir, &err);
-  if (!err.empty()) {
-    std::fprintf(stderr, "collidoscope render: %s\n", err.c_str());
-    return kExitFailure;
-  }
-  if (frames.empty()) {
-    std::fprintf(stderr, "collidoscope render: no frame_NNNNNN.snap files in %s/frames\n",
-                 run_dir.c_str());
-    return kExitFailure;
-  }
+  if (Status st = job::validate(rs); !st) return usage_error("render", st.message());
   const std::string out_dir = p->get("out", (fs::path(run_dir) / "render").string());
-  std::error_code ec;
-  fs::create_directories(fs::path(out_dir) / "frames", ec);
-  if (ec) {
-    std::fprintf(stderr, "collidoscope render: cannot create %s: %s\n", out_dir.c_str(),
-                 ec.message().c_str());
-    return kExitFailure;
-  }
 
-  // Render coordinates are centred on the first frame's origin, so float keeps
-  // its precision however far from the world origin the scene lies.
-  auto first = sim::read_snapshot(frames.front().path);
-  if (!first) {
-    std::fprintf(stderr, "collidoscope render: %s\n", first.status().message().c_str());
-    return kExitFailure;
-  }
-  const sim::Vec3d origin = first->origin;
-  render::Snapshot scene;
-  const std::string wall_path = (fs::path(run_dir) / "wall.stl").string();
-  if (fs::exists(wall_path)) {
-    auto mesh = sim::load_stl(wall_path);
-    if (!mesh) {
-      std::fprintf(stderr, "collidoscope render: %s\n", mesh.status().message().c_str());
-      return kExitFailure;
-    }
-    scene.wall = to_render_wall(*mesh, origin);
-  } else {
-    std::fprintf(stderr, "collidoscope render: note: %s not found, rendering particles only\n",
-                 wall_path.c_str());
-  }
-  // A fixed frame for the whole run: the wall's box, or the first frame's particles.
-  fill_particles(*first, origin, &scene);
-  scene.bounds = render::compute_bounds(scene);
-
-  if (ro.color == render::ColorMode::kSpeed) {
-    ro.color_min = 0;
-    ro.color_max = speed_max > 0 ? speed_max : estimate_speed_max(frames);
-    ro.color_label = "speed";
-  }
-  render::Status st;
-  auto renderer = render::Renderer::create(ro, &st);
-  if (!renderer) {
-    std::fprintf(stderr, "collidoscope render: %s\n", st.message().c_str());
-    return kExitFailure;
-  }
-
-  std::unique_ptr<render::VideoWriter> mp4, webm;
-  const std::string mp4_path = (fs::path(out_dir) / "video.mp4").string();
-  const std::string webm_path = (fs::path(out_dir) / "video.webm").string();
-  render::VideoOptions vo;
-  vo.width = ro.width;
-  vo.height = ro.height;
-  vo.fps = fps;
-  if (want_mp4) {
-    vo.codec = render::VideoCodec::kH264;
-    if (!(mp4 = render::VideoWriter::open(mp4_path, vo, &st))) {
-      std::fprintf(stderr, "collidoscope render: %s\n", st.message().c_str());
-      return kExitFailure;
-    }
-  }
-  if (want_webm) {
-    vo.codec = render::VideoCodec::kVP9;
-    if (!(webm = render::VideoWriter::open(webm_path, vo, &st))) {
-      std::fprintf(stderr, "collidoscope render: %s\n", st.message().c_str());
-      return kExitFailure;
-    }
-  }
-
-  const bool progress = stderr_is_terminal();
-  const size_t poster_at = frames.size() / 2;
-  const std::string poster_path = (fs::path(out_dir) / "poster.png").string();
-  double render_s = 0;
-  size_t pngs = 0;
+  const bool tty = stderr_is_terminal();
   const auto t_start = Clock::now();
-  // Declared after the writers: it is destroyed (joined) before them.
-  OutputWorker output(mp4.get(), webm.get());
-  for (size_t i = 0; i < frames.size(); ++i) {
-    auto snap = i == 0 ? std::move(first) : sim::read_snapshot(frames[i].path);
-    if (!snap) {
-      std::fprintf(stderr, "\ncollidoscope render: %s\n", snap.status().message().c_str());
-      return kExitFailure;
-    }
-    fill_particles(*snap, origin, &scene);
-    // One full turn over the run.
-    if (ro.camera == render::CameraPreset::kOrbit)
-      renderer->set_orbit_deg(360.0 * double(i) / double(frames.size()));
-    OutputWorker::Job job;
-    job.image = output.take_image();
-    const auto t0 = Clock::now();
-    if (!(st = renderer->render(scene, &job.image))) {
-      std::fprintf(stderr, "\ncollidoscope render: %s: %s\n", frames[i].path.c_str(),
-                   st.message().c_str());
-      return kExitFailure;
-    }
-    render_s += seconds_since(t0);
-    if (png_every > 0 && i % size_t(png_every) == 0) {
-      job.png_paths.push_back(
-          (fs::path(out_dir) / "frames" / frame_png_name(frames[i].index)).string());
-      ++pngs;
-    }
-    if (i == poster_at) job.png_paths.push_back(poster_path);
-    if (!(st = output.push(std::move(job)))) {
-      std::fprintf(stderr, "\ncollidoscope render: %s\n", st.message().c_str());
-      return kExitFailure;
-    }
-    if (progress)
-      std::fprintf(stderr, "\rrender: frame %zu/%zu (%.0f ms/frame)", i + 1, frames.size(),
-                   1e3 * seconds_since(t_start) / double(i + 1));
-  }
-  if (progress) std::fprintf(stderr, "\n");
-  if (!(st = output.drain())) {
+  job::RenderOutcome out;
+  auto progress = [&](size_t done, size_t total) {
+    if (tty)
+      std::fprintf(stderr, "\rrender: frame %zu/%zu (%.0f ms/frame)", done, total,
+                   1e3 * seconds_since(t_start) / double(done));
+  };
+  const Status st = job::render_run(run_dir, out_dir, rs, progress, nullptr, &out);
+  if (tty) std::fprintf(stderr, "\n");
+  if (!st) {
     std::fprintf(stderr, "collidoscope render: %s\n", st.message().c_str());
-    return kExitFailure;
+    return exit_code(st);
   }
-  double encode_s = output.encode_s();
-  const double png_s = output.png_s();
-  const auto t_finish = Clock::now();
-  for (auto* w : {mp4.get(), webm.get()})
-    if (w && !(st = w->finish())) {
-      std::fprintf(stderr, "collidoscope render: %s\n", st.message().c_str());
-      return kExitFailure;
-    }
-  encode_s += seconds_since(t_finish);
-
-  const double n = double(frames.size());
-  std::printf("rendered %zu frames at %dx%d with %s\n", frames.size(), ro.width, ro.height,
-              renderer->gl_description().c_str());
+  const double n = double(out.frames);
+  std::printf("rendered %zu frames at %dx%d with %s\n", out.frames, rs.width, rs.height,
+              out.gl.c_str());
   // Encoding runs beside rendering, so the parts add up to more than the total.
   std::printf(
       "  render %.1f ms/frame, encode %.1f ms/frame, png %.1f ms/frame (in parallel), "
       "total %.1f s = %.1f ms/frame\n",
-      1e3 * render_s / n, 1e3 * encode_s / n, 1e3 * png_s / n, seconds_since(t_start),
-      1e3 * seconds_since(t_start) / n);
-  std::printf("  poster   %s\n", poster_path.c_str());
-  if (pngs) std::printf("  frames   %s/frames/ (%zu PNG)\n", out_dir.c_str(), pngs);
-  if (mp4) std::printf("  mp4      %s (%s)\n", mp4_path.c_str(), mp4->encoder_name().c_str());
-  if (webm) std::printf("  webm     %s (%s)\n", webm_path.c_str(), webm->encoder_name().c_str());
+      1e3 * out.render_s / n, 1e3 * out.encode_s / n, 1e3 * out.png_s / n, out.total_s,
+      1e3 * out.total_s / n);
+  std::printf("  poster   %s\n", out.poster.c_str());
+  if (out.pngs) std::printf("  frames   %s/frames/ (%zu PNG)\n", out_dir.c_str(), out.pngs);
+  if (!out.mp4.empty()) std::printf("  mp4      %s (%s)\n", out.mp4.c_str(), out.mp4_encoder.c_str());
+  if (!out.webm.empty())
+    std::printf("  webm     %s (%s)\n", out.webm.c_str(), out.webm_encoder.c_str());
+  if (!out.gif.empty()) std::printf("  gif      %s\n", out.gif.c_str());
   return kExitOk;
 }
 

@@ -5,6 +5,10 @@
 #include <string>
 #include <vector>
 
+namespace collido::job {
+struct RenderSettings;  // job/render_run.h
+}
+
 namespace collido::app {
 
 using Args = std::vector<std::string>;
@@ -17,12 +21,16 @@ int bench_run(const Args& args);         // app/bench_run.cpp
 
 #ifdef COLLIDO_HAVE_RUN
 int cmd_run(const Args& args);           // app/cmd_run.cpp
+int cmd_job_exec(const Args& args);      // app/cmd_run.cpp
 #endif
 
 #ifdef COLLIDO_HAVE_RENDER
 int cmd_render(const Args& args);        // app/cmd_render.cpp
 int bench_render(const Args& args);      // app/cmd_render.cpp
 #endif
+
+// --video's "mp4,webm,gif" or "none" into *rs; false with *error otherwise (app/cmd_render.cpp).
+bool parse_video_list(const std::string& list, collido::job::RenderSettings* rs, std::string* error);
 
 #ifdef COLLIDO_HAVE_GVM
 int cmd_gvm(const Args& args);           // app/cmd_gvm.cpp: `gvm train`

@@ -4,24 +4,16 @@
 #include <cstdio>
 #include <sstream>
 
-#include "app/scene_args.h"
+#include "job/wall_source.h"
 #include "sim/parallel.h"
 #include "sim/particles.h"
 
 namespace collido::app {
 
-sim::Backend resolve_backend(sim::Backend wanted, std::string* note) {
-  if (wanted != sim::Backend::kCuda) return wanted;
-  std::string why;
-  if (sim::cuda_available(&why)) return sim::Backend::kCuda;
-  if (note) *note = "no usable GPU (" + why + "): running on the CPU";
-  return sim::Backend::kCpu;
-}
-
 int build_detect_setup(const ParsedArgs& args, const std::string& command, DetectSetup* out) {
   std::string err;
   out->wall_spec = args.get("wall", "wall1");
-  auto wall = load_wall(out->wall_spec, &out->wall_report);
+  auto wall = job::load_wall(out->wall_spec, &out->wall_report);
   if (!wall) {
     std::fprintf(stderr, "collidoscope %s: %s\n", command.c_str(), wall.status().message().c_str());
     return kExitFailure;
@@ -31,9 +23,10 @@ int build_detect_setup(const ParsedArgs& args, const std::string& command, Detec
   const int64_t threads = args.get_int("threads", 0, &err);
   if (!err.empty()) return usage_error(command, err);
   if (threads < 0 || threads > 4096) return usage_error(command, "--threads must be in [0, 4096]");
-  sim::set_cpu_threads(static_cast<int>(threads));
+  out->pool = std::make_unique<sim::ThreadPool>(static_cast<int>(threads));
 
   sim::DetectConfig& cfg = out->config;
+  cfg.pool = out->pool.get();
   if (args.has("method") && !sim::parse_method(args.get("method"), &cfg.method))
     return usage_error(command, "unknown --method '" + args.get("method") +
                                     "' (gravity, circumcircle, midpoint4, bin, reference)");
@@ -42,7 +35,7 @@ int build_detect_setup(const ParsedArgs& args, const std::string& command, Detec
   sim::Backend wanted = sim::Backend::kCpu;
   if (args.has("backend") && !sim::parse_backend(args.get("backend"), &wanted))
     return usage_error(command, "unknown --backend '" + args.get("backend") + "' (cpu, cuda)");
-  cfg.backend = cfg.method == sim::Method::kReference ? sim::Backend::kCpu : resolve_backend(wanted, &out->backend_note);
+  cfg.backend = cfg.method == sim::Method::kReference ? sim::Backend::kCpu : sim::usable_backend(wanted, &out->backend_note);
   if (!out->backend_note.empty()) std::fprintf(stderr, "collidoscope %s: note: %s\n", command.c_str(), out->backend_note.c_str());
   cfg.grid_length = args.get_double("grid-length", 0, &err);
   if (!err.empty()) return usage_error(command, err);

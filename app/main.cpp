@@ -21,6 +21,7 @@ const std::vector<Command>& commands() {
       {"detect", cmd_detect, "particle-wall collision detection on one frame"},
 #ifdef COLLIDO_HAVE_RUN
       {"run", cmd_run, "run a scene's collision frames (and --video render them)"},
+      {"job-exec", cmd_job_exec, "run one job from its spec (what the service starts)"},
 #endif
       {"bench", cmd_bench, "benchmarks: bench detect | bench run | bench render"},
 #ifdef COLLIDO_HAVE_RENDER

@@ -9,7 +9,19 @@
 
 namespace collido {
 
-enum class ErrorCode { kOk = 0, kInvalidArgument, kIo, kParse, kOutOfMemory, kBackend };
+// One set of codes for every module; the command line maps them to exit codes
+// (kInvalidArgument, kNotFound, kParse: 2, bad input; the rest: 1, a failed run)
+// and the service to HTTP (400/404/422, 409 or 507, 499-like cancellation, 500).
+enum class ErrorCode {
+  kOk = 0,
+  kInvalidArgument,   // the input says something impossible or malformed
+  kNotFound,          // a file, id or key that does not exist
+  kIo,                // reading or writing failed
+  kParse,             // a file's contents do not parse
+  kResourceExhausted, // over a memory or work budget, or an allocation failed
+  kCancelled,         // stopped on request
+  kBackend,           // the GPU, GL or an encoder failed
+};
 
 class Status {
  public:
@@ -29,6 +41,31 @@ class Status {
 inline Status invalid_argument(std::string m) { return {ErrorCode::kInvalidArgument, std::move(m)}; }
 inline Status io_error(std::string m) { return {ErrorCode::kIo, std::move(m)}; }
 inline Status parse_error(std::string m) { return {ErrorCode::kParse, std::move(m)}; }
+inline Status not_found(std::string m) { return {ErrorCode::kNotFound, std::move(m)}; }
+inline Status resource_exhausted(std::string m) {
+  return {ErrorCode::kResourceExhausted, std::move(m)};
+}
+inline Status cancelled(std::string m) { return {ErrorCode::kCancelled, std::move(m)}; }
+inline Status backend_error(std::string m) { return {ErrorCode::kBackend, std::move(m)}; }
+
+// True for the codes that mean the caller's input was wrong (exit code 2).
+inline bool is_input_error(ErrorCode c) {
+  return c == ErrorCode::kInvalidArgument || c == ErrorCode::kNotFound || c == ErrorCode::kParse;
+}
+// The name of a code, for JSON documents and logs ("invalid_argument", ...).
+inline const char* to_string(ErrorCode c) {
+  switch (c) {
+    case ErrorCode::kOk: return "ok";
+    case ErrorCode::kInvalidArgument: return "invalid_argument";
+    case ErrorCode::kNotFound: return "not_found";
+    case ErrorCode::kIo: return "io";
+    case ErrorCode::kParse: return "parse";
+    case ErrorCode::kResourceExhausted: return "resource_exhausted";
+    case ErrorCode::kCancelled: return "cancelled";
+    case ErrorCode::kBackend: return "backend";
+  }
+  return "unknown";
+}
 
 // A value or the Status that explains why there is none.
 template <class T>

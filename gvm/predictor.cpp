@@ -1,3 +1,4 @@
+#include "common/atomic_file.h"
 #include "gvm/predictor.h"
 
 #include <algorithm>
@@ -323,7 +324,7 @@ Expected<ResourcePredictor> ResourcePredictor::from_json(const std::string& text
 
 Status ResourcePredictor::save(const std::string& path) const {
   // Write then rename, so a reader never sees half a model.
-  const std::string tmp = path + ".tmp";
+  const std::string tmp = temp_path_for(path);
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     if (!out) return io_error("cannot write model '" + tmp + "'");

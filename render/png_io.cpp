@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <string>
 
+#include "common/atomic_file.h"
 #include "render/image.h"
 
 namespace collido::render {
@@ -13,10 +14,10 @@ namespace collido::render {
 Status write_png(const std::string& path, const Image& image, int compression) {
   if (image.width <= 0 || image.height <= 0 ||
       image.rgb.size() != size_t(image.width) * image.height * 3)
-    return Status::error("write_png " + path + ": image has no pixels or the wrong size");
-  const std::string tmp = path + ".tmp" + std::to_string(getpid());
+    return io_error("write_png " + path + ": image has no pixels or the wrong size");
+  const std::string tmp = temp_path_for(path);
   FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) return Status::error("write_png: cannot create " + tmp);
+  if (!f) return io_error("write_png: cannot create " + tmp);
 
   // The simplified writer has no compression setting, so use the classic API;
   // errors longjmp back here.
@@ -26,13 +27,13 @@ Status write_png(const std::string& path, const Image& image, int compression) {
     png_destroy_write_struct(&png, &info);
     std::fclose(f);
     std::remove(tmp.c_str());
-    return Status::error("write_png " + path + ": out of memory");
+    return io_error("write_png " + path + ": out of memory");
   }
   if (setjmp(png_jmpbuf(png))) {
     png_destroy_write_struct(&png, &info);
     std::fclose(f);
     std::remove(tmp.c_str());
-    return Status::error("write_png " + path + ": libpng failed (disk full?)");
+    return io_error("write_png " + path + ": libpng failed (disk full?)");
   }
   png_init_io(png, f);
   png_set_compression_level(png, compression < 0 ? 3 : (compression > 9 ? 9 : compression));
@@ -50,11 +51,11 @@ Status write_png(const std::string& path, const Image& image, int compression) {
   const bool closed = std::fclose(f) == 0;
   if (!flushed || !closed) {
     std::remove(tmp.c_str());
-    return Status::error("write_png " + path + ": write failed (disk full?)");
+    return io_error("write_png " + path + ": write failed (disk full?)");
   }
   if (std::rename(tmp.c_str(), path.c_str()) != 0) {
     std::remove(tmp.c_str());
-    return Status::error("write_png: cannot rename " + tmp + " to " + path);
+    return io_error("write_png: cannot rename " + tmp + " to " + path);
   }
   return Status::ok();
 }
@@ -63,14 +64,14 @@ Status read_png(const std::string& path, Image* image) {
   png_image img{};
   img.version = PNG_IMAGE_VERSION;
   if (!png_image_begin_read_from_file(&img, path.c_str()))
-    return Status::error("read_png " + path + ": " + img.message);
+    return io_error("read_png " + path + ": " + img.message);
   img.format = PNG_FORMAT_RGB;
   Image out;
   out.resize(int(img.width), int(img.height));
   if (!png_image_finish_read(&img, nullptr, out.rgb.data(), 0, nullptr)) {
     std::string msg = img.message;
     png_image_free(&img);
-    return Status::error("read_png " + path + ": " + msg);
+    return io_error("read_png " + path + ": " + msg);
   }
   *image = std::move(out);
   return Status::ok();

@@ -502,8 +502,8 @@ struct Renderer::Impl {
 };
 
 Status Renderer::Impl::render(const Snapshot& s, Image* image) {
-  if (std::string why = validate_snapshot(s); !why.empty()) return Status::error(why);
-  if (!context->make_current()) return Status::error("cannot make the GL context current");
+  if (std::string why = validate_snapshot(s); !why.empty()) return backend_error(why);
+  if (!context->make_current()) return backend_error("cannot make the GL context current");
   const int w = options.width, h = options.height;
 
   float az = 0, el = 0;
@@ -683,7 +683,7 @@ Status Renderer::Impl::render(const Snapshot& s, Image* image) {
   gl.ReadBuffer(GL_COLOR_ATTACHMENT0);
   gl.ReadPixels(0, 0, w, h, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());
   if (GLenum e = gl.GetError(); e != GL_NO_ERROR)
-    return Status::error("GL error " + std::to_string(e) + " while rendering frame " +
+    return backend_error("GL error " + std::to_string(e) + " while rendering frame " +
                          std::to_string(s.frame));
   if (image->width != w || image->height != h) image->resize(w, h);
   // GL rows run bottom-up; images top-down.
@@ -769,7 +769,7 @@ Renderer::~Renderer() = default;
 
 std::unique_ptr<Renderer> Renderer::create(const RenderOptions& options, Status* status) {
   auto fail = [&](const std::string& m) -> std::unique_ptr<Renderer> {
-    if (status) *status = Status::error(m);
+    if (status) *status = backend_error(m);
     return nullptr;
   };
   if (options.width < 16 || options.height < 16 || options.width > 8192 || options.height > 8192)

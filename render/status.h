@@ -1,25 +1,13 @@
-// Error reporting of the renderer without exceptions. The renderer does not link
-// the engine, so it has its own small Status (ok, or a message for a person).
+// The renderer reports errors through the project-wide Status (common/status.h),
+// a header-only convention, so the renderer still links no engine code.
 #pragma once
 
-#include <string>
-#include <utility>
+#include "common/status.h"
 
 namespace collido::render {
-
-class Status {
- public:
-  Status() = default;
-  static Status ok() { return {}; }
-  static Status error(std::string message) { return Status(std::move(message)); }
-  bool is_ok() const { return !failed_; }
-  explicit operator bool() const { return !failed_; }
-  const std::string& message() const { return message_; }
-
- private:
-  explicit Status(std::string message) : failed_(true), message_(std::move(message)) {}
-  bool failed_ = false;
-  std::string message_;
-};
-
+using collido::backend_error;
+using collido::ErrorCode;
+using collido::invalid_argument;
+using collido::io_error;
+using collido::Status;
 }  // namespace collido::render

@@ -15,6 +15,7 @@ extern "C" {
 #include <mutex>
 #include <string>
 
+#include "common/atomic_file.h"
 #include "render/video.h"
 
 namespace collido::render {
@@ -36,6 +37,7 @@ void quiet_libav_logs() {
 }
 
 const AVCodec* find_encoder(VideoCodec codec) {
+  if (codec == VideoCodec::kGif) return avcodec_find_encoder(AV_CODEC_ID_GIF);
   const char* preferred = codec == VideoCodec::kH264 ? "libx264" : "libvpx-vp9";
   if (const AVCodec* c = avcodec_find_encoder_by_name(preferred)) return c;
   return avcodec_find_encoder(codec == VideoCodec::kH264 ? AV_CODEC_ID_H264 : AV_CODEC_ID_VP9);
@@ -44,7 +46,12 @@ const AVCodec* find_encoder(VideoCodec codec) {
 }  // namespace
 
 const char* video_extension(VideoCodec codec) {
-  return codec == VideoCodec::kH264 ? "mp4" : "webm";
+  switch (codec) {
+    case VideoCodec::kH264: return "mp4";
+    case VideoCodec::kVP9: return "webm";
+    case VideoCodec::kGif: return "gif";
+  }
+  return "bin";
 }
 
 struct VideoWriter::Impl {
@@ -75,11 +82,11 @@ struct VideoWriter::Impl {
     for (;;) {
       int rc = avcodec_receive_packet(codec, packet);
       if (rc == AVERROR(EAGAIN) || rc == AVERROR_EOF) return Status::ok();
-      if (rc < 0) return Status::error(path + ": encoder failed: " + av_error(rc));
+      if (rc < 0) return backend_error(path + ": encoder failed: " + av_error(rc));
       av_packet_rescale_ts(packet, codec->time_base, stream->time_base);
       packet->stream_index = stream->index;
       rc = av_interleaved_write_frame(format, packet);  // takes the packet's reference
-      if (rc < 0) return Status::error(path + ": cannot write packet: " + av_error(rc));
+      if (rc < 0) return backend_error(path + ": cannot write packet: " + av_error(rc));
     }
   }
 };
@@ -90,25 +97,31 @@ VideoWriter::~VideoWriter() = default;
 std::unique_ptr<VideoWriter> VideoWriter::open(const std::string& path, const VideoOptions& o,
                                                Status* status) {
   auto fail = [&](const std::string& msg) -> std::unique_ptr<VideoWriter> {
-    if (status) *status = Status::error(msg);
+    if (status) *status = backend_error(msg);
     return nullptr;
   };
-  if (o.width <= 0 || o.height <= 0 || o.width % 2 || o.height % 2)
+  const bool gif = o.codec == VideoCodec::kGif;
+  if (o.width <= 0 || o.height <= 0 || (!gif && (o.width % 2 || o.height % 2)))
     return fail(path + ": video size " + std::to_string(o.width) + "x" + std::to_string(o.height) +
                 " must be positive and even (yuv420p)");
+  if (o.source_width < 0 || o.source_height < 0 || (o.source_width > 0) != (o.source_height > 0))
+    return fail(path + ": source size must be given as both width and height, or neither");
   if (o.fps <= 0 || o.fps > 240) return fail(path + ": fps must be in 1..240");
 
   quiet_libav_logs();
   auto impl = std::make_unique<Impl>();
   impl->options = o;
   impl->path = path;
-  impl->tmp_path = path + ".tmp" + std::to_string(getpid());
+  impl->tmp_path = temp_path_for(path);
   const bool h264 = o.codec == VideoCodec::kH264;
-  const char* muxer = h264 ? "mp4" : "webm";
+  const char* muxer = video_extension(o.codec);
+  if (o.source_width == 0) impl->options.source_width = o.width;
+  if (o.source_height == 0) impl->options.source_height = o.height;
 
   const AVCodec* enc = find_encoder(o.codec);
   if (!enc)
-    return fail(std::string("this libavcodec has no ") + (h264 ? "H.264" : "VP9") + " encoder");
+    return fail(std::string("this libavcodec has no ") + (h264 ? "H.264" : gif ? "GIF" : "VP9") +
+                " encoder");
   int rc = avformat_alloc_output_context2(&impl->format, nullptr, muxer, impl->tmp_path.c_str());
   if (rc < 0 || !impl->format) return fail(path + ": no " + muxer + " muxer: " + av_error(rc));
 
@@ -117,15 +130,19 @@ std::unique_ptr<VideoWriter> VideoWriter::open(const std::string& path, const Vi
   c->height = o.height;
   c->time_base = AVRational{1, o.fps};
   c->framerate = AVRational{o.fps, 1};
-  c->pix_fmt = AV_PIX_FMT_YUV420P;
+  // GIF: a fixed 3-3-2 palette with swscale's dithering needs no palette pass
+  // over the whole clip, so frames are still encoded as they arrive.
+  c->pix_fmt = gif ? AV_PIX_FMT_RGB8 : AV_PIX_FMT_YUV420P;
   c->gop_size = 2 * o.fps;  // a key frame every 2 s keeps seeking in the browser quick
-  c->thread_count = o.threads;
-  // Tag the stream as BT.709 limited range, matching the swscale conversion,
-  // so players do not guess the colours.
-  c->color_range = AVCOL_RANGE_MPEG;
-  c->colorspace = AVCOL_SPC_BT709;
-  c->color_primaries = AVCOL_PRI_BT709;
-  c->color_trc = AVCOL_TRC_BT709;
+  c->thread_count = gif ? 1 : o.threads;
+  if (!gif) {
+    // Tag the stream as BT.709 limited range, matching the swscale conversion,
+    // so players do not guess the colours.
+    c->color_range = AVCOL_RANGE_MPEG;
+    c->colorspace = AVCOL_SPC_BT709;
+    c->color_primaries = AVCOL_PRI_BT709;
+    c->color_trc = AVCOL_TRC_BT709;
+  }
   if (impl->format->oformat->flags & AVFMT_GLOBALHEADER) c->flags |= AV_CODEC_FLAG_GLOBAL_HEADER;
 
   AVDictionary* opts = nullptr;
@@ -135,7 +152,7 @@ std::unique_ptr<VideoWriter> VideoWriter::open(const std::string& path, const Vi
     av_dict_set(&opts, "preset", "veryfast", 0);
     av_dict_set_int(&opts, "crf", o.crf >= 0 ? o.crf : 20, 0);
     av_dict_set(&opts, "profile", "high", 0);
-  } else {
+  } else if (!gif) {
     // libvpx's default "good" mode is far too slow for a render job; realtime
     // with cpu-used 8 and row threading is fast and still looks clean.
     c->bit_rate = 0;  // with crf: constant quality
@@ -171,33 +188,38 @@ std::unique_ptr<VideoWriter> VideoWriter::open(const std::string& path, const Vi
   impl->frame->width = o.width;
   impl->frame->height = o.height;
   if (av_frame_get_buffer(impl->frame, 0) < 0) return fail(path + ": out of memory");
-  impl->sws = sws_getContext(o.width, o.height, AV_PIX_FMT_RGB24, o.width, o.height,
-                             AV_PIX_FMT_YUV420P, SWS_BILINEAR, nullptr, nullptr, nullptr);
-  if (!impl->sws) return fail(path + ": swscale cannot convert RGB24 to yuv420p");
-  const int* bt709 = sws_getCoefficients(SWS_CS_ITU709);
-  sws_setColorspaceDetails(impl->sws, bt709, 1 /*full-range RGB in*/, bt709, 0 /*limited out*/, 0,
-                           1 << 16, 1 << 16);
+  const VideoOptions& io = impl->options;
+  impl->sws = sws_getContext(io.source_width, io.source_height, AV_PIX_FMT_RGB24, o.width,
+                             o.height, c->pix_fmt, gif ? SWS_AREA : SWS_BILINEAR, nullptr, nullptr,
+                             nullptr);
+  if (!impl->sws) return fail(path + ": swscale cannot convert the RGB24 frames");
+  if (!gif) {
+    const int* bt709 = sws_getCoefficients(SWS_CS_ITU709);
+    sws_setColorspaceDetails(impl->sws, bt709, 1 /*full-range RGB in*/, bt709, 0 /*limited out*/,
+                             0, 1 << 16, 1 << 16);
+  }
   if (status) *status = Status::ok();
   return std::unique_ptr<VideoWriter>(new VideoWriter(std::move(impl)));
 }
 
 Status VideoWriter::add_frame(const Image& image) {
   Impl& s = *impl_;
-  if (s.finished) return Status::error(s.path + ": add_frame after finish");
-  if (image.width != s.options.width || image.height != s.options.height ||
+  if (s.finished) return backend_error(s.path + ": add_frame after finish");
+  if (image.width != s.options.source_width || image.height != s.options.source_height ||
       image.rgb.size() != size_t(image.width) * image.height * 3)
-    return Status::error(s.path + ": frame is " + std::to_string(image.width) + "x" +
-                         std::to_string(image.height) + ", video is " +
-                         std::to_string(s.options.width) + "x" + std::to_string(s.options.height));
+    return backend_error(s.path + ": frame is " + std::to_string(image.width) + "x" +
+                         std::to_string(image.height) + ", the writer takes " +
+                         std::to_string(s.options.source_width) + "x" +
+                         std::to_string(s.options.source_height));
   // The encoder may still hold the previous picture; get a private buffer if so.
   int rc = av_frame_make_writable(s.frame);
-  if (rc < 0) return Status::error(s.path + ": " + av_error(rc));
+  if (rc < 0) return backend_error(s.path + ": " + av_error(rc));
   const uint8_t* src[1] = {image.rgb.data()};
   const int stride[1] = {image.width * 3};
   sws_scale(s.sws, src, stride, 0, image.height, s.frame->data, s.frame->linesize);
   s.frame->pts = s.next_pts++;
   rc = avcodec_send_frame(s.codec, s.frame);
-  if (rc < 0) return Status::error(s.path + ": encoder refused a frame: " + av_error(rc));
+  if (rc < 0) return backend_error(s.path + ": encoder refused a frame: " + av_error(rc));
   return s.drain();
 }
 
@@ -205,14 +227,14 @@ Status VideoWriter::finish() {
   Impl& s = *impl_;
   if (s.finished) return Status::ok();
   int rc = avcodec_send_frame(s.codec, nullptr);
-  if (rc < 0 && rc != AVERROR_EOF) return Status::error(s.path + ": " + av_error(rc));
+  if (rc < 0 && rc != AVERROR_EOF) return backend_error(s.path + ": " + av_error(rc));
   if (Status st = s.drain(); !st) return st;
   rc = av_write_trailer(s.format);
-  if (rc < 0) return Status::error(s.path + ": cannot write trailer: " + av_error(rc));
+  if (rc < 0) return backend_error(s.path + ": cannot write trailer: " + av_error(rc));
   rc = avio_closep(&s.format->pb);
-  if (rc < 0) return Status::error(s.path + ": close failed: " + av_error(rc));
+  if (rc < 0) return backend_error(s.path + ": close failed: " + av_error(rc));
   if (std::rename(s.tmp_path.c_str(), s.path.c_str()) != 0)
-    return Status::error("cannot rename " + s.tmp_path + " to " + s.path);
+    return backend_error("cannot rename " + s.tmp_path + " to " + s.path);
   s.finished = true;
   return Status::ok();
 }
@@ -275,16 +297,16 @@ struct Decoder {
     quiet_libav_logs();
     path = p;
     int rc = avformat_open_input(&fmt, path.c_str(), nullptr, nullptr);
-    if (rc < 0) return Status::error("cannot open video " + path + ": " + av_error(rc));
+    if (rc < 0) return backend_error("cannot open video " + path + ": " + av_error(rc));
     if ((rc = avformat_find_stream_info(fmt, nullptr)) < 0)
-      return Status::error(path + ": no stream info: " + av_error(rc));
+      return backend_error(path + ": no stream info: " + av_error(rc));
     const AVCodec* decoder = nullptr;
     stream = av_find_best_stream(fmt, AVMEDIA_TYPE_VIDEO, -1, -1, &decoder, 0);
-    if (stream < 0 || !decoder) return Status::error(path + ": no decodable video stream");
+    if (stream < 0 || !decoder) return backend_error(path + ": no decodable video stream");
     dec = avcodec_alloc_context3(decoder);
     avcodec_parameters_to_context(dec, fmt->streams[stream]->codecpar);
     if ((rc = avcodec_open2(dec, decoder, nullptr)) < 0)
-      return Status::error(path + ": cannot open decoder: " + av_error(rc));
+      return backend_error(path + ": cannot open decoder: " + av_error(rc));
     pkt = av_packet_alloc();
     frame = av_frame_alloc();
     return Status::ok();
@@ -302,7 +324,7 @@ struct Decoder {
         continue;
       }
       if (rc == AVERROR_EOF) return Status::ok();
-      if (rc != AVERROR(EAGAIN)) return Status::error(path + ": decoding failed: " + av_error(rc));
+      if (rc != AVERROR(EAGAIN)) return backend_error(path + ": decoding failed: " + av_error(rc));
       if (flushing) return Status::ok();
       // The decoder wants input: the next packet of our stream, or a flush.
       for (;;) {
@@ -316,7 +338,7 @@ struct Decoder {
         if (ours) rc = avcodec_send_packet(dec, pkt);
         av_packet_unref(pkt);
         if (ours) {
-          if (rc < 0 && rc != AVERROR(EAGAIN)) return Status::error(path + ": corrupt packet: " + av_error(rc));
+          if (rc < 0 && rc != AVERROR(EAGAIN)) return backend_error(path + ": corrupt packet: " + av_error(rc));
           break;
         }
       }
@@ -360,7 +382,7 @@ Status read_video_frame(const std::string& path, int index, Image* image) {
     SwsContext* sws = sws_getContext(f->width, f->height, AVPixelFormat(f->format), f->width, f->height,
                                      AV_PIX_FMT_RGB24, SWS_BILINEAR, nullptr, nullptr, nullptr);
     if (!sws) {
-      convert = Status::error(path + ": cannot convert the frame to RGB");
+      convert = backend_error(path + ": cannot convert the frame to RGB");
       return false;
     }
     const int space = f->colorspace == AVCOL_SPC_BT709 ? SWS_CS_ITU709 : SWS_CS_ITU601;
@@ -378,7 +400,7 @@ Status read_video_frame(const std::string& path, int index, Image* image) {
   if (!walked) return walked;
   if (!convert) return convert;
   if (!found)
-    return Status::error(path + ": has " + std::to_string(seen) + " frames, no frame " + std::to_string(index));
+    return backend_error(path + ": has " + std::to_string(seen) + " frames, no frame " + std::to_string(index));
   return Status::ok();
 }
 

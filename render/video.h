@@ -1,5 +1,6 @@
 // Video files through libavcodec/libavformat: H.264 in MP4 and VP9 in WebM, the
-// two codecs every current browser plays. Frames are encoded as they arrive, so
+// two codecs every current browser plays, and an animated GIF loop for slides
+// and pages that cannot play video. Frames are encoded as they arrive, so
 // memory stays flat however long the run is. No FFmpeg types appear here.
 #pragma once
 
@@ -11,12 +12,19 @@
 
 namespace collido::render {
 
-enum class VideoCodec { kH264, kVP9 };
+enum class VideoCodec {
+  kH264,  // MP4, yuv420p
+  kVP9,   // WebM, yuv420p
+  kGif,   // GIF, 256 colours (3-3-2, dithered), loops forever; usually scaled down
+};
 
 struct VideoOptions {
   VideoCodec codec = VideoCodec::kH264;
-  int width = 1280;  // pixels; must be even (yuv420p halves chroma)
-  int height = 720;  // pixels; must be even
+  int width = 1280;  // pixels of the output; even for H.264 and VP9 (yuv420p halves chroma)
+  int height = 720;  // pixels of the output; even for H.264 and VP9
+  // Size of the images given to add_frame when it differs from the output
+  // (they are scaled); 0 = the same as width x height.
+  int source_width = 0, source_height = 0;
   int fps = 30;      // frames per second of the output
   // Constant quality: x264 CRF (0..51, 18 looks lossless, 23 default) or VP9 CRF
   // (0..63). Negative picks the codec's default for this renderer.
@@ -25,7 +33,7 @@ struct VideoOptions {
   int threads = 0;
 };
 
-// File name extension that goes with a codec ("mp4" or "webm").
+// File name extension that goes with a codec ("mp4", "webm" or "gif").
 const char* video_extension(VideoCodec codec);
 
 class VideoWriter {

@@ -38,6 +38,10 @@ Status check_timing(const Scene& s);
 // Parses and validates a scene document. Unknown keys, wrong types and
 // impossible values are errors that name the key ("material.restitution: ...").
 Expected<Scene> parse_scene(const std::string& json_text);
+// Makes the scene's wall file, written either way ("wall": "vessel.stl" or
+// {"file": "vessel.stl"}), a path relative to `base_dir` (unless absolute). A
+// string wall that names no parametric shape and has no ':' is a file.
+void resolve_wall_path(Scene* scene, const std::string& base_dir);
 // Reads a scene file; a wall file named in it is taken relative to the scene's folder.
 Expected<Scene> load_scene(const std::string& path);
 // The scene as a JSON document (every key, defaults filled in); parse_scene reads it back.

@@ -5,6 +5,7 @@
 
 #include "common/number_text.h"
 #include "scene/scene.h"
+#include "sim/shapes.h"
 
 namespace collido::scene {
 
@@ -259,11 +260,16 @@ Expected<Scene> load_scene(const std::string& path) {
     return invalid_argument(path + ": a scene file over 16 MiB");
   auto scene = parse_scene(text.str());
   if (!scene) return Status(scene.status().code(), path + ": " + scene.status().message());
-  if (scene->wall_is_file && !scene->wall.empty() && scene->wall[0] != '/') {
-    const size_t slash = path.find_last_of('/');
-    if (slash != std::string::npos) scene->wall = path.substr(0, slash + 1) + scene->wall;
-  }
+  const size_t slash = path.find_last_of('/');
+  resolve_wall_path(&*scene, slash == std::string::npos ? "" : path.substr(0, slash));
   return scene;
+}
+
+void resolve_wall_path(Scene* s, const std::string& base_dir) {
+  if (!s->wall_is_file && s->wall.find(':') == std::string::npos && !sim::make_shape(s->wall))
+    s->wall_is_file = true;
+  if (s->wall_is_file && !s->wall.empty() && s->wall[0] != '/' && !base_dir.empty())
+    s->wall = base_dir + "/" + s->wall;
 }
 
 std::string to_json(const Scene& s) {

@@ -31,8 +31,8 @@ if "$app" --help | grep -q "^  render"; then
 fi
 echo "== simulation: 2000 particles poured into wall1 (scenes/wall1_pour.json)"
 if "$app" --help | grep -q "^  render"; then video=--video; else video=; fi
-"$app" run scenes/wall1_pour.json --out "$out/pour" $video --width 1280 --height 720
+"$app" run scenes/wall1_pour.json --out "$out/pour" --force $video --width 1280 --height 720
 
 echo "results in $out/:"
 echo "  detection: summary.json, contacts.csv, run/ (wall + snapshot), render/ (poster, frame PNG)"
-echo "  simulation: pour/stats.csv (per frame), pour/run.json, pour/frames/ (snapshots)${video:+, pour/render/ (video.mp4, video.webm, poster.png)}"
+echo "  simulation: pour/stats.csv (per frame), pour/result.json (files, cost), pour/frames/ (snapshots)${video:+, pour/render/ (video.mp4, video.webm, loop.gif, poster.png)}"

@@ -14,6 +14,9 @@ namespace collido::sim {
 
 class CpuBackend {
  public:
+  // The pool that runs this backend's loops (nullptr: default_pool()).
+  void set_pool(ThreadPool* pool) { pool_ = pool ? pool : &default_pool(); }
+
   template <class T>
   using Buffer = std::vector<T>;
 
@@ -26,12 +29,12 @@ class CpuBackend {
 
   template <class F>
   void parallel_for(size_t n, F f) {
-    cpu_parallel_for(n, f);
+    cpu_parallel_for(*pool_, n, f);
   }
   // Loop bodies with many live values: the GPU caps their registers; threads here.
   template <class F>
   void parallel_for_heavy(size_t n, F f) {
-    cpu_parallel_for(n, f);
+    cpu_parallel_for(*pool_, n, f);
   }
   template <class T>
   void fill(T* p, size_t n, T v) {
@@ -109,7 +112,7 @@ class CpuBackend {
 
   // Sorts each bucket's (triangle, cell) entries by triangle so runs repeat exactly.
   void sort_segments(uint32_t* tri, uint64_t* cell, const uint32_t* start, uint32_t buckets, uint64_t) {
-    cpu_parallel_for(buckets, [&](uint32_t b) {
+    cpu_parallel_for(*pool_, buckets, [&](uint32_t b) {
       const uint32_t s = start[b], e = start[b + 1];
       if (e - s < 2) return;
       std::vector<std::pair<uint32_t, uint64_t>> v(e - s);
@@ -120,6 +123,7 @@ class CpuBackend {
   }
 
  private:
+  ThreadPool* pool_ = &default_pool();
   int64_t bytes_ = 0;
   std::vector<uint32_t> tk_, tv_, order_;
 };

@@ -12,6 +12,7 @@
 #include <cub/device/device_segmented_sort.cuh>
 #include <string>
 
+#include "sim/parallel.h"
 #include "sim/status.h"
 
 namespace collido::sim {
@@ -59,6 +60,8 @@ class CudaBackend {
     T* ptr_ = nullptr;
     size_t size_ = 0, capacity_ = 0;
   };
+
+  void set_pool(ThreadPool*) {}  // the GPU needs no host threads
 
   ~CudaBackend() {
     if (temp_) cudaFree(temp_);

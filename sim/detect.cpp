@@ -76,7 +76,7 @@ class ReferenceDetector final : public Detector {
     const size_t n = particles_.size();
     std::vector<std::vector<Contact>> per(n);
     out->counts.assign(n, 0);
-    cpu_parallel_for(n, [&](uint32_t i) {
+    cpu_parallel_for(cfg_.pool ? *cfg_.pool : default_pool(), n, [&](uint32_t i) {
       const Vec3d p{particles_.x[i], particles_.y[i], particles_.z[i]};
       const double r = particles_.r[i];
       for (size_t t = 0; t < mesh_.triangles.size(); ++t) {
@@ -108,6 +108,14 @@ class ReferenceDetector final : public Detector {
 };
 
 }  // namespace
+
+Backend usable_backend(Backend wanted, std::string* note) {
+  if (wanted != Backend::kCuda) return wanted;
+  std::string why;
+  if (cuda_available(&why)) return Backend::kCuda;
+  if (note) *note = "no usable GPU (" + why + "): running on the CPU";
+  return Backend::kCpu;
+}
 
 Expected<std::unique_ptr<Detector>> Detector::create(const TriangleMesh& mesh, const DetectConfig& config,
                                                      size_t max_particles) {

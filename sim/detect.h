@@ -13,6 +13,8 @@
 
 namespace collido::sim {
 
+class ThreadPool;  // sim/parallel.h
+
 enum class Method {
   kGravity,       // paper: division by longest-edge bisection, centroid spheres
   kCircumcircle,  // paper: division with obtuse split, circumspheres
@@ -48,6 +50,8 @@ struct DetectConfig {
   // Dense cell arrays above this many cells switch to a hashed table whose
   // size follows the element counts, so sparse or huge domains stay bounded.
   uint64_t max_dense_cells = 1ull << 24;
+  // Threads of the CPU backend, owned by the caller; nullptr = default_pool().
+  ThreadPool* pool = nullptr;
 };
 
 // One contact: particle index, the triangle's id in the input file, centre distance.
@@ -116,5 +120,9 @@ class Detector {
 
 // True when a CUDA device is usable; otherwise *why says what failed.
 bool cuda_available(std::string* why = nullptr);
+
+// The backend to run on: `wanted`, except CUDA when no device is usable, which
+// falls back to the CPU with *note saying why (note untouched otherwise).
+Backend usable_backend(Backend wanted, std::string* note);
 
 }  // namespace collido::sim

@@ -107,7 +107,9 @@ class GridDetector final : public Detector {
   }
 
  private:
-  GridDetector(const DetectConfig& cfg, size_t cap) : Detector(cfg), capacity_(cap) {}
+  GridDetector(const DetectConfig& cfg, size_t cap) : Detector(cfg), capacity_(cap) {
+    backend_.set_pool(cfg.pool);
+  }
 
   using Clock = std::chrono::steady_clock;
   // Adds the time since the previous lap to `slot` (with a device sync) when stages are timed.

@@ -52,6 +52,8 @@ struct DynamicsConfig {
   double grid_length = 0;     // wall cells, m; 0 = 2 r_max
   double domain_margin = -1;  // escape distance outside the wall's box, m; < 0 = automatic
   uint64_t max_dense_cells = 1ull << 24;
+  // Threads of the CPU backend, owned by the caller; nullptr = default_pool().
+  ThreadPool* pool = nullptr;
 };
 
 // Particles at the start of a run (world units, SI). A particle takes part
@@ -111,6 +113,18 @@ struct StepTimes {
   double drift_ms = 0, grid_ms = 0, pair_ms = 0, wall_ms = 0, kick_ms = 0;
 };
 
+// The changing part of a run (positions, velocities, spins, accelerations,
+// states, friction springs, time, step count) at a frame boundary, as plain
+// bytes: what a checkpoint saves. The constant part (the prepared wall, the
+// contact law, the time-step plan) is rebuilt from the scene by create().
+struct SimState {
+  uint64_t particles = 0;
+  double time = 0;  // s
+  uint64_t steps = 0;
+  bool all_released = false;
+  std::vector<std::vector<uint8_t>> arrays;  // the backend's buffers, in the pipeline's order
+};
+
 class Simulation {
  public:
   virtual ~Simulation() = default;
@@ -129,6 +143,12 @@ class Simulation {
   // Copies the state back: positions and velocities in world units (release
   // kept from the input) and per-particle flags (ParticleState | contact bits).
   virtual Status download(ParticleSet* state, std::vector<uint8_t>* flags) = 0;
+
+  // Copies the changing state out / back in. restore_state() takes only a state
+  // saved by a Simulation created from the same wall, config and particles;
+  // the run then continues exactly as the saved one would have.
+  virtual Status save_state(SimState* out) = 0;
+  virtual Status restore_state(const SimState& state) = 0;
 
   // Times each stage of the following steps (benchmarks); off by default.
   virtual void set_stage_timing(bool on) = 0;

@@ -149,6 +149,43 @@ class DynamicsPipeline final : public Simulation {
     return backend_.status();
   }
 
+  Status save_state(SimState* out) override {
+    out->particles = n_;
+    out->time = time_;
+    out->steps = steps_;
+    out->all_released = all_released_;
+    out->arrays.clear();
+    state_arrays([&](auto& buf, size_t count) {
+      std::vector<uint8_t> bytes(count * sizeof(*buf.data()));
+      if (count) backend_.to_host(bytes.data(), buf.data(), bytes.size());
+      out->arrays.push_back(std::move(bytes));
+      return true;
+    });
+    return backend_.status();
+  }
+
+  Status restore_state(const SimState& in) override {
+    if (in.particles != n_)
+      return invalid_argument("checkpoint holds " + std::to_string(in.particles) +
+                              " particles, the run has " + std::to_string(n_));
+    size_t k = 0;
+    const bool fits = state_arrays([&](auto& buf, size_t count) {
+      if (k >= in.arrays.size() || in.arrays[k].size() != count * sizeof(*buf.data()))
+        return false;
+      if (count) backend_.to_device(buf.data(), in.arrays[k].data(), in.arrays[k].size());
+      ++k;
+      return true;
+    });
+    if (!fits || k != in.arrays.size())
+      return invalid_argument("checkpoint does not match this run's settings (friction, particle "
+                              "contacts or integrator differ)");
+    time_ = in.time;
+    steps_ = in.steps;
+    all_released_ = in.all_released;
+    backend_.sync();
+    return backend_.status();
+  }
+
   Status download(ParticleSet* out, std::vector<uint8_t>* flags) override {
     std::vector<Vec3d> p(n_), v(n_);
     if (n_) {
@@ -171,7 +208,9 @@ class DynamicsPipeline final : public Simulation {
   }
 
  private:
-  DynamicsPipeline(const DynamicsConfig& cfg, const TimeStepInfo& ts) : cfg_(cfg), ts_(ts) {}
+  DynamicsPipeline(const DynamicsConfig& cfg, const TimeStepInfo& ts) : cfg_(cfg), ts_(ts) {
+    backend_.set_pool(cfg.pool);
+  }
 
   // --- set-up ---------------------------------------------------------------------------------
  public:  // nvcc's extended lambdas may not live in private member functions
@@ -258,6 +297,20 @@ class DynamicsPipeline final : public Simulation {
     speeds();
     backend_.sync();
     return backend_.status();
+  }
+
+  // Calls f(buffer, element count) for every buffer of the changing state, in
+  // one fixed order (save_state and restore_state walk it alike); stops at the
+  // first f that returns false and says whether all were visited.
+  template <class F>
+  bool state_arrays(F&& f) {
+    bool ok = f(pos_, n_) && f(vel_, n_) && f(acc_, n_) && f(state_, n_) && f(flags_, n_) &&
+              f(speed_, n_);
+    if (ok && law_.mu > 0) {
+      ok = f(omega_, n_) && f(alpha_, n_) && f(wall_hist_[hist_in_], n_ * kWallSlots);
+      if (ok && cfg_.particle_contacts) ok = f(pair_hist_[hist_in_], n_ * kPairSlots);
+    }
+    return ok;
   }
 
   // The per-particle arrays as plain pointers, for the loop bodies to capture by value.

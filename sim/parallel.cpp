@@ -1,121 +1,142 @@
 #include "sim/parallel.h"
 
+#include <sched.h>
+
 #include <algorithm>
+#include <cmath>
 #include <condition_variable>
-#include <memory>
+#include <cstdlib>
+#include <fstream>
 #include <mutex>
+#include <sstream>
+#include <string>
 #include <thread>
 #include <vector>
 
 namespace collido::sim {
-namespace {
 
-// A pool of persistent workers: a frame of 10^6 particles is a few ms, so
-// starting threads for every loop would cost more than the loop.
-class Pool {
- public:
-  explicit Pool(int threads) {
-    for (int t = 1; t < threads; ++t) workers_.emplace_back([this] { worker(); });
-    size_ = threads;
+// Persistent workers: a frame of 10^6 particles is a few ms, so starting
+// threads for every loop would cost more than the loop.
+struct ThreadPool::Impl {
+  explicit Impl(int threads) : size(threads) {
+    for (int t = 1; t < threads; ++t) workers.emplace_back([this] { worker(); });
   }
-  ~Pool() {
+  ~Impl() {
     {
-      std::lock_guard<std::mutex> lk(m_);
-      stop_ = true;
+      std::lock_guard<std::mutex> lk(m);
+      stop = true;
     }
-    cv_.notify_all();
-    for (auto& w : workers_) w.join();
+    cv.notify_all();
+    for (auto& w : workers) w.join();
   }
-  int size() const { return size_; }
 
-  void run(size_t n, size_t grain, const std::function<void(size_t, size_t)>& body) {
-    // One loop at a time: callers on several threads (service workers) take turns.
-    std::lock_guard<std::mutex> serial(run_mutex_);
-    const size_t chunks_wanted = static_cast<size_t>(size_) * 8;
-    grain = std::max(grain, (n + chunks_wanted - 1) / chunks_wanted);
-    grain = std::max<size_t>(grain, 1);
-    if (size_ == 1 || n <= grain) {
-      body(0, n);
+  void run(size_t n, size_t grain_in, const std::function<void(size_t, size_t)>& fn) {
+    std::lock_guard<std::mutex> serial(run_mutex);
+    const size_t chunks_wanted = static_cast<size_t>(size) * 8;
+    size_t g = std::max(grain_in, (n + chunks_wanted - 1) / chunks_wanted);
+    g = std::max<size_t>(g, 1);
+    if (size == 1 || n <= g) {
+      fn(0, n);
       return;
     }
     {
-      std::lock_guard<std::mutex> lk(m_);
-      body_ = &body;
-      n_ = n;
-      grain_ = grain;
-      next_.store(0);
-      active_ = static_cast<int>(workers_.size());
-      ++generation_;
+      std::lock_guard<std::mutex> lk(m);
+      body = &fn;
+      count = n;
+      grain = g;
+      next.store(0);
+      active = static_cast<int>(workers.size());
+      ++generation;
     }
-    cv_.notify_all();
+    cv.notify_all();
     drain();
-    std::unique_lock<std::mutex> lk(m_);
-    done_cv_.wait(lk, [this] { return active_ == 0; });
-    body_ = nullptr;
+    std::unique_lock<std::mutex> lk(m);
+    done_cv.wait(lk, [this] { return active == 0; });
+    body = nullptr;
   }
 
- private:
   void drain() {
     for (;;) {
-      size_t begin = next_.fetch_add(grain_);
-      if (begin >= n_) return;
-      (*body_)(begin, std::min(n_, begin + grain_));
+      const size_t begin = next.fetch_add(grain);
+      if (begin >= count) return;
+      (*body)(begin, std::min(count, begin + grain));
     }
   }
   void worker() {
     uint64_t seen = 0;
     for (;;) {
       {
-        std::unique_lock<std::mutex> lk(m_);
-        cv_.wait(lk, [&] { return stop_ || generation_ != seen; });
-        if (stop_) return;
-        seen = generation_;
+        std::unique_lock<std::mutex> lk(m);
+        cv.wait(lk, [&] { return stop || generation != seen; });
+        if (stop) return;
+        seen = generation;
       }
       drain();
-      std::lock_guard<std::mutex> lk(m_);
-      if (--active_ == 0) done_cv_.notify_one();
+      std::lock_guard<std::mutex> lk(m);
+      if (--active == 0) done_cv.notify_one();
     }
   }
 
-  std::vector<std::thread> workers_;
-  int size_ = 1;
-  std::mutex run_mutex_, m_;
-  std::condition_variable cv_, done_cv_;
-  bool stop_ = false;
-  uint64_t generation_ = 0;
-  int active_ = 0;
-  const std::function<void(size_t, size_t)>* body_ = nullptr;
-  size_t n_ = 0, grain_ = 1;
-  std::atomic<size_t> next_{0};
+  const int size;
+  std::vector<std::thread> workers;
+  std::mutex run_mutex, m;
+  std::condition_variable cv, done_cv;
+  bool stop = false;
+  uint64_t generation = 0;
+  int active = 0;
+  const std::function<void(size_t, size_t)>* body = nullptr;
+  size_t count = 0, grain = 1;
+  std::atomic<size_t> next{0};
 };
 
-std::mutex g_pool_mutex;
-std::unique_ptr<Pool> g_pool;
-int g_requested = 0;
+ThreadPool::ThreadPool(int threads)
+    : impl_(std::make_unique<Impl>(threads > 0 ? threads : usable_cpus())) {}
+ThreadPool::~ThreadPool() = default;
+int ThreadPool::size() const { return impl_->size; }
+void ThreadPool::run_chunks(size_t n, size_t grain,
+                            const std::function<void(size_t, size_t)>& body) {
+  impl_->run(n, grain, body);
+}
 
-Pool& pool() {
-  std::lock_guard<std::mutex> lk(g_pool_mutex);
-  int want = g_requested > 0 ? g_requested : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  if (!g_pool || g_pool->size() != want) {
-    g_pool.reset();
-    g_pool = std::make_unique<Pool>(want);
+namespace {
+
+// The CPU quota of this process's cgroup in CPUs (v2 "cpu.max", else v1
+// "cpu.cfs_quota_us"/"cpu.cfs_period_us"); 0 when none is set or readable.
+double cgroup_cpu_quota() {
+  std::ifstream self("/proc/self/cgroup");
+  std::string line, v2_path;
+  while (std::getline(self, line))
+    if (line.rfind("0::", 0) == 0) v2_path = line.substr(3);
+  for (const std::string& dir : {"/sys/fs/cgroup" + v2_path, std::string("/sys/fs/cgroup")}) {
+    std::ifstream f(dir + "/cpu.max");
+    std::string quota;
+    double period = 0;
+    if (f >> quota >> period && quota != "max" && period > 0) {
+      const double q = std::atof(quota.c_str());
+      if (q > 0) return q / period;
+    }
   }
-  return *g_pool;
+  std::ifstream q1("/sys/fs/cgroup/cpu/cpu.cfs_quota_us"), p1("/sys/fs/cgroup/cpu/cpu.cfs_period_us");
+  double q = 0, p = 0;
+  if (q1 >> q && p1 >> p && q > 0 && p > 0) return q / p;
+  return 0;
 }
 
 }  // namespace
 
-void set_cpu_threads(int threads) {
-  std::lock_guard<std::mutex> lk(g_pool_mutex);
-  g_requested = std::max(0, threads);
+int usable_cpus() {
+  int n = 0;
+  cpu_set_t set;
+  if (sched_getaffinity(0, sizeof set, &set) == 0) n = CPU_COUNT(&set);
+  if (n <= 0) n = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  const double quota = cgroup_cpu_quota();
+  if (quota > 0) n = std::min(n, std::max(1, static_cast<int>(std::ceil(quota - 1e-9))));
+  return std::max(1, n);
 }
 
-int cpu_threads() { return pool().size(); }
-
-namespace detail {
-void run_chunks(size_t n, size_t grain, const std::function<void(size_t, size_t)>& body) {
-  pool().run(n, grain, body);
+ThreadPool& default_pool() {
+  static ThreadPool pool(usable_cpus());
+  return pool;
 }
-}  // namespace detail
 
 }  // namespace collido::sim

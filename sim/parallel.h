@@ -1,28 +1,50 @@
-// The CPU side of the engine's one-source loops: a persistent thread pool and
+// The CPU side of the engine's one-source loops: a thread pool and
 // parallel_for. Loop bodies are the same COLLIDO_HD lambdas the GPU runs.
+//
+// A pool is an object its owner holds (a job, a benchmark, a test); the engine
+// reads it from its config (DetectConfig::pool, DynamicsConfig::pool). Callers
+// that bring none share default_pool(), which is sized once and never resized,
+// so no caller can change the threads of another one's running loop.
 #pragma once
 
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <memory>
 
 namespace collido::sim {
 
-// Threads used by CPU loops; 0 = all hardware threads. Takes effect at the next loop.
-void set_cpu_threads(int threads);
-int cpu_threads();
+class ThreadPool {
+ public:
+  // `threads` workers in all, the calling thread included; <= 0 = usable_cpus().
+  explicit ThreadPool(int threads = 0);
+  ~ThreadPool();
+  ThreadPool(const ThreadPool&) = delete;
+  ThreadPool& operator=(const ThreadPool&) = delete;
 
-namespace detail {
-// Runs body(begin, end) over chunks of [0, n) on the pool; returns when all are done.
-void run_chunks(size_t n, size_t grain, const std::function<void(size_t, size_t)>& body);
-}  // namespace detail
+  int size() const;
+  // Runs body(begin, end) over chunks of [0, n) on the pool; returns when all
+  // are done. Loops from several caller threads take turns.
+  void run_chunks(size_t n, size_t grain, const std::function<void(size_t, size_t)>& body);
 
-// Calls f(i) for every i in [0, n) on all pool threads, in dynamically balanced chunks.
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// CPUs this process may really use: its affinity mask (taskset, a Slurm step,
+// a container's cpuset), capped by a cgroup CPU quota where one is set. At least 1.
+int usable_cpus();
+
+// The pool shared by callers that bring none: usable_cpus() threads, made at first use.
+ThreadPool& default_pool();
+
+// Calls f(i) for every i in [0, n) on the pool's threads, in dynamically balanced chunks.
 template <class F>
-void cpu_parallel_for(size_t n, F&& f, size_t grain = 4096) {
+void cpu_parallel_for(ThreadPool& pool, size_t n, F&& f, size_t grain = 4096) {
   if (n == 0) return;
-  detail::run_chunks(n, grain, [&f](size_t begin, size_t end) {
+  pool.run_chunks(n, grain, [&f](size_t begin, size_t end) {
     for (size_t i = begin; i < end; ++i) f(static_cast<uint32_t>(i));
   });
 }

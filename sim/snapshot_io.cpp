@@ -6,6 +6,7 @@
 #include <memory>
 #include <utility>
 
+#include "common/atomic_file.h"
 #include "sim/snapshot.h"
 
 namespace collido::sim {
@@ -89,7 +90,7 @@ Status write_snapshot(const std::string& path, const Snapshot& s) {
   put<double>(header, s.origin.y);
   put<double>(header, s.origin.z);
 
-  const std::string tmp = path + ".tmp" + std::to_string(getpid());
+  const std::string tmp = temp_path_for(path);
   File f(std::fopen(tmp.c_str(), "wb"));
   if (!f) return io_error("write_snapshot: cannot create " + tmp);
   bool ok = std::fwrite(header.data(), 1, header.size(), f.get()) == header.size();

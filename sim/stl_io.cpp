@@ -8,6 +8,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "common/atomic_file.h"
 #include "sim/mesh.h"
 
 namespace collido::sim {
@@ -178,7 +179,7 @@ Expected<TriangleMesh> load_stl(const std::string& path, MeshReport* report) {
 }
 
 Status save_stl(const TriangleMesh& mesh, const std::string& path) {
-  const std::string tmp = path + ".tmp";
+  const std::string tmp = temp_path_for(path);
   std::FILE* f = std::fopen(tmp.c_str(), "wb");
   if (!f) return io_error(path + ": cannot open for writing");
   char header[80] = "binary STL written by collidoscope";

@@ -1,13 +1,15 @@
 #include "sim/vtp_io.h"
 
 #include <cstdio>
-#include <fstream>
+#include <sstream>
+
+#include "common/atomic_file.h"
 
 namespace collido::sim {
 
+// Both files are built in memory and renamed into place whole.
 Status write_vtp(const std::string& path, const Snapshot& s) {
-  std::ofstream out(path);
-  if (!out) return io_error(path + ": cannot write");
+  std::ostringstream out;
   const size_t n = s.size();
   char buf[128];
   out << "<?xml version=\"1.0\"?>\n"
@@ -34,13 +36,11 @@ Status write_vtp(const std::string& path, const Snapshot& s) {
   out << "</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n";
   for (size_t i = 0; i < n; ++i) out << i + 1 << '\n';
   out << "</DataArray>\n</Verts>\n</Piece>\n</PolyData>\n</VTKFile>\n";
-  if (!out.flush()) return io_error(path + ": write failed");
-  return Status::ok();
+  return write_file_atomic(path, out.str());
 }
 
 Status write_pvd(const std::string& path, const std::vector<PvdEntry>& entries) {
-  std::ofstream out(path);
-  if (!out) return io_error(path + ": cannot write");
+  std::ostringstream out;
   out << "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"1.0\">\n<Collection>\n";
   char buf[64];
   for (const PvdEntry& e : entries) {
@@ -48,8 +48,7 @@ Status write_pvd(const std::string& path, const std::vector<PvdEntry>& entries) 
     out << "<DataSet timestep=\"" << buf << "\" file=\"" << e.file << "\"/>\n";
   }
   out << "</Collection>\n</VTKFile>\n";
-  if (!out.flush()) return io_error(path + ": write failed");
-  return Status::ok();
+  return write_file_atomic(path, out.str());
 }
 
 }  // namespace collido::sim

@@ -39,7 +39,7 @@ TEST(CliRun, WritesSnapshotsStatisticsAndParaViewFrames) {
   fs::remove_all(dir);
   ASSERT_EQ(cmd_run({scene, "--out", dir, "--vtp", "--quiet"}), kExitOk);
   for (const char* f :
-       {"wall.stl", "scene.json", "run.json", "stats.csv", "frames.pvd", "vtp/frame_000005.vtp"})
+       {"wall.stl", "scene.json", "result.json", "stats.csv", "frames.pvd", "vtp/frame_000005.vtp"})
     EXPECT_TRUE(fs::exists(fs::path(dir) / f)) << f;
   const auto stats = lines(dir + "/stats.csv");
   ASSERT_EQ(stats.size(), 1u + 6u);  // header, frame 0 and five frames
@@ -80,7 +80,9 @@ TEST(CliRun, ExampleScenesRun) {
   EXPECT_GE(seen, 3);
 }
 
-TEST(CliRun, BadScenesExitTwoAndImpossibleRunsExitOne) {
+// One rule for exit codes: bad input (arguments, scenes, files that are
+// missing or do not fit) exits 2, a run that fails exits 1.
+TEST(CliRun, BadInputExitsTwo) {
   EXPECT_EQ(cmd_run({}), kExitUsage);
   EXPECT_EQ(cmd_run({"--help"}), kExitOk);
   EXPECT_EQ(cmd_run({"/nonexistent/scene.json"}), kExitUsage);
@@ -94,13 +96,16 @@ TEST(CliRun, BadScenesExitTwoAndImpossibleRunsExitOne) {
     EXPECT_EQ(cmd_run({ok, "--duration", d}), kExitUsage) << d;
   // A wall that does not exist, and more particles than the vessel holds.
   const std::string dir = ::testing::TempDir() + "/run_fail";
+  fs::remove_all(dir);
   EXPECT_EQ(cmd_run({write_scene("nowall.json", R"({"wall": {"file": "missing.stl"}})"), "--out",
                      dir, "--quiet"}),
-            kExitFailure);
+            kExitUsage);
   EXPECT_EQ(cmd_run({write_scene("full.json",
                                  R"({"wall": "box:x=2,y=2,z=2", "particles": {"count": 1000}})"),
                      "--out", dir, "--quiet"}),
-            kExitFailure);
+            kExitUsage);
+  // Input that is refused leaves nothing behind.
+  EXPECT_FALSE(fs::exists(dir));
 }
 
 TEST(CliRun, AFixedStepBeyondTheStableBoundIsWarnedAboutAndStillReported) {
@@ -112,7 +117,7 @@ TEST(CliRun, AFixedStepBeyondTheStableBoundIsWarnedAboutAndStillReported) {
   fs::remove_all(dir);
   ASSERT_EQ(cmd_run({scene, "--out", dir, "--quiet"}), kExitOk);
   std::stringstream run;
-  run << std::ifstream(dir + "/run.json").rdbuf();
+  run << std::ifstream(dir + "/result.json").rdbuf();
   EXPECT_NE(run.str().find("\"beyond_stable\": true"), std::string::npos) << run.str();
 }
 

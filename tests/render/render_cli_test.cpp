@@ -119,13 +119,14 @@ TEST_F(RenderCliTest, BadArgumentsExitTwo) {
 }
 
 TEST_F(RenderCliTest, MissingOrCorruptFramesFailWithoutLeavingVideo) {
-  EXPECT_EQ(cmd_render({(dir_ / "nowhere").string()}), kExitFailure);
+  // Missing and corrupt frames are bad input: exit 2, the one rule of app/cli.h.
+  EXPECT_EQ(cmd_render({(dir_ / "nowhere").string()}), kExitUsage);
   write_run(3);
   {
     std::ofstream f(sim::snapshot_path(run(), 2), std::ios::binary | std::ios::trunc);
     f << "CLSNAP01 but then nothing";
   }
-  EXPECT_EQ(cmd_render({run(), "--out", out(), "--width", "64", "--height", "48"}), kExitFailure);
+  EXPECT_EQ(cmd_render({run(), "--out", out(), "--width", "64", "--height", "48"}), kExitUsage);
   EXPECT_FALSE(fs::exists(out() + "/video.mp4"));
   EXPECT_FALSE(fs::exists(out() + "/video.webm"));
   for (const auto& e : fs::directory_iterator(out()))

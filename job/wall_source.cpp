@@ -1,4 +1,4 @@
-#include "app/scene_args.h"
+#include "job/wall_source.h"
 
 #include <sys/stat.h>
 
@@ -10,7 +10,7 @@
 #include "mesh_import/mesh_import.h"
 #endif
 
-namespace collido::app {
+namespace collido::job {
 
 namespace {
 bool is_file(const std::string& p) {
@@ -25,6 +25,8 @@ std::string lower_ext(const std::string& p) {
 }
 }  // namespace
 
+bool is_shape_spec(const std::string& spec) { return bool(sim::make_shape(spec)); }
+
 sim::Expected<sim::TriangleMesh> load_wall(const std::string& spec, sim::MeshReport* report) {
   if (is_file(spec)) {
     if (lower_ext(spec) == "stl") return sim::load_stl(spec, report);
@@ -38,7 +40,7 @@ sim::Expected<sim::TriangleMesh> load_wall(const std::string& spec, sim::MeshRep
   if (!mesh) {
     const bool looks_like_path = spec.find('/') != std::string::npos || spec.find('.') != std::string::npos;
     if (looks_like_path && spec.find(':') == std::string::npos)
-      return sim::io_error(spec + ": no such file");
+      return sim::not_found(spec + ": no such file");
     return mesh.status();
   }
   if (report) {
@@ -49,4 +51,4 @@ sim::Expected<sim::TriangleMesh> load_wall(const std::string& spec, sim::MeshRep
   return mesh;
 }
 
-}  // namespace collido::app
+}  // namespace collido::job

@@ -1,0 +1,92 @@
+#include "job/budget.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include "sim/divide.h"
+
+namespace collido::job {
+namespace {
+
+// Host bytes per particle: the input set and its download copy (2 x 64), the
+// engine's arrays (positions, velocities, accelerations, radius, mass,
+// release, speed, states: about 110), the statistics scratch (16 x 8), a
+// snapshot (29) and, with friction, spins and two generations of springs.
+double bytes_per_particle(const sim::DynamicsConfig& c) {
+  double b = 2 * 64 + 110 + 128 + 29;
+  if (c.material.friction > 0) b += 48 + 2 * 16 * 4 + (c.particle_contacts ? 2 * 16 * 8 : 0);
+  if (c.particle_contacts) b += 5 * 4 + 16 + 8;
+  return b;
+}
+
+std::string figure(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3g", v);
+  return buf;
+}
+
+}  // namespace
+
+uint64_t machine_memory_bytes() {
+  const long pages = sysconf(_SC_PHYS_PAGES), size = sysconf(_SC_PAGE_SIZE);
+  return pages > 0 && size > 0 ? uint64_t(pages) * uint64_t(size) : (uint64_t(8) << 30);
+}
+
+WorkEstimate estimate_work(const sim::TriangleMesh& wall, const sim::DynamicsConfig& config,
+                           uint64_t particles, double r_max) {
+  WorkEstimate e;
+  const double cell = config.grid_length > 0 ? config.grid_length : 2 * r_max;
+  if (config.method == sim::Method::kBin) {
+    // The bin preparation visits every cell of each triangle's box grown by r_max.
+    const double grow = r_max + cell;
+    for (size_t t = 0; t < wall.triangles.size(); ++t) {
+      double cells = 1;
+      for (int axis = 0; axis < 3; ++axis) {
+        double lo = 1e300, hi = -1e300;
+        for (int k = 0; k < 3; ++k) {
+          const sim::Vec3d p = wall.corner(t, k);
+          const double v = axis == 0 ? p.x : axis == 1 ? p.y : p.z;
+          lo = std::min(lo, v), hi = std::max(hi, v);
+        }
+        cells *= std::floor((hi - lo + 2 * grow) / cell) + 2;
+      }
+      e.wall_cells += cells;
+    }
+    e.pieces = double(wall.triangles.size());
+  } else {
+    // Four-way splitting's count is exact and cheap to compute; bisection
+    // (gravity, circumcircle) stops each piece as soon as it fits and makes 6 to
+    // 14 times fewer on the calibration walls (app/cmd_calibrate.cpp), so a
+    // sixth of it is a generous estimate there. The grid over piece centres
+    // costs work in proportion to the pieces, not to the cells.
+    const double m4 = sim::midpoint4_piece_count(wall, r_max);
+    e.pieces = config.method == sim::Method::kMidpoint4 ? m4 : m4 / 6;
+  }
+  e.host_bytes = double(particles) * bytes_per_particle(config) + e.pieces * 160 +
+                 std::min(e.wall_cells, 1e12) * 12 + 64.0 * (1 << 20);
+  return e;
+}
+
+Status check_budget(const WorkEstimate& e, const Budget& budget) {
+  if (!(e.pieces <= budget.pieces))
+    return resource_exhausted("dividing the wall would make about " + figure(e.pieces) +
+                              " triangles, over the limit of " + figure(budget.pieces) +
+                              ": use the bin method (no division) or larger particles");
+  if (!(e.wall_cells <= budget.wall_cells))
+    return resource_exhausted(
+        "the wall would be prepared over " + figure(e.wall_cells) + " (triangle, cell) pairs, over "
+        "the limit of " + figure(budget.wall_cells) +
+        ": the grid cells are tiny next to the wall; use larger particles or a larger grid_length");
+  const double limit = budget.host_bytes ? double(budget.host_bytes) : double(machine_memory_bytes());
+  if (!(e.host_bytes <= limit))
+    return resource_exhausted("the run needs about " + figure(e.host_bytes / double(1 << 30)) +
+                              " GiB of memory (" + figure(e.pieces) + " wall triangles after division), "
+                              "more than the " + figure(limit / double(1 << 30)) +
+                              " GiB it may use; use fewer particles or the bin method");
+  return Status::ok();
+}
+
+}  // namespace collido::job

@@ -1,0 +1,99 @@
+#include "job/checkpoint.h"
+
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+#include "common/atomic_file.h"
+
+namespace collido::job {
+namespace {
+
+constexpr char kMagic[8] = {'C', 'L', 'C', 'K', 'P', 'T', '0', '1'};
+// More than any run holds; a larger count or size means a damaged file.
+constexpr uint32_t kMaxArrays = 64;
+
+uint64_t fnv1a(const std::string& bytes) {
+  uint64_t h = 1469598103934665603ull;
+  for (unsigned char c : bytes) h = (h ^ c) * 1099511628211ull;
+  return h;
+}
+
+template <class T>
+void put(std::string* out, const T& v) {
+  out->append(reinterpret_cast<const char*>(&v), sizeof v);
+}
+
+class Reader {
+ public:
+  explicit Reader(const std::string& b) : b_(b) {}
+  template <class T>
+  bool get(T* v) {
+    if (b_.size() - at_ < sizeof(T)) return false;
+    std::memcpy(v, b_.data() + at_, sizeof(T));
+    at_ += sizeof(T);
+    return true;
+  }
+  bool bytes(size_t n, std::vector<uint8_t>* out) {
+    if (b_.size() - at_ < n) return false;
+    out->assign(b_.begin() + long(at_), b_.begin() + long(at_ + n));
+    at_ += n;
+    return true;
+  }
+  size_t at() const { return at_; }
+
+ private:
+  const std::string& b_;
+  size_t at_ = 0;
+};
+
+}  // namespace
+
+Status write_checkpoint(const std::string& path, const Checkpoint& c) {
+  std::string b(kMagic, sizeof kMagic);
+  put(&b, c.frame);
+  put(&b, c.state.particles);
+  put(&b, c.state.time);
+  put(&b, c.state.steps);
+  put(&b, uint8_t(c.state.all_released));
+  put(&b, uint32_t(c.state.arrays.size()));
+  for (const auto& a : c.state.arrays) {
+    put(&b, uint64_t(a.size()));
+    b.append(reinterpret_cast<const char*>(a.data()), a.size());
+  }
+  put(&b, fnv1a(b));
+  return write_file_atomic(path, b);
+}
+
+Expected<Checkpoint> read_checkpoint(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return not_found(path + ": no checkpoint");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  const std::string b = ss.str();
+  auto damaged = [&](const char* why) { return parse_error(path + ": damaged checkpoint (" + why + ")"); };
+  if (b.size() < sizeof kMagic + 8 || std::memcmp(b.data(), kMagic, sizeof kMagic) != 0)
+    return damaged("not a checkpoint");
+  uint64_t stored = 0;
+  std::memcpy(&stored, b.data() + b.size() - 8, 8);
+  if (fnv1a(b.substr(0, b.size() - 8)) != stored) return damaged("checksum");
+  Reader r(b);
+  char magic[8];
+  r.get(&magic);
+  Checkpoint c;
+  uint8_t released = 0;
+  uint32_t arrays = 0;
+  if (!r.get(&c.frame) || !r.get(&c.state.particles) || !r.get(&c.state.time) ||
+      !r.get(&c.state.steps) || !r.get(&released) || !r.get(&arrays) || arrays > kMaxArrays)
+    return damaged("header");
+  c.state.all_released = released != 0;
+  c.state.arrays.resize(arrays);
+  for (auto& a : c.state.arrays) {
+    uint64_t n = 0;
+    if (!r.get(&n) || n > b.size() || !r.bytes(size_t(n), &a)) return damaged("arrays");
+  }
+  if (r.at() + 8 != b.size()) return damaged("length");
+  return c;
+}
+
+}  // namespace collido::job

@@ -1,0 +1,27 @@
+// A run's changing state at a frame boundary, saved so a killed or preempted
+// job resumes where it stopped. Little-endian binary:
+//   char[8] "CLCKPT01", uint64 frame, uint64 particles, double time,
+//   uint64 steps, uint8 all_released, uint32 array count,
+//   then per array: uint64 bytes, the bytes;
+//   last, uint64 FNV-1a hash of everything before it.
+// Written through a temporary name, so the file is always a whole checkpoint.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "common/status.h"
+#include "sim/dynamics.h"
+
+namespace collido::job {
+
+struct Checkpoint {
+  uint64_t frame = 0;  // the last frame whose outputs are written
+  sim::SimState state;
+};
+
+Status write_checkpoint(const std::string& path, const Checkpoint& c);
+// Errors say whether the file is missing (kNotFound) or damaged (kParse).
+Expected<Checkpoint> read_checkpoint(const std::string& path);
+
+}  // namespace collido::job

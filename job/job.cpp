@@ -1,0 +1,567 @@
+#include "job/job.h"
+
+#include <sys/resource.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <memory>
+#include <new>
+#include <nlohmann/json.hpp>
+
+#include "common/atomic_file.h"
+#include "job/budget.h"
+#include "job/checkpoint.h"
+#include "job/run_dir.h"
+#include "job/stats_file.h"
+#include "job/wall_source.h"
+#include "scene/scene.h"
+#include "sim/parallel.h"
+#include "sim/placement.h"
+#include "sim/snapshot.h"
+#include "sim/vtp_io.h"
+
+namespace collido::job {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+using Clock = std::chrono::steady_clock;
+
+const char* to_string(DirPolicy p) {
+  switch (p) {
+    case DirPolicy::kRefuse: return "refuse";
+    case DirPolicy::kReplace: return "replace";
+    case DirPolicy::kResume: return "resume";
+  }
+  return "refuse";
+}
+
+bool parse_dir_policy(const std::string& s, DirPolicy* out) {
+  for (DirPolicy p : {DirPolicy::kRefuse, DirPolicy::kReplace, DirPolicy::kResume})
+    if (s == to_string(p)) return *out = p, true;
+  return false;
+}
+
+const char* to_string(Stage s) {
+  switch (s) {
+    case Stage::kPrepare: return "prepare";
+    case Stage::kSimulate: return "simulate";
+    case Stage::kRender: return "render";
+    case Stage::kDone: return "done";
+  }
+  return "prepare";
+}
+
+namespace {
+
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+uint64_t peak_rss_bytes() {
+  struct rusage ru {};
+  getrusage(RUSAGE_SELF, &ru);
+  return uint64_t(ru.ru_maxrss) * 1024;  // KiB on Linux
+}
+
+// The particles that take part (released, finite, inside the domain), in the
+// float snapshot form relative to `origin`. Escaped and non-finite ones are
+// counted in the statistics and never written.
+sim::Snapshot snapshot_of(const sim::ParticleSet& p, const std::vector<uint8_t>& flags,
+                          uint64_t frame, double time, sim::Vec3d origin) {
+  sim::Snapshot s;
+  s.frame = frame;
+  s.time = time;
+  s.origin = origin;
+  size_t n = 0;
+  for (uint8_t f : flags) n += (f & sim::kStateMask) == sim::kActive;
+  s.resize(n);
+  size_t k = 0;
+  for (size_t i = 0; i < p.size(); ++i) {
+    if ((flags[i] & sim::kStateMask) != sim::kActive) continue;
+    s.x[k] = float(p.x[i] - origin.x), s.y[k] = float(p.y[i] - origin.y),
+    s.z[k] = float(p.z[i] - origin.z);
+    s.r[k] = float(p.r[i]);
+    s.vx[k] = float(p.vx[i]), s.vy[k] = float(p.vy[i]), s.vz[k] = float(p.vz[i]);
+    s.contact[k] = (flags[i] & sim::kFlagWallContact) ? 1 : 0;
+    ++k;
+  }
+  return s;
+}
+
+std::string vtp_name(uint64_t frame) {
+  char name[32];
+  std::snprintf(name, sizeof name, "frame_%06llu.vtp", (unsigned long long)frame);
+  return name;
+}
+
+json render_to_json(const RenderSettings& r) {
+  return {{"width", r.width},         {"height", r.height},     {"fps", r.fps},
+          {"png_every", r.png_every}, {"camera", r.camera},     {"color", r.color},
+          {"wall", r.wall},           {"speed_max", r.speed_max}, {"mp4", r.mp4},
+          {"webm", r.webm},           {"gif", r.gif},           {"gif_width", r.gif_width},
+          {"gif_fps", r.gif_fps},     {"msaa", r.msaa},         {"overlay", r.overlay},
+          {"cull", r.cull}};
+}
+
+// The manifest: what the run produced and what it cost, one JSON writer.
+json manifest(const JobResult& r, const RunPaths& paths, const scene::Scene* scene) {
+  json j;
+  j["version"] = 1;
+  j["status"] = r.status.is_ok() ? "done"
+                : r.status.code() == ErrorCode::kCancelled ? "cancelled"
+                                                            : "failed";
+  j["complete"] = r.status.is_ok();
+  if (!r.status.is_ok())
+    j["error"] = {{"code", to_string(r.status.code())}, {"message", r.status.message()}};
+  j["units"] = {{"length", "m"}, {"time", "s"}, {"speed", "m/s"}, {"energy", "J"}};
+  j["backend"] = r.backend;
+  j["threads"] = r.threads;
+  j["particles"] = r.particles;
+  j["triangles"] = r.triangles;
+  if (scene) {
+    j["frames"] = scene->frames() + 1;
+    j["fps"] = scene->fps;
+    j["duration_s"] = scene->duration;
+  }
+  j["escaped"] = r.escaped;
+  j["invalid"] = r.invalid;
+  j["resumed_from_frame"] = r.resumed_from_frame;
+  const sim::TimeStepInfo& ts = r.time_step;
+  j["time_step"] = {{"stiffness_N_m", ts.stiffness},       {"damping_ratio", ts.damping_ratio},
+                    {"critical_step_s", ts.critical_step}, {"spring_step_s", ts.spring_step},
+                    {"fixed_step_s", ts.explicit_step},    {"beyond_stable", ts.beyond_stable}};
+  const Cost& c = r.cost;
+  j["cost"] = {{"total_s", c.total_s},
+               {"prepare_s", c.prepare_s},
+               {"simulate_s", c.simulate_s},
+               {"render_s", c.render_s},
+               {"frames", c.frames},
+               {"steps", c.steps},
+               {"ms_per_step", c.steps ? 1e3 * c.simulate_s / double(c.steps) : 0.0},
+               {"peak_host_bytes", c.peak_host_bytes},
+               {"peak_device_bytes", c.peak_device_bytes},
+               {"gpu_busy_fraction", c.gpu_busy_fraction}};
+  j["notes"] = r.notes;
+  json arts = json::array();
+  for (const Artifact& a : r.artifacts)
+    arts.push_back({{"path", a.path}, {"bytes", a.bytes}, {"mime", a.mime}, {"role", a.role},
+                    {"count", a.count}});
+  j["artifacts"] = arts;
+  (void)paths;
+  return j;
+}
+
+// Everything run_job does, inside the boundary that turns exceptions into a status.
+class JobRunner {
+ public:
+  JobRunner(const JobSpec& spec, const Hooks& hooks) : spec_(spec), hooks_(hooks) {
+    paths_.dir = spec.out_dir;
+  }
+
+  JobResult run() {
+    t_start_ = Clock::now();
+    result_.out_dir = spec_.out_dir;
+    // Everything the input decides is checked before the directory is touched,
+    // so a bad scene leaves nothing behind.
+    Status st = prepare();
+    if (st) st = claim_run_dir(spec_.out_dir, spec_.dir_policy);
+    if (!st) {
+      result_.status = st;
+      result_.cost.total_s = seconds_since(t_start_);
+      return result_;  // not our directory (yet): write nothing into it
+    }
+    owns_dir_ = true;
+    return finish(execute());
+  }
+
+  JobResult fail_with(Status st) { return finish(st); }
+
+ private:
+  void note(const std::string& line) {
+    result_.notes.push_back(line);
+    if (hooks_.note) hooks_.note(line);
+  }
+  bool cancel_requested() const { return hooks_.cancel && hooks_.cancel->load(); }
+  void report(Stage stage, uint64_t done, uint64_t total, double eta) {
+    if (!hooks_.progress) return;
+    Progress p;
+    p.stage = stage;
+    p.done = done;
+    p.total = total;
+    p.elapsed_s = seconds_since(t_start_);
+    p.eta_s = eta;
+    p.steps = sim_ ? sim_->steps_taken() : 0;
+    p.sim_time = last_.time;
+    p.contacts = last_.wall_contacts + last_.particle_contacts;
+    hooks_.progress(p);
+  }
+
+  Status prepare_scene() {
+    auto scene = scene::parse_scene(spec_.scene_json);
+    if (!scene) return scene.status();
+    scene_ = std::move(*scene);
+    scene::resolve_wall_path(&scene_, spec_.scene_dir);
+    if (spec_.vtp) scene_.vtp = true;
+    if (!spec_.backend.empty()) {
+      scene_.backend_auto = spec_.backend == "auto";
+      if (!scene_.backend_auto && !sim::parse_backend(spec_.backend, &scene_.dynamics.backend))
+        return invalid_argument("backend: must be auto, cpu or cuda");
+    }
+    if (spec_.duration > 0) {
+      scene_.duration = spec_.duration;
+      if (Status st = scene::check_timing(scene_); !st) return st;
+    }
+    if (spec_.render) {
+      RenderSettings rs = spec_.render_settings;
+      if (rs.fps == 0) rs.fps = std::max(1, std::min(240, int(std::lround(scene_.fps))));
+      if (Status st = validate(rs); !st) return st;
+    }
+    if (spec_.threads < 0 || spec_.threads > 4096)
+      return invalid_argument("threads: must be in [0, 4096]");
+    return Status::ok();
+  }
+
+  Status choose_backend() {
+    std::string why;
+    sim::Backend wanted = scene_.backend_auto ? sim::Backend::kCuda : scene_.dynamics.backend;
+    scene_.dynamics.backend = sim::usable_backend(wanted, &why);
+    // Asked for the GPU by name: say so; "auto" on a machine without one is the normal case.
+    if (!why.empty() && !scene_.backend_auto) note(why);
+    result_.backend = sim::to_string(scene_.dynamics.backend);
+    return Status::ok();
+  }
+
+  // The scene, wall, budget, particles and the engine: no file is written.
+  Status prepare() {
+    if (Status st = prepare_scene(); !st) return st;
+    choose_backend();
+    pool_ = std::make_unique<sim::ThreadPool>(spec_.threads);
+    result_.threads = pool_->size();
+    scene_.dynamics.pool = pool_.get();
+
+    sim::MeshReport report;
+    auto wall = load_wall(scene_.wall, &report);
+    if (!wall) return Status(wall.status().code(), "wall: " + wall.status().message());
+    wall_ = std::move(*wall);
+    result_.triangles = wall_.triangles.size();
+    const WorkEstimate work =
+        estimate_work(wall_, scene_.dynamics, scene_.particles.count, scene_.particles.r_max);
+    if (Status st = check_budget(work, spec_.budget); !st) return st;
+
+    auto particles = sim::place_particles(wall_, scene_.particles, scene_.placement,
+                                          scene_.dynamics.gravity, scene_.seed);
+    if (!particles) return particles.status();
+    result_.particles = particles->size();
+    auto sim_or = sim::Simulation::create(wall_, scene_.dynamics, *particles);
+    if (!sim_or) return sim_or.status();
+    sim_ = std::move(*sim_or);
+    particles->resize(0);
+    const sim::TimeStepInfo& ts = sim_->time_step_info();
+    result_.time_step = ts;
+    if (ts.beyond_stable)
+      note("time_step " + std::to_string(ts.explicit_step) + " s is beyond the stable bound " +
+           std::to_string(ts.critical_step) +
+           " s of the contact spring; expect energy to blow up and particles to tunnel");
+    return Status::ok();
+  }
+
+  Status execute() {
+    // Outputs that do not change during the run.
+    if (spec_.dir_policy != DirPolicy::kResume) {
+      JobSpec saved = spec_;
+      saved.dir_policy = DirPolicy::kResume;
+      if (Status st = write_file_atomic(paths_.job(), spec_to_json(saved) + "\n"); !st) return st;
+    }
+    if (Status st = write_file_atomic(paths_.scene(), scene::to_json(scene_) + "\n"); !st)
+      return st;
+    if (Status st = sim::save_stl(wall_, paths_.wall()); !st) return st;
+    if (scene_.vtp) {
+      std::error_code ec;
+      fs::create_directories(paths_.vtp(), ec);
+      if (ec) return io_error(paths_.vtp() + ": " + ec.message());
+    }
+    result_.cost.prepare_s = seconds_since(t_start_);
+    if (Status st = simulate(); !st) return st;
+    if (spec_.render) return render();
+    return Status::ok();
+  }
+
+  Status simulate() {
+    const uint64_t frames = scene_.frames();
+    const double frame_dt = scene_.duration / double(frames);
+    const sim::Vec3d origin = sim::mesh_bounds(wall_).center();
+    uint64_t first = 0;
+    std::vector<double> times;  // simulated time of each frame written, for the PVD index
+    auto ck = spec_.dir_policy == DirPolicy::kResume ? read_checkpoint(paths_.checkpoint())
+                                                      : Expected<Checkpoint>(not_found(""));
+    if (!ck && ck.status().code() != ErrorCode::kNotFound) return ck.status();
+    if (ck) {
+      if (Status st = sim_->restore_state(ck->state); !st) return st;
+      if (Status st = stats_.resume(paths_.stats_partial(), ck->frame, &times); !st) return st;
+      first = ck->frame + 1;
+      result_.resumed_from_frame = ck->frame;
+      note("resumed from the checkpoint of frame " + std::to_string(ck->frame));
+    } else {
+      // A fresh run, or one killed before its first checkpoint: from frame 0.
+      if (spec_.dir_policy == DirPolicy::kResume) note("no checkpoint yet: starting from frame 0");
+      if (Status st = stats_.create(paths_.stats_partial()); !st) return st;
+    }
+    std::vector<sim::PvdEntry> pvd;
+    for (size_t f = 0; f < times.size(); ++f) pvd.push_back({times[f], "vtp/" + vtp_name(f)});
+
+    sim::ParticleSet state;
+    std::vector<uint8_t> flags;
+    const auto t_loop = Clock::now();
+    auto last_save = Clock::now();
+    double engine_s = 0;
+    for (uint64_t f = first; f <= frames; ++f) {
+      if (cancel_requested())
+        return cancelled("cancelled at frame " + std::to_string(f) + " of " + std::to_string(frames));
+      const auto t0 = Clock::now();
+      Status s = f == 0 ? sim_->measure(&last_) : sim_->advance(frame_dt, &last_);
+      if (!s) return Status(s.code(), "frame " + std::to_string(f) + ": " + s.message());
+      last_.frame = f;
+      const double engine_ms = 1e3 * seconds_since(t0);
+      engine_s += engine_ms * 1e-3;
+      if (Status d = sim_->download(&state, &flags); !d) return d;
+      const sim::Snapshot snap = snapshot_of(state, flags, f, last_.time, origin);
+      if (Status w = sim::write_snapshot(sim::snapshot_path(paths_.dir, f), snap); !w) return w;
+      if (scene_.vtp) {
+        if (Status w = sim::write_vtp(paths_.vtp() + "/" + vtp_name(f), snap); !w) return w;
+        pvd.push_back({last_.time, "vtp/" + vtp_name(f)});
+      }
+      if (Status w = stats_.append(last_, engine_ms); !w) return w;
+      if (last_.escaped + last_.invalid > lost_) {
+        note("frame " + std::to_string(f) + ": " + std::to_string(last_.escaped) +
+             " particles escaped, " + std::to_string(last_.invalid) +
+             " non-finite (frozen, not written)");
+        lost_ = last_.escaped + last_.invalid;
+      }
+      // The state after this frame, so a kill loses at most the frames since.
+      if (f == frames || seconds_since(last_save) >= spec_.checkpoint_interval_s) {
+        Checkpoint ck;
+        ck.frame = f;
+        if (Status c = sim_->save_state(&ck.state); !c) return c;
+        if (Status c = write_checkpoint(paths_.checkpoint(), ck); !c) return c;
+        last_save = Clock::now();
+      }
+      const double elapsed = seconds_since(t_loop);
+      const double per_frame = elapsed / double(f - first + 1);
+      report(Stage::kSimulate, f, frames, per_frame * double(frames - f));
+    }
+    if (Status st = stats_.finish(paths_.stats()); !st) return st;
+    if (scene_.vtp)
+      if (Status w = sim::write_pvd(paths_.pvd(), pvd); !w) return w;
+    result_.cost.simulate_s = seconds_since(t_loop);
+    result_.cost.frames = frames + 1;
+    result_.escaped = last_.escaped;
+    result_.invalid = last_.invalid;
+    if (scene_.dynamics.backend == sim::Backend::kCuda && result_.cost.simulate_s > 0)
+      result_.cost.gpu_busy_fraction = std::min(1.0, engine_s / result_.cost.simulate_s);
+    return Status::ok();
+  }
+
+  Status render() {
+#ifdef COLLIDO_HAVE_RENDER
+    RenderSettings rs = spec_.render_settings;
+    // The video plays at the scene's frame rate, so a second on screen is a simulated second.
+    if (rs.fps == 0) rs.fps = std::max(1, std::min(240, int(std::lround(scene_.fps))));
+    const auto t0 = Clock::now();
+    RenderOutcome out;
+    auto progress = [&](size_t done, size_t total) {
+      const double per = seconds_since(t0) / double(done);
+      report(Stage::kRender, done, total, per * double(total - done));
+    };
+    Status st = render_run(paths_.dir, paths_.render(), rs, progress, hooks_.cancel, &out);
+    result_.cost.render_s = seconds_since(t0);
+    return st;
+#else
+    return invalid_argument("render: this build has no renderer");
+#endif
+  }
+
+  JobResult finish(Status st) {
+    stats_.close();
+    result_.status = st;
+    if (sim_) {
+      result_.cost.steps = sim_->steps_taken();
+      result_.cost.peak_device_bytes =
+          scene_.dynamics.backend == sim::Backend::kCuda ? sim_->device_bytes() : 0;
+    }
+    result_.cost.peak_host_bytes = peak_rss_bytes();
+    result_.cost.total_s = seconds_since(t_start_);
+    if (owns_dir_) {
+      result_.artifacts = list_artifacts(paths_, nullptr);
+      const json m = manifest(result_, paths_, scene_ready_() ? &scene_ : nullptr);
+      Status w = write_file_atomic(paths_.result(), m.dump(2) + "\n");
+      if (result_.status.is_ok() && !w) result_.status = w;
+    }
+    report(Stage::kDone, 1, 1, 0);
+    return result_;
+  }
+  bool scene_ready_() const { return !scene_.wall.empty(); }
+
+  const JobSpec& spec_;
+  const Hooks& hooks_;
+  RunPaths paths_;
+  JobResult result_;
+  Clock::time_point t_start_;
+  bool owns_dir_ = false;
+  scene::Scene scene_;
+  std::unique_ptr<sim::ThreadPool> pool_;
+  sim::TriangleMesh wall_;
+  std::unique_ptr<sim::Simulation> sim_;
+  StatsFile stats_;
+  sim::FrameStats last_;
+  uint64_t lost_ = 0;
+};
+
+}  // namespace
+
+JobResult run_job(const JobSpec& spec, const Hooks& hooks) {
+  // The boundary: nothing thrown inside (an allocation failure, above all) leaves it.
+  std::unique_ptr<JobRunner> runner;
+  try {
+    runner = std::make_unique<JobRunner>(spec, hooks);
+    return runner->run();
+  } catch (const std::bad_alloc&) {
+    const Status st = resource_exhausted("out of memory: the scene needs more than this machine "
+                                         "can give; use fewer particles or a coarser wall");
+    if (runner) return runner->fail_with(st);
+    JobResult r;
+    r.status = st;
+    return r;
+  } catch (const std::exception& e) {
+    const Status st = backend_error(std::string("internal error: ") + e.what());
+    if (runner) return runner->fail_with(st);
+    JobResult r;
+    r.status = st;
+    return r;
+  }
+}
+
+std::string spec_to_json(const JobSpec& s) {
+  json scene = json::parse(s.scene_json, nullptr, false);
+  json j = {{"version", 1},
+            {"scene", scene.is_discarded() ? json(s.scene_json) : scene},
+            {"scene_dir", s.scene_dir},
+            {"out_dir", s.out_dir},
+            {"dir_policy", to_string(s.dir_policy)},
+            {"threads", s.threads},
+            {"backend", s.backend},
+            {"duration", s.duration},
+            {"vtp", s.vtp},
+            {"render", s.render},
+            {"render_settings", render_to_json(s.render_settings)},
+            {"checkpoint_interval_s", s.checkpoint_interval_s},
+            {"budget",
+             {{"host_bytes", s.budget.host_bytes},
+              {"wall_cells", s.budget.wall_cells},
+              {"pieces", s.budget.pieces}}}};
+  return j.dump(2);
+}
+
+namespace {
+
+// Reads j[key] into *out when present; an error names the key when it has the wrong type.
+template <class T>
+Status read_key(const json& j, const char* key, T* out, const std::string& where = "") {
+  if (!j.contains(key)) return Status::ok();
+  const json& v = j.at(key);
+  const std::string name = where.empty() ? key : where + "." + key;
+  if constexpr (std::is_same_v<T, bool>) {
+    if (!v.is_boolean()) return invalid_argument(name + ": expected true or false");
+  } else if constexpr (std::is_same_v<T, std::string>) {
+    if (!v.is_string()) return invalid_argument(name + ": expected a string");
+  } else if constexpr (std::is_integral_v<T>) {
+    if (!v.is_number_integer()) return invalid_argument(name + ": expected an integer");
+    if (v.is_number_unsigned() ? v.get<uint64_t>() > uint64_t(std::numeric_limits<T>::max())
+                               : (v.get<int64_t>() < int64_t(std::numeric_limits<T>::min()) ||
+                                  (v.get<int64_t>() > 0 &&
+                                   uint64_t(v.get<int64_t>()) > uint64_t(std::numeric_limits<T>::max()))))
+      return invalid_argument(name + ": out of range");
+  } else {
+    if (!v.is_number()) return invalid_argument(name + ": expected a number");
+    if (!std::isfinite(v.get<double>())) return invalid_argument(name + ": not finite");
+  }
+  *out = v.get<T>();
+  return Status::ok();
+}
+
+#define COLLIDO_READ(...)                                    \
+  do {                                                       \
+    if (Status read_status = read_key(__VA_ARGS__); !read_status) return read_status; \
+  } while (0)
+
+}  // namespace
+
+Expected<JobSpec> spec_from_json(const std::string& text) {
+  const json j = json::parse(text, nullptr, false);
+  if (j.is_discarded()) return parse_error("job spec: not valid JSON");
+  if (!j.is_object()) return invalid_argument("job spec: expected a JSON object");
+  static const char* kKeys[] = {"version", "scene",    "scene_dir",       "out_dir",
+                                "dir_policy", "threads", "backend",       "duration",
+                                "vtp",     "render",   "render_settings", "checkpoint_interval_s",
+                                "budget"};
+  for (auto it = j.begin(); it != j.end(); ++it) {
+    bool known = false;
+    for (const char* k : kKeys) known = known || it.key() == k;
+    if (!known) return invalid_argument(it.key() + ": unknown key of the job spec");
+  }
+  JobSpec s;
+  if (!j.contains("scene")) return invalid_argument("scene: missing");
+  const json& scene = j.at("scene");
+  if (scene.is_string())
+    s.scene_json = scene.get<std::string>();
+  else if (scene.is_object())
+    s.scene_json = scene.dump();
+  else
+    return invalid_argument("scene: expected the scene document (an object)");
+  COLLIDO_READ(j, "scene_dir", &s.scene_dir);
+  COLLIDO_READ(j, "out_dir", &s.out_dir);
+  if (s.out_dir.empty()) return invalid_argument("out_dir: missing");
+  std::string policy = to_string(s.dir_policy);
+  COLLIDO_READ(j, "dir_policy", &policy);
+  if (!parse_dir_policy(policy, &s.dir_policy))
+    return invalid_argument("dir_policy: must be refuse, replace or resume");
+  COLLIDO_READ(j, "threads", &s.threads);
+  COLLIDO_READ(j, "backend", &s.backend);
+  COLLIDO_READ(j, "duration", &s.duration);
+  COLLIDO_READ(j, "vtp", &s.vtp);
+  COLLIDO_READ(j, "render", &s.render);
+  COLLIDO_READ(j, "checkpoint_interval_s", &s.checkpoint_interval_s);
+  if (!(s.checkpoint_interval_s >= 0)) return invalid_argument("checkpoint_interval_s: must be >= 0");
+  if (j.contains("render_settings")) {
+    const json& r = j.at("render_settings");
+    if (!r.is_object()) return invalid_argument("render_settings: expected an object");
+    RenderSettings& rs = s.render_settings;
+    const std::string w = "render_settings";
+    COLLIDO_READ(r, "width", &rs.width, w);
+    COLLIDO_READ(r, "height", &rs.height, w);
+    COLLIDO_READ(r, "fps", &rs.fps, w);
+    COLLIDO_READ(r, "png_every", &rs.png_every, w);
+    COLLIDO_READ(r, "camera", &rs.camera, w);
+    COLLIDO_READ(r, "color", &rs.color, w);
+    COLLIDO_READ(r, "wall", &rs.wall, w);
+    COLLIDO_READ(r, "speed_max", &rs.speed_max, w);
+    COLLIDO_READ(r, "mp4", &rs.mp4, w);
+    COLLIDO_READ(r, "webm", &rs.webm, w);
+    COLLIDO_READ(r, "gif", &rs.gif, w);
+    COLLIDO_READ(r, "gif_width", &rs.gif_width, w);
+    COLLIDO_READ(r, "gif_fps", &rs.gif_fps, w);
+    COLLIDO_READ(r, "msaa", &rs.msaa, w);
+    COLLIDO_READ(r, "overlay", &rs.overlay, w);
+    COLLIDO_READ(r, "cull", &rs.cull, w);
+  }
+  if (j.contains("budget")) {
+    const json& b = j.at("budget");
+    if (!b.is_object()) return invalid_argument("budget: expected an object");
+    COLLIDO_READ(b, "host_bytes", &s.budget.host_bytes, "budget");
+    COLLIDO_READ(b, "wall_cells", &s.budget.wall_cells, "budget");
+    COLLIDO_READ(b, "pieces", &s.budget.pieces, "budget");
+  }
+  return s;
+}
+
+}  // namespace collido::job

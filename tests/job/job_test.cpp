@@ -1,0 +1,384 @@
+// The job library end to end: what a run directory holds, who owns it,
+// cancellation, two jobs at once, checkpoints and resume after SIGKILL, the
+// job-exec child, and scenes a hostile user would send.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <thread>
+
+#include "common/atomic_file.h"
+#include "job/checkpoint.h"
+#include "job/child.h"
+#include "job/job.h"
+#include "sim/snapshot.h"
+#ifdef COLLIDO_HAVE_RENDER
+#include "render/video.h"
+#endif
+
+namespace collido::job {
+namespace {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+std::string read_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// A fresh directory per test under the test temp folder.
+std::string fresh_dir(const std::string& name) {
+  const std::string dir = ::testing::TempDir() + "/job_" + name + "_" + std::to_string(getpid());
+  fs::remove_all(dir);
+  return dir;
+}
+
+// Particles falling into a box with friction and pair contacts: every part of the state moves.
+const char* kDropScene = R"({
+  "wall": "box:x=6,y=6,z=6",
+  "particles": {"count": 64, "radius": [0.3, 0.4]},
+  "placement": {"kind": "fill", "region": {"min": [-2, -2, 1], "max": [2, 2, 5]}},
+  "material": {"restitution": 0.5, "friction": 0.3, "stiffness": 1e5},
+  "particle_contacts": true, "duration": 0.6, "fps": 20, "backend": "cpu"
+})";
+
+JobSpec drop_spec(const std::string& dir, int threads = 1) {
+  JobSpec s;
+  s.scene_json = kDropScene;
+  s.out_dir = dir;
+  s.threads = threads;
+  s.checkpoint_interval_s = 0;
+  return s;
+}
+
+// The statistics without their wall-clock column (the only one that may differ between runs).
+std::vector<std::string> stats_rows(const std::string& dir) {
+  std::ifstream in(dir + "/stats.csv");
+  std::vector<std::string> rows;
+  for (std::string l; std::getline(in, l);) rows.push_back(l.substr(0, l.rfind(',')));
+  return rows;
+}
+
+TEST(Job, RunWritesEveryFrameAndAManifest) {
+  const std::string dir = fresh_dir("run");
+  std::vector<Progress> seen;
+  Hooks hooks;
+  hooks.progress = [&](const Progress& p) { seen.push_back(p); };
+  const JobResult r = run_job(drop_spec(dir), hooks);
+  ASSERT_TRUE(r.status) << r.status.message();
+  EXPECT_EQ(r.particles, 64u);
+  EXPECT_EQ(r.cost.frames, 13u);
+  EXPECT_GT(r.cost.steps, 0u);
+  EXPECT_GT(r.cost.peak_host_bytes, 0u);
+  const auto rows = stats_rows(dir);
+  ASSERT_EQ(rows.size(), 14u);  // header and frames 0..12
+  for (size_t f = 0; f <= 12; ++f) EXPECT_EQ(rows[f + 1].substr(0, rows[f + 1].find(',')), std::to_string(f));
+  EXPECT_FALSE(fs::exists(dir + "/stats.csv.partial"));
+  const json m = json::parse(read_file(dir + "/result.json"));
+  EXPECT_EQ(m["status"], "done");
+  EXPECT_EQ(m["frames"], 13);
+  EXPECT_EQ(m["cost"]["steps"], r.cost.steps);
+  bool has_stats = false, has_frames = false;
+  for (const auto& a : m["artifacts"]) {
+    const std::string path = a["path"];
+    if (path == "stats.csv") has_stats = a["mime"] == "text/csv";
+    if (path == "frames/") has_frames = a["count"] == 13;
+  }
+  EXPECT_TRUE(has_stats && has_frames) << m["artifacts"].dump();
+  // Progress: every simulated frame reported, then done.
+  ASSERT_FALSE(seen.empty());
+  EXPECT_EQ(seen.back().stage, Stage::kDone);
+  int frames = 0;
+  for (const auto& p : seen) frames += p.stage == Stage::kSimulate;
+  EXPECT_EQ(frames, 13);
+}
+
+TEST(Job, ARunDirectoryBelongsToOneRun) {
+  const std::string dir = fresh_dir("owned");
+  ASSERT_TRUE(run_job(drop_spec(dir), {}).status);
+  const std::string before = read_file(dir + "/stats.csv");
+  // A second run into the same directory is refused and changes nothing.
+  JobResult again = run_job(drop_spec(dir), {});
+  EXPECT_EQ(again.status.code(), ErrorCode::kInvalidArgument);
+  EXPECT_NE(again.status.message().find("already holds files"), std::string::npos);
+  EXPECT_EQ(read_file(dir + "/stats.csv"), before);
+  // Replacing empties it first: no frame of the old run survives a shorter new one.
+  JobSpec shorter = drop_spec(dir);
+  shorter.duration = 0.1;
+  shorter.dir_policy = DirPolicy::kReplace;
+  ASSERT_TRUE(run_job(shorter, {}).status);
+  EXPECT_FALSE(fs::exists(sim::snapshot_path(dir, 3)));
+  EXPECT_EQ(stats_rows(dir).size(), 4u);
+  // A folder with someone's files but no run is never emptied.
+  const std::string other = fresh_dir("not_a_run");
+  fs::create_directories(other);
+  std::ofstream(other + "/thesis.tex") << "precious";
+  JobSpec into_other = drop_spec(other);
+  into_other.dir_policy = DirPolicy::kReplace;
+  EXPECT_FALSE(run_job(into_other, {}).status);
+  EXPECT_EQ(read_file(other + "/thesis.tex"), "precious");
+}
+
+TEST(Job, CancelStopsAtAFrameAndSaysSo) {
+  const std::string dir = fresh_dir("cancel");
+  std::atomic<bool> cancel{false};
+  Hooks hooks;
+  hooks.cancel = &cancel;
+  hooks.progress = [&](const Progress& p) {
+    if (p.stage == Stage::kSimulate && p.done == 3) cancel = true;
+  };
+  const JobResult r = run_job(drop_spec(dir), hooks);
+  EXPECT_EQ(r.status.code(), ErrorCode::kCancelled);
+  const json m = json::parse(read_file(dir + "/result.json"));
+  EXPECT_EQ(m["status"], "cancelled");
+  EXPECT_EQ(m["complete"], false);
+  // stats.csv, a final name, exists only for a whole run.
+  EXPECT_FALSE(fs::exists(dir + "/stats.csv"));
+  EXPECT_TRUE(fs::exists(sim::snapshot_path(dir, 3)));
+  EXPECT_FALSE(fs::exists(sim::snapshot_path(dir, 4)));
+}
+
+TEST(Job, TwoJobsAtOnceGiveWhatEachGivesAlone) {
+  const std::string a = fresh_dir("alone_a"), b = fresh_dir("alone_b");
+  ASSERT_TRUE(run_job(drop_spec(a, 2), {}).status);
+  JobSpec other = drop_spec(b, 1);
+  other.scene_json = R"({"wall": "wall1", "particles": {"count": 300, "radius": 1},
+    "placement": {"kind": "pour"}, "particle_contacts": true, "duration": 0.3, "fps": 10,
+    "backend": "cpu"})";
+  ASSERT_TRUE(run_job(other, {}).status);
+  const std::string a2 = fresh_dir("together_a"), b2 = fresh_dir("together_b");
+  JobResult ra, rb;
+  std::thread ta([&] { ra = run_job(drop_spec(a2, 2), {}); });
+  std::thread tb([&] {
+    JobSpec s = other;
+    s.out_dir = b2;
+    rb = run_job(s, {});
+  });
+  ta.join();
+  tb.join();
+  ASSERT_TRUE(ra.status && rb.status);
+  EXPECT_EQ(ra.threads, 2);
+  EXPECT_EQ(rb.threads, 1);
+  EXPECT_EQ(stats_rows(a), stats_rows(a2));
+  EXPECT_EQ(stats_rows(b), stats_rows(b2));
+  EXPECT_EQ(read_file(sim::snapshot_path(a, 12)), read_file(sim::snapshot_path(a2, 12)));
+  EXPECT_EQ(read_file(sim::snapshot_path(b, 3)), read_file(sim::snapshot_path(b2, 3)));
+}
+
+TEST(Job, CheckpointsRoundTripAndDamageIsDetected) {
+  const std::string dir = fresh_dir("ckpt");
+  ASSERT_TRUE(run_job(drop_spec(dir), {}).status);
+  auto ck = read_checkpoint(dir + "/checkpoint.bin");
+  ASSERT_TRUE(ck) << ck.status().message();
+  EXPECT_EQ(ck->frame, 12u);
+  EXPECT_EQ(ck->state.particles, 64u);
+  EXPECT_GT(ck->state.arrays.size(), 6u);  // friction and pairs: springs saved too
+  std::string bytes = read_file(dir + "/checkpoint.bin");
+  bytes[bytes.size() / 2] ^= 1;
+  ASSERT_TRUE(write_file_atomic(dir + "/damaged.bin", bytes));
+  EXPECT_EQ(read_checkpoint(dir + "/damaged.bin").status().code(), ErrorCode::kParse);
+  EXPECT_EQ(read_checkpoint(dir + "/none.bin").status().code(), ErrorCode::kNotFound);
+}
+
+// Runs the spec in a job-exec child and kills it with SIGKILL once it has
+// written `frame`'s snapshot; false when the child finished first.
+bool kill_at_frame(const std::string& spec_path, const std::string& dir, uint64_t frame) {
+  auto child = ChildJob::start(COLLIDO_BINARY, spec_path);
+  EXPECT_TRUE(child) << child.status().message();
+  if (!child) return false;
+  const pid_t pid = (*child)->pid();
+  for (int i = 0; i < 20000; ++i) {
+    if (fs::exists(sim::snapshot_path(dir, frame))) {
+      kill(pid, SIGKILL);
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
+  }
+  const ChildResult r = (*child)->wait(nullptr);
+  return r.signal == SIGKILL;
+}
+
+TEST(Job, AKilledRunResumesToTheSameEnd) {
+  const std::string ref = fresh_dir("uninterrupted");
+  JobSpec ref_spec = drop_spec(ref);
+  ref_spec.duration = 1.5;  // 31 frames: long enough to be killed in the middle
+  ASSERT_TRUE(run_job(ref_spec, {}).status);
+  const auto ref_rows = stats_rows(ref);
+  const auto ref_last = sim::read_snapshot(sim::snapshot_path(ref, 30));
+  ASSERT_TRUE(ref_last);
+
+  int killed = 0;
+  for (uint64_t at : {0u, 7u, 19u}) {
+    const std::string dir = fresh_dir("killed_" + std::to_string(at));
+    JobSpec spec = ref_spec;
+    spec.out_dir = dir;
+    const std::string spec_path = dir + ".spec.json";
+    std::ofstream(spec_path) << spec_to_json(spec);
+    if (!kill_at_frame(spec_path, dir, at)) continue;  // finished before the kill: nothing to resume
+    ++killed;
+    // After the kill no file under a final name is incomplete.
+    EXPECT_FALSE(fs::exists(dir + "/stats.csv"));
+    for (const auto& e : fs::recursive_directory_iterator(dir)) {
+      const std::string name = e.path().filename().string();
+      if (e.path().extension() == ".snap" && !is_temp_name(name)) {
+        EXPECT_TRUE(sim::read_snapshot(e.path().string())) << e.path();
+      }
+      if (name == "result.json" || name == "job.json" || name == "scene.json") {
+        EXPECT_FALSE(json::parse(read_file(e.path().string()), nullptr, false).is_discarded());
+      }
+    }
+    JobSpec resume = spec;
+    resume.dir_policy = DirPolicy::kResume;
+    const JobResult r = run_job(resume, {});
+    ASSERT_TRUE(r.status) << r.status.message();
+    EXPECT_EQ(stats_rows(dir), ref_rows) << "killed at frame " << at;
+    const auto last = sim::read_snapshot(sim::snapshot_path(dir, 30));
+    ASSERT_TRUE(last);
+    ASSERT_EQ(last->size(), ref_last->size());
+    double worst = 0;
+    for (size_t i = 0; i < last->size(); ++i)
+      worst = std::max({worst, std::fabs(double(last->x[i]) - ref_last->x[i]) / ref_last->r[i],
+                        std::fabs(double(last->y[i]) - ref_last->y[i]) / ref_last->r[i],
+                        std::fabs(double(last->z[i]) - ref_last->z[i]) / ref_last->r[i]});
+    EXPECT_LE(worst, 1e-9) << "killed at frame " << at;
+  }
+  EXPECT_GE(killed, 2);
+}
+
+TEST(Job, JobExecReportsProgressAndRefusesBadSpecs) {
+  const std::string dir = fresh_dir("exec");
+  const std::string spec_path = dir + ".spec.json";
+  std::ofstream(spec_path) << spec_to_json(drop_spec(dir));
+  auto child = ChildJob::start(COLLIDO_BINARY, spec_path);
+  ASSERT_TRUE(child);
+  int reports = 0;
+  const ChildResult r = (*child)->wait([&](const Progress&) { ++reports; });
+  EXPECT_TRUE(r.status) << r.status.message();
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_GE(reports, 13);
+  EXPECT_GT(r.peak_host_bytes, 1u << 20);
+  EXPECT_TRUE(fs::exists(dir + "/result.json"));
+
+  for (const std::string& bad : {std::string("{\"scene\": "), std::string("{\"out_dir\": \"x\"}"),
+                                 std::string("[1, 2]")}) {
+    const std::string path = dir + ".bad.json";
+    std::ofstream(path) << bad;
+    auto c = ChildJob::start(COLLIDO_BINARY, path);
+    ASSERT_TRUE(c);
+    const ChildResult br = (*c)->wait(nullptr);
+    EXPECT_EQ(br.exit_code, 2) << bad;
+    EXPECT_FALSE(br.status) << bad;
+  }
+  auto missing = ChildJob::start(COLLIDO_BINARY, dir + ".missing.json");
+  ASSERT_TRUE(missing);
+  EXPECT_EQ((*missing)->wait(nullptr).exit_code, 2);
+}
+
+TEST(Job, CancelReachesAJobInAChild) {
+  const std::string dir = fresh_dir("exec_cancel");
+  JobSpec spec = drop_spec(dir);
+  spec.duration = 50;  // long: it must be stopped, not finish
+  const std::string spec_path = dir + ".spec.json";
+  std::ofstream(spec_path) << spec_to_json(spec);
+  auto child = ChildJob::start(COLLIDO_BINARY, spec_path);
+  ASSERT_TRUE(child);
+  std::atomic<bool> cancel{false};
+  const ChildResult r = (*child)->wait(
+      [&](const Progress& p) {
+        if (p.stage == Stage::kSimulate && p.done >= 2) cancel = true;
+      },
+      &cancel);
+  EXPECT_EQ(r.status.code(), ErrorCode::kCancelled) << r.status.message();
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(json::parse(read_file(dir + "/result.json"))["status"], "cancelled");
+}
+
+// Scenes a hostile user would send: each is refused at once with the figures,
+// before anything large is allocated or any file is written.
+TEST(Job, ScenesBeyondTheBudgetAreRefusedBeforeTheyStart) {
+  struct Case {
+    const char* scene;
+    const char* says;
+  } cases[] = {
+      // A radius 1e-4 of the wall: binning would visit ~1e13 cells.
+      {R"({"wall": "wall1", "particles": {"count": 10, "radius": 0.01}, "placement": {"kind": "pour"}})",
+       "(triangle, cell) pairs"},
+      // Dividing wall1 for tiny particles: billions of pieces.
+      {R"({"wall": "wall1", "particles": {"count": 10, "radius": 0.01}, "placement": {"kind": "pour"},
+          "method": "midpoint4"})",
+       "dividing the wall"},
+      // 2^28 particles with friction and pairs: far beyond this machine's memory.
+      {R"({"wall": "box:x=1e4,y=1e4,z=1e4", "particles": {"count": 268435456, "radius": 5},
+          "material": {"friction": 0.3}, "particle_contacts": true})",
+       "GiB of memory"},
+  };
+  for (const Case& c : cases) {
+    const std::string dir = fresh_dir("hostile");
+    JobSpec s;
+    s.scene_json = c.scene;
+    s.out_dir = dir;
+    const auto t0 = std::chrono::steady_clock::now();
+    const JobResult r = run_job(s, {});
+    const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    EXPECT_EQ(r.status.code(), ErrorCode::kResourceExhausted) << c.scene << r.status.message();
+    EXPECT_NE(r.status.message().find(c.says), std::string::npos) << r.status.message();
+    EXPECT_LT(took, 30.0) << c.scene;  // a refusal, not a stall (a generous bound, not a speed test)
+    EXPECT_FALSE(fs::exists(dir));
+  }
+}
+
+TEST(Job, SpecsRoundTripThroughJson) {
+  JobSpec s = drop_spec("/tmp/x", 3);
+  s.render = true;
+  s.render_settings.width = 320;
+  s.render_settings.gif = false;
+  s.budget.wall_cells = 1e6;
+  auto back = spec_from_json(spec_to_json(s));
+  ASSERT_TRUE(back) << back.status().message();
+  EXPECT_EQ(back->threads, 3);
+  EXPECT_EQ(back->render_settings.width, 320);
+  EXPECT_FALSE(back->render_settings.gif);
+  EXPECT_EQ(back->budget.wall_cells, 1e6);
+  EXPECT_EQ(json::parse(back->scene_json), json::parse(kDropScene));
+  EXPECT_EQ(spec_from_json(R"({"scene": {}, "out_dir": "d", "speed": 1})").status().message(),
+            "speed: unknown key of the job spec");
+  EXPECT_EQ(spec_from_json(R"({"scene": {}, "out_dir": "d", "threads": "8"})").status().message(),
+            "threads: expected an integer");
+}
+
+#ifdef COLLIDO_HAVE_RENDER
+TEST(Job, RenderedJobHasVideosAndALoopingGif) {
+  const std::string dir = fresh_dir("render");
+  JobSpec s = drop_spec(dir);
+  s.render = true;
+  s.render_settings.width = 160;
+  s.render_settings.height = 96;
+  s.render_settings.gif_width = 80;
+  s.render_settings.png_every = 0;
+  const JobResult r = run_job(s, {});
+  ASSERT_TRUE(r.status) << r.status.message();
+  render::VideoInfo mp4, gif;
+  ASSERT_TRUE(render::probe_video(dir + "/render/video.mp4", &mp4));
+  EXPECT_EQ(mp4.frames, 13);
+  ASSERT_TRUE(render::probe_video(dir + "/render/loop.gif", &gif));
+  EXPECT_EQ(gif.codec, "gif");
+  EXPECT_EQ(gif.width, 80);
+  EXPECT_EQ(gif.frames, 7);  // 20 fps kept at 10: every second frame of 13
+  const json m = json::parse(read_file(dir + "/result.json"));
+  int videos = 0;
+  for (const auto& a : m["artifacts"]) videos += a["role"] == "video" || a["role"] == "gif";
+  EXPECT_EQ(videos, 3);
+}
+#endif
+
+}  // namespace
+}  // namespace collido::job
