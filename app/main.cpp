@@ -1,11 +1,13 @@
 // collidoscope: the command line of the engine, renderer, predictor and service.
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <string>
 #include <vector>
 
 #include "app/cli.h"
 #include "app/commands.h"
+#include "sim/parallel.h"
 
 namespace {
 
@@ -46,6 +48,9 @@ void print_usage() {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Before any thread starts: llvmpipe's rasterizer threads follow the CPUs
+  // this process may use (render/render.h says why the renderer does not set it).
+  setenv("LP_NUM_THREADS", std::to_string(collido::sim::usable_cpus()).c_str(), /*overwrite=*/0);
   if (argc < 2 || !std::strcmp(argv[1], "--help") || !std::strcmp(argv[1], "-h") ||
       !std::strcmp(argv[1], "help")) {
     print_usage();

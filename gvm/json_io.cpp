@@ -35,15 +35,15 @@ Expected<MachineParams> machine_from_json(const nlohmann::json& j) {
   try {
     if (!j.is_object() || j.value("kind", "") != "general-vector-machine")
       return parse_error("not a general-vector-machine JSON object");
-    if (j.at("version").get<int>() != 1)
+    if (integer_at<int>(j, "version") != 1)
       return parse_error("unsupported GVM model version " + j.at("version").dump());
     MachineParams p;
     auto act = parse_activation(j.at("activation").get<std::string>());
     if (!act) return parse_error("unknown activation " + j.at("activation").dump());
     p.activation = *act;
-    p.inputs = j.at("inputs").get<size_t>();
-    p.outputs = j.at("outputs").get<size_t>();
-    p.hidden = j.at("hidden").get<size_t>();
+    p.inputs = integer_at<size_t>(j, "inputs");
+    p.outputs = integer_at<size_t>(j, "outputs");
+    p.hidden = integer_at<size_t>(j, "hidden");
     j.at("input_names").get_to(p.input_names);
     j.at("output_names").get_to(p.output_names);
     j.at("in_min").get_to(p.in_min);
@@ -60,7 +60,7 @@ Expected<MachineParams> machine_from_json(const nlohmann::json& j) {
     j.at("beta").get_to(p.beta);
     j.at("v").get_to(p.v);
     return p;
-  } catch (const nlohmann::json::exception& e) {
+  } catch (const std::exception& e) {  // nlohmann's type errors and BadField
     return parse_error(std::string("GVM model JSON: ") + e.what());
   }
 }

@@ -275,29 +275,29 @@ Expected<ResourcePredictor> ResourcePredictor::from_json(const std::string& text
       return parse_error("not a collidoscope resource-predictor model");
     // Version 1 held one machine for all outputs, version 2 fed the frame count to every
     // output (see output_uses_input); such models must be retrained.
-    if (j.at("version").get<int>() != 3)
+    if (integer_at<int>(j, "version") != 3)
       return parse_error("unsupported model version " + j.at("version").dump() +
                          " (retrain with `collidoscope gvm train`)");
     p.features_ = FeatureSpace::with_devices(j.at("devices").get<std::vector<std::string>>());
     for (const auto& u : j.at("usual")) {
       auto b = parse_backend(u.at("backend").get<std::string>());
       if (!b) return parse_error("unknown backend in model: " + u.at("backend").dump());
-      p.usual_.push_back({*b, u.at("device").get<std::string>(), u.at("threads").get<int64_t>()});
+      p.usual_.push_back({*b, u.at("device").get<std::string>(), integer_at<int64_t>(u, "threads")});
     }
     const auto& t = j.at("training");
-    p.training_rows_ = t.at("rows").get<size_t>();
-    p.options_.hidden = t.at("hidden").get<int>();
-    p.options_.epochs = t.at("epochs").get<int>();
-    p.options_.seed = t.at("seed").get<uint64_t>();
+    p.training_rows_ = integer_at<size_t>(t, "rows");
+    p.options_.hidden = integer_at<int>(t, "hidden");
+    p.options_.epochs = integer_at<int>(t, "epochs");
+    p.options_.seed = integer_at<uint64_t>(t, "seed");
     p.options_.delta = t.at("delta").get<double>();
     p.options_.adaptive_delta = t.value("adaptive_delta", true);
     auto act = parse_activation(t.at("activation").get<std::string>());
     if (act) p.options_.activation = *act;
     p.options_.beta_max = t.at("beta_max").get<double>();
-    p.options_.ensemble = t.at("ensemble").get<int>();
+    p.options_.ensemble = integer_at<int>(t, "ensemble");
     p.train_loss_ = t.at("train_loss").get<double>();
     p.validation_loss_ = t.value("validation_loss", std::nan(""));
-  } catch (const nlohmann::json::exception& e) {
+  } catch (const std::exception& e) {  // nlohmann's type errors and BadField
     return parse_error(std::string("model JSON: ") + e.what());
   }
   if (!j.contains("machines") || !j["machines"].is_array() || j["machines"].size() != kOutputCount)

@@ -114,7 +114,9 @@ json manifest(const JobResult& r, const RunPaths& paths, const scene::Scene* sce
   j["complete"] = r.status.is_ok();
   if (!r.status.is_ok())
     j["error"] = {{"code", to_string(r.status.code())}, {"message", r.status.message()}};
+  // Outputs are in SI whatever unit the scene was written in.
   j["units"] = {{"length", "m"}, {"time", "s"}, {"speed", "m/s"}, {"energy", "J"}};
+  if (scene) j["scene_length_unit"] = scene->length_unit;
   j["backend"] = r.backend;
   j["threads"] = r.threads;
   j["particles"] = r.particles;
@@ -213,9 +215,13 @@ class JobRunner {
       if (Status st = scene::check_timing(scene_); !st) return st;
     }
     if (spec_.render) {
+#ifdef COLLIDO_HAVE_RENDER
       RenderSettings rs = spec_.render_settings;
       if (rs.fps == 0) rs.fps = std::max(1, std::min(240, int(std::lround(scene_.fps))));
       if (Status st = validate(rs); !st) return st;
+#else
+      return invalid_argument("render: this build has no renderer");
+#endif
     }
     if (spec_.threads < 0 || spec_.threads > 4096)
       return invalid_argument("threads: must be in [0, 4096]");
@@ -244,6 +250,11 @@ class JobRunner {
     auto wall = load_wall(scene_.wall, &report);
     if (!wall) return Status(wall.status().code(), "wall: " + wall.status().message());
     wall_ = std::move(*wall);
+    const double unit = scene_.length_scale();
+    if (unit != 1) {
+      for (auto& v : wall_.vertices) v = v * unit;
+      note("wall and scene lengths in " + scene_.length_unit + ", run in metres");
+    }
     result_.triangles = wall_.triangles.size();
     const WorkEstimate work =
         estimate_work(wall_, scene_.dynamics, scene_.particles.count, scene_.particles.r_max);

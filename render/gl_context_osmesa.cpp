@@ -14,18 +14,6 @@
 namespace collido::render {
 namespace {
 
-// llvmpipe reads LP_NUM_THREADS once, when its screen is created by the first
-// context; without it Mesa may use fewer rasterizer threads than the machine has.
-void set_llvmpipe_threads_once() {
-  static std::once_flag once;
-  std::call_once(once, [] {
-    if (std::getenv("LP_NUM_THREADS")) return;
-    unsigned n = std::thread::hardware_concurrency();
-    if (n == 0) n = 1;
-    setenv("LP_NUM_THREADS", std::to_string(n).c_str(), 0);
-  });
-}
-
 class OsMesaContext final : public GlContext {
  public:
   explicit OsMesaContext(OSMesaContext ctx) : ctx_(ctx), dummy_(4 * kSide * kSide) {}
@@ -51,8 +39,7 @@ class OsMesaContext final : public GlContext {
 }  // namespace
 
 std::unique_ptr<GlContext> create_osmesa_context(std::string* error) {
-  set_llvmpipe_threads_once();
-  const int attribs[] = {OSMESA_FORMAT,
+    const int attribs[] = {OSMESA_FORMAT,
                          OSMESA_RGBA,
                          OSMESA_DEPTH_BITS,
                          0,  // depth lives in the renderer's FBO

@@ -86,6 +86,11 @@ struct FrameTiming {
   double total_ms() const { return cull_ms + upload_ms + draw_ms + readback_ms + overlay_ms; }
 };
 
+// llvmpipe reads LP_NUM_THREADS once, when the first context creates its
+// screen; without it Mesa may use fewer rasterizer threads than the process
+// may use. A library must not change the environment of a running,
+// threaded process, so the program sets it at start-up (app/main.cpp).
+
 class Renderer {
  public:
   // Creates the offscreen context, shaders and framebuffers. nullptr and

@@ -23,6 +23,12 @@ struct Scene {
   double fps = 30;           // output frames per simulated second
   uint64_t seed = 1;
   bool vtp = false;  // also write VTK PolyData frames for ParaView
+  // The unit of the wall (file or shape) and of every length and speed in the
+  // document: "m", "cm" or "mm" (STL has no unit; CAD writes millimetres).
+  // The parsed scene holds SI values; only the wall is scaled when it is loaded.
+  // Gravity stays in m/s^2, stiffness in N/m, times in s.
+  std::string length_unit = "m";
+  double length_scale() const;  // metres per unit
 
   // Frames written after the initial one.
   uint64_t frames() const;

@@ -15,6 +15,10 @@ uint64_t Scene::frames() const {
   return static_cast<uint64_t>(std::ceil(duration * fps - 1e-9));
 }
 
+double Scene::length_scale() const {
+  return length_unit == "mm" ? 1e-3 : length_unit == "cm" ? 1e-2 : 1.0;
+}
+
 Status check_timing(const Scene& s) {
   if (!(s.duration > 0 && s.duration <= kMaxDuration))
     return invalid_argument("duration: must lie in (0, 1e5] s");
@@ -205,6 +209,19 @@ Status read_material(const json& m, Scene* s) {
   return Status::ok();
 }
 
+// Multiplies every length and speed of the document by k (the unit to metres,
+// or back for writing).
+void scale_lengths(Scene* s, double k) {
+  if (k == 1) return;
+  s->particles.r_min *= k, s->particles.r_max *= k;
+  sim::PlacementSpec& pl = s->placement;
+  pl.region_lo = pl.region_lo * k, pl.region_hi = pl.region_hi * k;
+  pl.inlet = pl.inlet * k;
+  pl.inlet_radius *= k;
+  pl.velocity = pl.velocity * k;
+  s->dynamics.impact_speed *= k;
+}
+
 }  // namespace
 
 Expected<Scene> parse_scene(const std::string& text) {
@@ -214,7 +231,11 @@ Expected<Scene> parse_scene(const std::string& text) {
   ObjectReader r(doc, "");
   COLLIDO_TRY(
       r.only({"wall", "particles", "placement", "gravity", "material", "duration", "fps", "method",
-              "backend", "particle_contacts", "integrator", "time_step", "seed", "output"}));
+              "backend", "particle_contacts", "integrator", "time_step", "seed", "output",
+              "length_unit"}));
+  COLLIDO_TRY(r.string("length_unit", &s.length_unit));
+  if (s.length_unit != "m" && s.length_unit != "cm" && s.length_unit != "mm")
+    return invalid_argument("length_unit: \"" + s.length_unit + "\" is not m, cm or mm");
   if (!r.has("wall"))
     return invalid_argument("wall: missing (a shape such as \"wall1\" or {\"file\": ...})");
   COLLIDO_TRY(read_wall(r.at("wall"), &s));
@@ -248,6 +269,7 @@ Expected<Scene> parse_scene(const std::string& text) {
     COLLIDO_TRY(o.only({"vtp"}));
     COLLIDO_TRY(o.boolean("vtp", &s.vtp));
   }
+  scale_lengths(&s, s.length_scale());
   return s;
 }
 
@@ -272,7 +294,10 @@ void resolve_wall_path(Scene* s, const std::string& base_dir) {
     s->wall = base_dir + "/" + s->wall;
 }
 
-std::string to_json(const Scene& s) {
+std::string to_json(const Scene& si) {
+  // Written back in the document's own unit, so parse_scene reads the same scene.
+  Scene s = si;
+  scale_lengths(&s, 1 / s.length_scale());
   auto v3 = [](sim::Vec3d v) { return json::array({v.x, v.y, v.z}); };
   json j;
   j["wall"] = s.wall_is_file ? json{{"file", s.wall}} : json{{"shape", s.wall}};
@@ -306,6 +331,7 @@ std::string to_json(const Scene& s) {
   j["time_step"] = s.dynamics.time_step;
   j["seed"] = s.seed;
   j["output"] = {{"vtp", s.vtp}};
+  j["length_unit"] = s.length_unit;
   return j.dump(2);
 }
 

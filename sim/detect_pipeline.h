@@ -22,6 +22,9 @@
 
 namespace collido::sim {
 
+// Largest particle radius or grid cell, as a multiple of the wall's size.
+inline constexpr double kMaxScaleOverWall = 1e4;
+
 template <class B>
 class GridDetector final : public Detector {
   template <class T>
@@ -145,6 +148,14 @@ class GridDetector final : public Detector {
       return invalid_argument("grid length " + std::to_string(cell) +
                               " is absurdly small for a wall " + std::to_string(extent) +
                               " across");
+    // The engine works in float relative to the wall: a radius or cell that
+    // dwarfs the wall by more than this cannot be placed exactly against it.
+    const double largest = std::max(extent, 1e-300) * kMaxScaleOverWall;
+    if (cfg_.r_max > largest || cell > largest)
+      return invalid_argument("a radius of " + std::to_string(cfg_.r_max) + " or grid length of " +
+                              std::to_string(cell) + " is more than " +
+                              std::to_string(int(kMaxScaleOverWall)) + " times the wall (" +
+                              std::to_string(extent) + " across)");
 
     backend_.resize(particles_, capacity_);
     backend_.resize(counts_, std::max<size_t>(capacity_, 1));

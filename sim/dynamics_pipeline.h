@@ -524,8 +524,9 @@ class DynamicsPipeline final : public Simulation {
       Vec3d f = grav * m, torque{0, 0, 0};
       double elastic = 0, overlap_max = 0;
       uint32_t npair = 0, slots = 0, overflow = 0;
-      const FrictionSlot* old_slots = hin + size_t(i) * kPairSlots;
-      FrictionSlot* new_slots = hout + size_t(i) * kPairSlots;
+      // No springs are kept without friction (the buffers are empty): no pointer into them.
+      const FrictionSlot* old_slots = friction ? hin + size_t(i) * kPairSlots : nullptr;
+      FrictionSlot* new_slots = friction ? hout + size_t(i) * kPairSlots : nullptr;
       int cx = 0, cy = 0, cz = 0;
       if (pg.cell_of(xf, cx, cy, cz)) {
         pg.for_each_neighbour(cx, cy, cz, 1, [&](uint64_t l, uint32_t b) {
@@ -638,8 +639,9 @@ class DynamicsPipeline final : public Simulation {
         set.offer(WallContact{q, nrm, d, orig}, tol);
       });
       const double m = 1.0 / P.inv_mass[i];
-      const FrictionSlot* old_slots = hin + size_t(i) * kWallSlots;
-      FrictionSlot* new_slots = hout + size_t(i) * kWallSlots;
+      // No springs are kept without friction (the buffers are empty): no pointer into them.
+      const FrictionSlot* old_slots = friction ? hin + size_t(i) * kWallSlots : nullptr;
+      FrictionSlot* new_slots = friction ? hout + size_t(i) * kWallSlots : nullptr;
       Vec3d f{0, 0, 0}, torque{0, 0, 0};
       double elastic = 0, overlap_max = 0;
       const Vec3d vi = P.v[i];

@@ -8,6 +8,9 @@
 
 namespace collido::sim {
 
+// Largest inlet radius in particle spacings: a disc of about 3 million slots.
+constexpr double kMaxInletSlots = 1000;
+
 const char* to_string(PlacementKind k) {
   return k == PlacementKind::kFill ? "fill" : k == PlacementKind::kPour ? "pour" : "jet";
 }
@@ -66,7 +69,9 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
     if (Status s = (*detector)->detect(&touching); !s) return s;
     for (size_t s = 0; s < layer.size() && out->size() < ps.count; ++s) {
       if (touching.counts[s]) continue;
-      if (closed && winding_number(wall, {layer.x[s], layer.y[s], layer.z[s]}) < 0.5) continue;
+      // |w|: a vessel wound inward (as other DEM codes export them) has w = -1 inside.
+      if (closed && std::fabs(winding_number(wall, {layer.x[s], layer.y[s], layer.z[s]})) < 0.5)
+        continue;
       const size_t n = out->size();
       out->resize(n + 1);
       out->x[n] = layer.x[s], out->y[n] = layer.y[s], out->z[n] = layer.z[s];
@@ -109,8 +114,15 @@ Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSp
   Vec3d u = cross(dir, t);
   u = u * (1.0 / length(u));
   const Vec3d w = cross(dir, u);
+  // Slots across the inlet's radius: bounded before the cast (a huge inlet
+  // for tiny particles would overflow int and fill memory with the disc).
+  const double across = std::floor(radius / s);
+  if (!(across <= kMaxInletSlots))
+    return invalid_argument("placement.inlet_radius: " + number_text(radius) + " m is more than " +
+                            number_text(kMaxInletSlots) + " particle spacings (" +
+                            number_text(s) + " m) across");
   std::vector<Vec3d> disc;
-  const int n = int(std::floor(radius / s));
+  const int n = int(across);
   for (int i = -n; i <= n; ++i)
     for (int j = -n; j <= n; ++j) {
       const double a = i * s, b = j * s;

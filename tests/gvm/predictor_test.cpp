@@ -196,6 +196,23 @@ TEST(Predictor, CorruptModelFilesAreErrors) {
   EXPECT_EQ(ResourcePredictor::load("/nonexistent/model.json").status().code(), ErrorCode::kIo);
 }
 
+// Integer fields holding floats too large for the type (UBSan caught a plain
+// cast of these) are parse errors that name the field.
+TEST(Predictor, IntegerFieldsOutOfRangeAreErrorsNotCasts) {
+  const std::string text = trained().to_json();
+  for (const char* field : {"\"version\": 3", "\"hidden\": ", "\"epochs\": ", "\"seed\": "}) {
+    const size_t at = text.find(field);
+    ASSERT_NE(at, std::string::npos) << field;
+    const size_t value = text.find(':', at) + 2, end = text.find_first_of(",\n}", value);
+    for (const char* bad : {"1e300", "-1e300", "3.5", "99999999999999999999"}) {
+      const std::string doc = text.substr(0, value) + bad + text.substr(end);
+      auto r = ResourcePredictor::from_json(doc);
+      ASSERT_FALSE(r) << field << " = " << bad;
+      EXPECT_EQ(r.status().code(), ErrorCode::kParse) << r.status().message();
+    }
+  }
+}
+
 TEST(Predictor, ReadsConfigurationJson) {
   auto c = run_config_from_json(
       R"({"particles": 1e6, "triangles": 99612, "method": "circumcircle",

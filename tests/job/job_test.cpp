@@ -250,6 +250,8 @@ TEST(Job, AKilledRunResumesToTheSameEnd) {
                         std::fabs(double(last->y[i]) - ref_last->y[i]) / ref_last->r[i],
                         std::fabs(double(last->z[i]) - ref_last->z[i]) / ref_last->r[i]});
     EXPECT_LE(worst, 1e-9) << "killed at frame " << at;
+    // In fact the same bytes: the restored run is the uninterrupted one.
+    EXPECT_EQ(read_file(sim::snapshot_path(dir, 30)), read_file(sim::snapshot_path(ref, 30)));
   }
   EXPECT_GE(killed, 2);
 }
@@ -334,6 +336,41 @@ TEST(Job, ScenesBeyondTheBudgetAreRefusedBeforeTheyStart) {
     EXPECT_LT(took, 30.0) << c.scene;  // a refusal, not a stall (a generous bound, not a speed test)
     EXPECT_FALSE(fs::exists(dir));
   }
+}
+
+// STL files carry no unit and CAD writes millimetres: a hopper given in mm
+// runs as the same hopper given in metres (the physics stays SI).
+TEST(Job, AHopperInMillimetresRunsAsInMetres) {
+  const char* mm = R"({"wall": "funnel:r1=60,r2=300,h=400,segments=24", "length_unit": "mm",
+    "particles": {"count": 150, "radius": 12},
+    "placement": {"kind": "pour", "inlet": [0, 0, 420], "inlet_radius": 150, "rate": 2000,
+                  "velocity": [0, 0, -500]},
+    "material": {"impact_speed": 3000}, "duration": 0.2, "fps": 10, "backend": "cpu"})";
+  const char* m = R"({"wall": "funnel:r1=0.06,r2=0.3,h=0.4,segments=24",
+    "particles": {"count": 150, "radius": 0.012},
+    "placement": {"kind": "pour", "inlet": [0, 0, 0.42], "inlet_radius": 0.15, "rate": 2000,
+                  "velocity": [0, 0, -0.5]},
+    "material": {"impact_speed": 3}, "duration": 0.2, "fps": 10, "backend": "cpu"})";
+  JobResult r[2];
+  for (int k = 0; k < 2; ++k) {
+    JobSpec s;
+    s.scene_json = k ? m : mm;
+    s.out_dir = fresh_dir(k ? "hopper_m" : "hopper_mm");
+    r[k] = run_job(s, {});
+    ASSERT_TRUE(r[k].status) << r[k].status.message();
+  }
+  EXPECT_NEAR(r[0].time_step.stiffness, r[1].time_step.stiffness, 1e-9 * r[1].time_step.stiffness);
+  EXPECT_NEAR(r[0].time_step.critical_step, r[1].time_step.critical_step,
+              1e-9 * r[1].time_step.critical_step);
+  // The same steps per simulated second (the automatic step follows the
+  // speeds, which rounding of the millimetre wall may move by an ulp).
+  EXPECT_NEAR(double(r[0].cost.steps), double(r[1].cost.steps), 0.01 * double(r[1].cost.steps));
+  const json scene = json::parse(read_file(r[0].out_dir + "/scene.json"));
+  EXPECT_EQ(scene["length_unit"], "mm");
+  EXPECT_EQ(scene["particles"]["radius"], 12);  // written back in the document's unit
+  const json manifest = json::parse(read_file(r[0].out_dir + "/result.json"));
+  EXPECT_EQ(manifest["units"]["length"], "m");
+  EXPECT_EQ(manifest["scene_length_unit"], "mm");
 }
 
 TEST(Job, SpecsRoundTripThroughJson) {

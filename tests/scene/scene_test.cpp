@@ -2,6 +2,7 @@
 // round trip through to_json, and a fuzz of mutated documents.
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <fstream>
 
 #include "scene/scene.h"
@@ -128,6 +129,46 @@ TEST(Scene, WallFileIsRelativeToTheSceneFile) {
   EXPECT_TRUE(s->wall_is_file);
   EXPECT_EQ(s->wall, path.substr(0, path.find_last_of('/') + 1) + "vessel.stl");
   EXPECT_FALSE(load_scene(dir + "/missing.json"));
+}
+
+// "wall": "vessel.stl" (a string that names no shape) is a file too, found the same way.
+TEST(Scene, WallFileWrittenAsAStringIsRelativeToTheSceneFileToo) {
+  const std::string dir = ::testing::TempDir() + "/scene_dir";
+  std::filesystem::create_directories(dir);
+  std::ofstream(dir + "/s.json") << R"({"wall": "vessel.stl"})";
+  auto s = load_scene(dir + "/s.json");
+  ASSERT_TRUE(s) << s.status().message();
+  EXPECT_TRUE(s->wall_is_file);
+  EXPECT_EQ(s->wall, dir + "/vessel.stl");
+  std::ofstream(dir + "/shape.json") << R"({"wall": "wall1"})";
+  auto shape = load_scene(dir + "/shape.json");
+  ASSERT_TRUE(shape);
+  EXPECT_FALSE(shape->wall_is_file);
+  EXPECT_EQ(shape->wall, "wall1");
+}
+
+// Lengths and speeds of a document in mm or cm are held in SI; written back in the unit.
+TEST(Scene, LengthUnitScalesLengthsAndSpeeds) {
+  auto s = parse_scene(R"({"wall": "wall1", "length_unit": "mm",
+    "particles": {"radius": [2, 4]},
+    "placement": {"kind": "jet", "inlet": [0, 0, 500], "inlet_radius": 50, "velocity": [0, 0, -1000]},
+    "material": {"impact_speed": 2000}, "gravity": [0, 0, -9.81]})");
+  ASSERT_TRUE(s) << s.status().message();
+  EXPECT_DOUBLE_EQ(s->length_scale(), 1e-3);
+  EXPECT_DOUBLE_EQ(s->particles.r_min, 0.002);
+  EXPECT_DOUBLE_EQ(s->particles.r_max, 0.004);
+  EXPECT_DOUBLE_EQ(s->placement.inlet.z, 0.5);
+  EXPECT_DOUBLE_EQ(s->placement.inlet_radius, 0.05);
+  EXPECT_DOUBLE_EQ(s->placement.velocity.z, -1.0);
+  EXPECT_DOUBLE_EQ(s->dynamics.impact_speed, 2.0);
+  EXPECT_DOUBLE_EQ(s->dynamics.gravity.z, -9.81);  // gravity stays in m/s^2
+  auto back = parse_scene(to_json(*s));
+  ASSERT_TRUE(back) << back.status().message();
+  EXPECT_EQ(back->length_unit, "mm");
+  EXPECT_DOUBLE_EQ(back->particles.r_max, 0.004);
+  EXPECT_DOUBLE_EQ(back->placement.velocity.z, -1.0);
+  EXPECT_EQ(parse_scene(R"({"wall": "wall1", "length_unit": "inch"})").status().message(),
+            "length_unit: \"inch\" is not m, cm or mm");
 }
 
 // Mutated documents (bytes dropped, swapped, duplicated) either parse into a

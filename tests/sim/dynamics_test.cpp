@@ -8,6 +8,7 @@
 #include <cstdio>
 
 #include "sim/dynamics.h"
+#include "sim/parallel.h"
 #include "sim/particles.h"
 #include "sim/shapes.h"
 #include "tests/sim/gpu_suite.h"
@@ -374,6 +375,50 @@ void friction_history_overflow_is_counted() {
 }
 
 TEST(Dynamics, FrictionHistoryOverflowIsCounted) { friction_history_overflow_is_counted(); }
+
+// A state saved at a frame and restored into a new Simulation of the same
+// scene continues bit for bit as the original (what a checkpoint relies on):
+// friction springs, spins, pair contacts and Verlet's accelerations included.
+void saved_state_continues_exactly() {
+  const TriangleMesh wall = make_cylinder(50, 100, 40);
+  ParticleSet p = lattice(8, 8.2, -0.05, 1, 5.0, 5);
+  DynamicsConfig cfg;
+  cfg.particle_contacts = true;
+  cfg.material.friction = 0.4;
+  ThreadPool pool(2);
+  cfg.pool = &pool;
+  auto a = make_sim(wall, cfg, p);
+  ASSERT_TRUE(a);
+  FrameStats st;
+  ASSERT_TRUE(a->advance(0.01, &st));
+  SimState saved;
+  ASSERT_TRUE(a->save_state(&saved));
+  ASSERT_TRUE(a->advance(0.01, &st));
+  ParticleSet end_a;
+  ASSERT_TRUE(a->download(&end_a, nullptr));
+
+  auto b = make_sim(wall, cfg, p);
+  ASSERT_TRUE(b);
+  ASSERT_TRUE(b->restore_state(saved));
+  EXPECT_EQ(b->time(), saved.time);
+  EXPECT_EQ(b->steps_taken(), saved.steps);
+  ASSERT_TRUE(b->advance(0.01, &st));
+  ParticleSet end_b;
+  ASSERT_TRUE(b->download(&end_b, nullptr));
+  EXPECT_EQ(a->steps_taken(), b->steps_taken());
+  EXPECT_EQ(end_a.x, end_b.x);
+  EXPECT_EQ(end_a.vz, end_b.vz);
+
+  // A state from another scene is refused, not half applied.
+  DynamicsConfig frictionless = cfg;
+  frictionless.material.friction = 0;
+  auto c = make_sim(wall, frictionless, p);
+  ASSERT_TRUE(c);
+  EXPECT_FALSE(c->restore_state(saved));
+  saved.particles += 1;
+  EXPECT_FALSE(b->restore_state(saved));
+}
+TEST(Dynamics, SavedStateContinuesExactly) { saved_state_continues_exactly(); }
 TEST(Dynamics, ElasticBoxKeepsItsEnergy) {
   elastic_box_energy();
 }
@@ -453,6 +498,7 @@ TEST_F(DynamicsCuda, RestitutionIsKept) {
 TEST_F(DynamicsCuda, DivisionMethodsPushOnceToo) {
   division_methods_push_once();
 }
+TEST_F(DynamicsCuda, SavedStateContinuesExactly) { saved_state_continues_exactly(); }
 TEST_F(DynamicsCuda, FrictionTurnsSlidingIntoRolling) {
   friction_makes_it_roll();
 }

@@ -54,6 +54,25 @@ TEST(Placement, FillIsInsideClearAndWithoutOverlaps) {
   EXPECT_EQ(p->r, q->r);
 }
 
+// A closed vessel whose triangles wind inward fills exactly as the same vessel wound outward.
+TEST(Placement, InwardWoundVesselFillsLikeOutward) {
+  const TriangleMesh out = make_cylinder(10, 20, 40);
+  TriangleMesh in = out;
+  for (auto& t : in.triangles) std::swap(t[1], t[2]);
+  ASSERT_LT(winding_number(in, {0, 0, 10}), -0.5);
+  ParticleSpec ps;
+  ps.count = 500;
+  ps.r_min = 0.4, ps.r_max = 0.6;
+  auto a = place_particles(out, ps, PlacementSpec{}, {0, 0, -9.81}, 3);
+  auto b = place_particles(in, ps, PlacementSpec{}, {0, 0, -9.81}, 3);
+  ASSERT_TRUE(a) << a.status().message();
+  ASSERT_TRUE(b) << b.status().message();
+  EXPECT_EQ(a->x, b->x);
+  EXPECT_EQ(a->y, b->y);
+  EXPECT_EQ(a->z, b->z);
+  EXPECT_EQ(a->r, b->r);
+}
+
 TEST(Placement, FillRefusesWhatDoesNotFitAndSaysHowManyDo) {
   const TriangleMesh wall = make_box(4, 4, 4);
   ParticleSpec ps;
@@ -136,6 +155,10 @@ TEST(Placement, JetNeedsVelocityAndInletsNeedRoom) {
   pl.inlet_radius = 0.1;  // smaller than one particle
   EXPECT_FALSE(place_particles(wall, ps, pl, {0, 0, -9.81}, 1));
   EXPECT_EQ(refusal(wall, ps, pl, {0, 0, -9.81}).rfind("placement.inlet_radius", 0), 0u);
+  // An inlet 10^12 spacings across: refused before the slot count is cast to
+  // int (UBSan caught the overflow) or the disc fills memory.
+  pl.inlet_radius = 1e12;
+  EXPECT_NE(refusal(wall, ps, pl, {0, 0, -9.81}).find("particle spacings"), std::string::npos);
   // A jet straight up too slow to climb one layer's spacing against gravity.
   pl.inlet_radius = 2;
   pl.velocity = {0, 0, 0.1};
