@@ -84,22 +84,14 @@ int cmd_detect(const Args& args) {
 
   if (parsed->has("out")) {
     const std::string path = parsed->get("out");
-    const std::string tmp = temp_path_for(path);
-    {
-      std::ofstream out(tmp);
-      out << "particle,triangle,distance\n";
-      char buf[96];
-      for (const auto& c : result.contacts) {
-        std::snprintf(buf, sizeof buf, "%u,%u,%.9g\n", c.particle, c.triangle, c.distance);
-        out << buf;
-      }
-      if (!out) {
-        std::fprintf(stderr, "collidoscope detect: %s: write failed\n", path.c_str());
-        return kExitFailure;
-      }
+    std::string text = "particle,triangle,distance\n";
+    char buf[96];
+    for (const auto& c : result.contacts) {
+      std::snprintf(buf, sizeof buf, "%u,%u,%.9g\n", c.particle, c.triangle, c.distance);
+      text += buf;
     }
-    if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-      std::fprintf(stderr, "collidoscope detect: %s: cannot rename into place\n", path.c_str());
+    if (Status w = write_file_atomic(path, text); !w) {
+      std::fprintf(stderr, "collidoscope detect: %s\n", w.message().c_str());
       return kExitFailure;
     }
   }

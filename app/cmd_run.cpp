@@ -178,14 +178,18 @@ int cmd_run(const Args& args) {
     return exit_code(r.status);
   }
   if (!quiet) {
+    const sim::TimeStepInfo& ts = r.time_step;
     std::fprintf(stderr,
                  "run: %llu particles, wall %llu triangles, on the %s (%d threads): %llu steps in "
-                 "%.1f s (%.3g ms per step); results in %s\n",
+                 "%.1f s (%.3g ms per step); results in %s\n"
+                 "run: stiffness %.4g N/m, damping ratio %.3g, critical step %.3g s, %s step %.3g s\n",
                  (unsigned long long)r.particles, (unsigned long long)r.triangles,
                  r.backend.c_str(), r.threads, (unsigned long long)r.cost.steps,
                  r.cost.simulate_s,
                  r.cost.steps ? 1e3 * r.cost.simulate_s / double(r.cost.steps) : 0.0,
-                 r.out_dir.c_str());
+                 r.out_dir.c_str(), ts.stiffness, ts.damping_ratio, ts.critical_step,
+                 ts.explicit_step > 0 ? "fixed" : "automatic",
+                 ts.explicit_step > 0 ? ts.explicit_step : ts.spring_step);
     for (const job::Artifact& a : r.artifacts)
       if (a.role == "video" || a.role == "gif" || a.role == "poster")
         std::fprintf(stderr, "  %-7s %s/%s (%s)\n", a.role.c_str(), r.out_dir.c_str(),

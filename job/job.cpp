@@ -105,7 +105,7 @@ json render_to_json(const RenderSettings& r) {
 }
 
 // The manifest: what the run produced and what it cost, one JSON writer.
-json manifest(const JobResult& r, const RunPaths& paths, const scene::Scene* scene) {
+json manifest(const JobResult& r, const scene::Scene* scene) {
   json j;
   j["version"] = 1;
   j["status"] = r.status.is_ok() ? "done"
@@ -150,7 +150,6 @@ json manifest(const JobResult& r, const RunPaths& paths, const scene::Scene* sce
     arts.push_back({{"path", a.path}, {"bytes", a.bytes}, {"mime", a.mime}, {"role", a.role},
                     {"count", a.count}});
   j["artifacts"] = arts;
-  (void)paths;
   return j;
 }
 
@@ -166,7 +165,7 @@ class JobRunner {
     result_.out_dir = spec_.out_dir;
     // Everything the input decides is checked before the directory is touched,
     // so a bad scene leaves nothing behind.
-    Status st = prepare();
+    Status st = guarded([&] { return prepare(); });
     if (st) st = claim_run_dir(spec_.out_dir, spec_.dir_policy);
     if (!st) {
       result_.status = st;
@@ -174,10 +173,8 @@ class JobRunner {
       return result_;  // not our directory (yet): write nothing into it
     }
     owns_dir_ = true;
-    return finish(execute());
+    return finish(guarded([&] { return execute(); }));
   }
-
-  JobResult fail_with(Status st) { return finish(st); }
 
  private:
   void note(const std::string& line) {
@@ -228,14 +225,27 @@ class JobRunner {
     return Status::ok();
   }
 
-  Status choose_backend() {
+  void choose_backend() {
     std::string why;
     sim::Backend wanted = scene_.backend_auto ? sim::Backend::kCuda : scene_.dynamics.backend;
     scene_.dynamics.backend = sim::usable_backend(wanted, &why);
     // Asked for the GPU by name: say so; "auto" on a machine without one is the normal case.
     if (!why.empty() && !scene_.backend_auto) note(why);
     result_.backend = sim::to_string(scene_.dynamics.backend);
-    return Status::ok();
+  }
+
+  // Runs a stage; an exception thrown inside (an allocation failure above all)
+  // becomes its status, so the job still ends with a result.json.
+  template <class F>
+  static Status guarded(F&& stage) {
+    try {
+      return stage();
+    } catch (const std::bad_alloc&) {
+      return resource_exhausted("out of memory: the scene needs more than this machine can give; "
+                                "use fewer particles or a coarser wall");
+    } catch (const std::exception& e) {
+      return backend_error(std::string("internal error: ") + e.what());
+    }
   }
 
   // The scene, wall, budget, particles and the engine: no file is written.
@@ -404,14 +414,13 @@ class JobRunner {
     result_.cost.total_s = seconds_since(t_start_);
     if (owns_dir_) {
       result_.artifacts = list_artifacts(paths_, nullptr);
-      const json m = manifest(result_, paths_, scene_ready_() ? &scene_ : nullptr);
+      const json m = manifest(result_, scene_.wall.empty() ? nullptr : &scene_);
       Status w = write_file_atomic(paths_.result(), m.dump(2) + "\n");
       if (result_.status.is_ok() && !w) result_.status = w;
     }
     report(Stage::kDone, 1, 1, 0);
     return result_;
   }
-  bool scene_ready_() const { return !scene_.wall.empty(); }
 
   const JobSpec& spec_;
   const Hooks& hooks_;
@@ -431,23 +440,20 @@ class JobRunner {
 }  // namespace
 
 JobResult run_job(const JobSpec& spec, const Hooks& hooks) {
-  // The boundary: nothing thrown inside (an allocation failure, above all) leaves it.
-  std::unique_ptr<JobRunner> runner;
+  // The boundary: nothing thrown inside leaves it. The stages catch their own
+  // (JobRunner::guarded); this is the last net, for the bookkeeping around them.
   try {
-    runner = std::make_unique<JobRunner>(spec, hooks);
-    return runner->run();
+    JobRunner runner(spec, hooks);
+    return runner.run();
   } catch (const std::bad_alloc&) {
-    const Status st = resource_exhausted("out of memory: the scene needs more than this machine "
-                                         "can give; use fewer particles or a coarser wall");
-    if (runner) return runner->fail_with(st);
     JobResult r;
-    r.status = st;
+    r.out_dir = spec.out_dir;
+    r.status = resource_exhausted("out of memory");
     return r;
   } catch (const std::exception& e) {
-    const Status st = backend_error(std::string("internal error: ") + e.what());
-    if (runner) return runner->fail_with(st);
     JobResult r;
-    r.status = st;
+    r.out_dir = spec.out_dir;
+    r.status = backend_error(std::string("internal error: ") + e.what());
     return r;
   }
 }
