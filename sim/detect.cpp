@@ -117,6 +117,12 @@ Backend usable_backend(Backend wanted, std::string* note) {
   return Backend::kCpu;
 }
 
+#if !defined(COLLIDO_HAVE_CUDA)
+// A build without CUDA has no device to name or measure (sim/detect_cuda.h).
+std::string cuda_device_name() { return ""; }
+double cuda_copy_bandwidth_gbs() { return 0; }
+#endif
+
 Expected<std::unique_ptr<Detector>> Detector::create(const TriangleMesh& mesh, const DetectConfig& config,
                                                      size_t max_particles) {
   if (config.method == Method::kReference) {
