@@ -274,13 +274,23 @@ Expected<TriangleMesh> make_one(const std::string& spec) {
 }  // namespace
 
 Expected<TriangleMesh> make_shape(const std::string& spec) {
+  // A union of many finely divided parts would take a worker minutes to build
+  // (the fuzzer found one): the parts and the triangles they add up to are bounded.
+  constexpr size_t kMaxParts = 64;
+  constexpr size_t kMaxTriangles = size_t(1) << 22;
   TriangleMesh out;
-  size_t pos = 0;
+  size_t pos = 0, parts = 0;
   while (pos <= spec.size()) {
+    if (++parts > kMaxParts)
+      return invalid_argument("wall spec: a union of more than " + std::to_string(kMaxParts) +
+                              " shapes");
     size_t plus = spec.find('+', pos);
     std::string part = spec.substr(pos, plus == std::string::npos ? std::string::npos : plus - pos);
     auto m = make_one(part);
     if (!m) return m.status();
+    if (out.triangles.size() + m->triangles.size() > kMaxTriangles)
+      return invalid_argument("wall spec: the shapes add up to more than " +
+                              std::to_string(kMaxTriangles) + " triangles");
     append_mesh(out, *m);
     if (plus == std::string::npos) break;
     pos = plus + 1;

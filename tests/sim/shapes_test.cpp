@@ -79,5 +79,20 @@ TEST(Shapes, OpenCapsAreOpen) {
   EXPECT_EQ(m->triangles.size(), 128u);
 }
 
+// A union that would take a worker minutes to build (found by fuzz_wall_spec)
+// is refused: too many parts, or more triangles than a wall spec may make.
+TEST(Shapes, HugeUnionsAreRefused) {
+  std::string big = "sphere:r=1,subdivisions=8";
+  for (int i = 0; i < 3; ++i) big += "+sphere:r=1,subdivisions=8,dz=" + std::to_string(3 * (i + 1));
+  auto m = make_shape(big);
+  ASSERT_FALSE(m);
+  EXPECT_NE(m.status().message().find("triangles"), std::string::npos) << m.status().message();
+  std::string many = "box:x=1,y=1,z=1";
+  for (int i = 0; i < 64; ++i) many += "+box:x=1,y=1,z=1";
+  auto n = make_shape(many);
+  ASSERT_FALSE(n);
+  EXPECT_NE(n.status().message().find("union of more than 64"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace collido::sim
