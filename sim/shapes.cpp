@@ -277,7 +277,7 @@ Expected<TriangleMesh> make_shape(const std::string& spec) {
   // A union of many finely divided parts would take a worker minutes to build
   // (the fuzzer found one): the parts and the triangles they add up to are bounded.
   constexpr size_t kMaxParts = 64;
-  constexpr size_t kMaxTriangles = size_t(1) << 22;
+  constexpr size_t kMaxTriangles = size_t(1) << 21;
   TriangleMesh out;
   size_t pos = 0, parts = 0;
   while (pos <= spec.size()) {
