@@ -42,6 +42,7 @@ void put(std::string& buf, T v) {
 }
 
 bool write_floats(FILE* f, const std::vector<float>& a) {
+  if (a.empty()) return true;  // an empty vector's data() may be null, which fwrite must not get
   if (kHostLittle) return std::fwrite(a.data(), sizeof(float), a.size(), f) == a.size();
   for (float v : a) {
     v = swap_bytes(v);
@@ -96,7 +97,7 @@ Status write_snapshot(const std::string& path, const Snapshot& s) {
   bool ok = std::fwrite(header.data(), 1, header.size(), f.get()) == header.size();
   for (const auto* a : {&s.x, &s.y, &s.z, &s.r, &s.vx, &s.vy, &s.vz})
     ok = ok && write_floats(f.get(), *a);
-  ok = ok && std::fwrite(s.contact.data(), 1, n, f.get()) == n;
+  ok = ok && (n == 0 || std::fwrite(s.contact.data(), 1, n, f.get()) == n);
   ok = ok && std::fflush(f.get()) == 0;
   ok = std::fclose(f.release()) == 0 && ok;
   if (!ok) {
