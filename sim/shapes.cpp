@@ -201,7 +201,12 @@ Caps caps_of(const std::string& s, Caps fallback) {
   return fallback;
 }
 
-Expected<TriangleMesh> make_one(const std::string& spec) {
+// Most triangles one wall spec may make; make_shape explains why.
+constexpr size_t kMaxShapeTriangles = size_t(1) << 21;
+
+// One shape of a spec; `budget` is how many triangles it may still make, checked
+// from its parameters before anything is built.
+Expected<TriangleMesh> make_one(const std::string& spec, size_t budget) {
   const size_t colon = spec.find(':');
   const std::string kind = spec.substr(0, colon);
   const std::string params = colon == std::string::npos ? "" : spec.substr(colon + 1);
@@ -218,6 +223,12 @@ Expected<TriangleMesh> make_one(const std::string& spec) {
       return invalid_argument(kind + ": segments must be an integer in [3, 100000], got " + std::to_string(v));
     return Status::ok();
   };
+  auto fits = [&](double triangles) -> Status {
+    if (triangles > double(budget))
+      return invalid_argument("wall spec: the shapes add up to more than " +
+                              std::to_string(kMaxShapeTriangles) + " triangles");
+    return Status::ok();
+  };
 
   TriangleMesh mesh;
   ShapeArgs a;
@@ -231,7 +242,7 @@ Expected<TriangleMesh> make_one(const std::string& spec) {
     if (!p) return p.status();
     a = *p;
     double r = get(a, "r", 50), h = get(a, "h", 100), n = get(a, "segments", 40);
-    for (Status s : {positive("r", r), positive("h", h), segs(n)})
+    for (Status s : {positive("r", r), positive("h", h), segs(n), fits(4 * n)})
       if (!s) return s;
     mesh = make_cylinder(r, h, static_cast<int>(n), caps_of(a.caps, Caps::kBoth));
   } else if (kind == "cone" || kind == "funnel") {
@@ -242,7 +253,7 @@ Expected<TriangleMesh> make_one(const std::string& spec) {
            n = get(a, "segments", 64);
     if (r1 < 0 || r2 < 0 || (r1 == 0 && r2 == 0) || r1 > 1e9 || r2 > 1e9)
       return invalid_argument(kind + ": radii must be >= 0, not both zero");
-    for (Status s : {positive("h", h), segs(n)})
+    for (Status s : {positive("h", h), segs(n), fits(4 * n)})
       if (!s) return s;
     mesh = make_cone(r1, r2, h, static_cast<int>(n),
                      caps_of(a.caps, kind == "funnel" ? Caps::kNone : Caps::kBoth));
@@ -262,6 +273,7 @@ Expected<TriangleMesh> make_one(const std::string& spec) {
     if (Status st = positive("r", r); !st) return st;
     if (s < 0 || s > 8 || s != std::floor(s))
       return invalid_argument("sphere: subdivisions must be an integer in [0, 8]");
+    if (Status st = fits(20 * std::pow(4.0, s)); !st) return st;
     mesh = make_sphere(r, static_cast<int>(s));
   } else {
     return invalid_argument("unknown shape '" + kind +
@@ -277,7 +289,6 @@ Expected<TriangleMesh> make_shape(const std::string& spec) {
   // A union of many finely divided parts would take a worker minutes to build
   // (the fuzzer found one): the parts and the triangles they add up to are bounded.
   constexpr size_t kMaxParts = 64;
-  constexpr size_t kMaxTriangles = size_t(1) << 21;
   TriangleMesh out;
   size_t pos = 0, parts = 0;
   while (pos <= spec.size()) {
@@ -286,11 +297,8 @@ Expected<TriangleMesh> make_shape(const std::string& spec) {
                               " shapes");
     size_t plus = spec.find('+', pos);
     std::string part = spec.substr(pos, plus == std::string::npos ? std::string::npos : plus - pos);
-    auto m = make_one(part);
+    auto m = make_one(part, kMaxShapeTriangles - std::min(kMaxShapeTriangles, out.triangles.size()));
     if (!m) return m.status();
-    if (out.triangles.size() + m->triangles.size() > kMaxTriangles)
-      return invalid_argument("wall spec: the shapes add up to more than " +
-                              std::to_string(kMaxTriangles) + " triangles");
     append_mesh(out, *m);
     if (plus == std::string::npos) break;
     pos = plus + 1;
