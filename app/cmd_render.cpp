@@ -15,6 +15,7 @@
 
 #include <unistd.h>
 
+#include "common/stopwatch.h"
 #include "app/cli.h"
 #include "app/commands.h"
 #include "job/render_run.h"
@@ -24,11 +25,8 @@ namespace collido::app {
 namespace {
 
 namespace fs = std::filesystem;
-using Clock = std::chrono::steady_clock;
+using Clock = SteadyClock;
 
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 const std::vector<FlagSpec> kRenderFlags = {
     {"out", true, "output directory (default DIR/render)"},

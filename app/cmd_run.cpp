@@ -89,7 +89,8 @@ std::string apply_flags(const ParsedArgs& p, job::JobSpec* spec) {
   if (p.has("duration")) {
     spec->duration = p.get_double("duration", 0, &err);
     if (!err.empty()) return err;
-    if (!(spec->duration > 0)) return "--duration: duration: must lie in (0, 1e5] s";
+    // 0 in a spec means "the scene's"; the job holds the rest to the scene's limits.
+    if (!(spec->duration > 0)) return "--duration must be a positive number of seconds";
   }
   if (p.has("threads")) {
     spec->threads = int(p.get_int("threads", 0, &err));

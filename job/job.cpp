@@ -1,3 +1,4 @@
+#include "common/stopwatch.h"
 #include "job/job.h"
 
 #include <sys/resource.h>
@@ -25,7 +26,7 @@ namespace collido::job {
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
-using Clock = std::chrono::steady_clock;
+using Clock = SteadyClock;
 
 const char* to_string(DirPolicy p) {
   switch (p) {
@@ -54,9 +55,6 @@ const char* to_string(Stage s) {
 
 namespace {
 
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 uint64_t peak_rss_bytes() {
   struct rusage ru {};
@@ -213,7 +211,10 @@ class JobRunner {
     }
     if (spec_.render) {
 #ifdef COLLIDO_HAVE_RENDER
-      RenderSettings rs = spec_.render_settings;
+      // The video plays at the scene's frame rate unless the spec says otherwise,
+      // so a second on screen is a simulated second.
+      render_settings_ = spec_.render_settings;
+      RenderSettings& rs = render_settings_;
       if (rs.fps == 0) rs.fps = std::max(1, std::min(240, int(std::lround(scene_.fps))));
       if (Status st = validate(rs); !st) return st;
 #else
@@ -385,16 +386,14 @@ class JobRunner {
 
   Status render() {
 #ifdef COLLIDO_HAVE_RENDER
-    RenderSettings rs = spec_.render_settings;
-    // The video plays at the scene's frame rate, so a second on screen is a simulated second.
-    if (rs.fps == 0) rs.fps = std::max(1, std::min(240, int(std::lround(scene_.fps))));
     const auto t0 = Clock::now();
     RenderOutcome out;
     auto progress = [&](size_t done, size_t total) {
       const double per = seconds_since(t0) / double(done);
       report(Stage::kRender, done, total, per * double(total - done));
     };
-    Status st = render_run(paths_.dir, paths_.render(), rs, progress, hooks_.cancel, &out);
+    Status st =
+        render_run(paths_.dir, paths_.render(), render_settings_, progress, hooks_.cancel, &out);
     result_.cost.render_s = seconds_since(t0);
     return st;
 #else
@@ -429,6 +428,7 @@ class JobRunner {
   Clock::time_point t_start_;
   bool owns_dir_ = false;
   scene::Scene scene_;
+  RenderSettings render_settings_;  // the spec's, with the frame rate resolved
   std::unique_ptr<sim::ThreadPool> pool_;
   sim::TriangleMesh wall_;
   std::unique_ptr<sim::Simulation> sim_;

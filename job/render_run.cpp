@@ -1,3 +1,4 @@
+#include "common/stopwatch.h"
 #include "job/render_run.h"
 
 #include <algorithm>
@@ -20,11 +21,8 @@ namespace collido::job {
 namespace {
 
 namespace fs = std::filesystem;
-using Clock = std::chrono::steady_clock;
+using Clock = SteadyClock;
 
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 struct FrameFile {
   uint64_t index;
