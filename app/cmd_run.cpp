@@ -4,6 +4,8 @@
 // service and cluster nodes start it (job/child.h speaks its protocol).
 #include <unistd.h>
 
+#include <sys/prctl.h>
+
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
@@ -252,6 +254,14 @@ int cmd_job_exec(const Args& args) {
                                                             spec.status().message()));
   if (p->has("threads")) spec->threads = int(p->get_int("threads", 0, &err));
   if (!err.empty()) return usage_error("job-exec", err);
+  // A job whose parent (a service worker) is gone must not run on beside the
+  // one the restarted service resumes in the same directory: it dies with its
+  // parent, leaving its last checkpoint. Started by no one (a shell), no matter.
+  if (fd >= 0) {
+    const pid_t parent = getppid();
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (getppid() != parent) return kExitFailure;  // the parent died before prctl
+  }
   // A viewer closing a pipe must not kill the job; SIGTERM asks it to stop.
   std::signal(SIGPIPE, SIG_IGN);
   std::signal(SIGTERM, on_terminate);

@@ -32,6 +32,11 @@ int bench_render(const Args& args);      // app/cmd_render.cpp
 // --video's "mp4,webm,gif" or "none" into *rs; false with *error otherwise (app/cmd_render.cpp).
 bool parse_video_list(const std::string& list, collido::job::RenderSettings* rs, std::string* error);
 
+#ifdef COLLIDO_HAVE_SERVICE
+int cmd_serve(const Args& args);         // app/cmd_serve.cpp
+int cmd_admin(const Args& args);         // app/cmd_serve.cpp: `admin create NAME`
+#endif
+
 #ifdef COLLIDO_HAVE_GVM
 int cmd_gvm(const Args& args);           // app/cmd_gvm.cpp: `gvm train`
 int cmd_predict(const Args& args);       // app/cmd_gvm.cpp
@@ -39,6 +44,7 @@ int cmd_predict(const Args& args);       // app/cmd_gvm.cpp
 
 #ifdef COLLIDO_HAVE_CALIBRATE
 int cmd_calibrate(const Args& args);     // app/cmd_calibrate.cpp
+int cmd_calibrate_exec(const Args& args);  // app/cmd_calibrate.cpp: one run of a sweep (a child)
 #endif
 
 }  // namespace collido::app

@@ -29,12 +29,18 @@ const std::vector<Command>& commands() {
 #ifdef COLLIDO_HAVE_RENDER
       {"render", cmd_render, "render snapshots into PNG frames and video"},
 #endif
+#ifdef COLLIDO_HAVE_SERVICE
+      {"serve", cmd_serve, "the REST service: API, job queue and workers, result links"},
+      {"admin", cmd_admin, "make the service's first administrator: admin create NAME"},
+#endif
 #ifdef COLLIDO_HAVE_GVM
       {"gvm", cmd_gvm, "train the time/memory predictor: gvm train"},
       {"predict", cmd_predict, "predict time and memory of a configuration"},
 #endif
 #ifdef COLLIDO_HAVE_CALIBRATE
       {"calibrate", cmd_calibrate, "run a sweep of real configurations into a log"},
+      // Hidden (no summary): one run of a sweep, started by calibrate itself.
+      {"calibrate-exec", cmd_calibrate_exec, nullptr},
 #endif
   };
   return table;
@@ -42,7 +48,8 @@ const std::vector<Command>& commands() {
 
 void print_usage() {
   std::printf("usage: collidoscope COMMAND [options]   (COMMAND --help for its options)\n\n");
-  for (const auto& c : commands()) std::printf("  %-10s %s\n", c.name, c.summary);
+  for (const auto& c : commands())
+    if (c.summary) std::printf("  %-10s %s\n", c.name, c.summary);
 }
 
 }  // namespace

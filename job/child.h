@@ -16,6 +16,7 @@
 
 #include "common/status.h"
 #include "job/job.h"
+#include "job/subprocess.h"
 
 namespace collido::job {
 
@@ -47,13 +48,11 @@ class ChildJob {
                    const std::atomic<bool>* cancel = nullptr);
   // Asks the child to stop at its next frame (SIGTERM).
   void request_cancel();
-  pid_t pid() const { return pid_; }
+  pid_t pid() const { return process_->pid(); }
 
  private:
-  ChildJob(pid_t pid, int fd) : pid_(pid), fd_(fd) {}
-  pid_t pid_;
-  int fd_;
-  bool reaped_ = false;
+  explicit ChildJob(std::unique_ptr<Subprocess> process) : process_(std::move(process)) {}
+  std::unique_ptr<Subprocess> process_;
 };
 
 }  // namespace collido::job

@@ -1,7 +1,4 @@
-#include "common/stopwatch.h"
 #include "job/job.h"
-
-#include <sys/resource.h>
 
 #include <chrono>
 #include <cmath>
@@ -11,11 +8,13 @@
 #include <nlohmann/json.hpp>
 
 #include "common/atomic_file.h"
+#include "common/process_memory.h"
+#include "common/stopwatch.h"
+#include "job/assess.h"
 #include "job/budget.h"
 #include "job/checkpoint.h"
 #include "job/run_dir.h"
 #include "job/stats_file.h"
-#include "job/wall_source.h"
 #include "scene/scene.h"
 #include "sim/parallel.h"
 #include "sim/placement.h"
@@ -54,13 +53,6 @@ const char* to_string(Stage s) {
 }
 
 namespace {
-
-
-uint64_t peak_rss_bytes() {
-  struct rusage ru {};
-  getrusage(RUSAGE_SELF, &ru);
-  return uint64_t(ru.ru_maxrss) * 1024;  // KiB on Linux
-}
 
 // The particles that take part (released, finite, inside the domain), in the
 // float snapshot form relative to `origin`. Escaped and non-finite ones are
@@ -195,34 +187,10 @@ class JobRunner {
   }
 
   Status prepare_scene() {
-    auto scene = scene::parse_scene(spec_.scene_json);
-    if (!scene) return scene.status();
-    scene_ = std::move(*scene);
-    scene::resolve_wall_path(&scene_, spec_.scene_dir);
-    if (spec_.vtp) scene_.vtp = true;
-    if (!spec_.backend.empty()) {
-      scene_.backend_auto = spec_.backend == "auto";
-      if (!scene_.backend_auto && !sim::parse_backend(spec_.backend, &scene_.dynamics.backend))
-        return invalid_argument("backend: must be auto, cpu or cuda");
-    }
-    if (spec_.duration > 0) {
-      scene_.duration = spec_.duration;
-      if (Status st = scene::check_timing(scene_); !st) return st;
-    }
-    if (spec_.render) {
-#ifdef COLLIDO_HAVE_RENDER
-      // The video plays at the scene's frame rate unless the spec says otherwise,
-      // so a second on screen is a simulated second.
-      render_settings_ = spec_.render_settings;
-      RenderSettings& rs = render_settings_;
-      if (rs.fps == 0) rs.fps = std::max(1, std::min(240, int(std::lround(scene_.fps))));
-      if (Status st = validate(rs); !st) return st;
-#else
-      return invalid_argument("render: this build has no renderer");
-#endif
-    }
-    if (spec_.threads < 0 || spec_.threads > 4096)
-      return invalid_argument("threads: must be in [0, 4096]");
+    auto resolved = resolve_scene(spec_);
+    if (!resolved) return resolved.status();
+    scene_ = std::move(resolved->scene);
+    render_settings_ = resolved->render;
     return Status::ok();
   }
 
@@ -257,15 +225,11 @@ class JobRunner {
     result_.threads = pool_->size();
     scene_.dynamics.pool = pool_.get();
 
-    sim::MeshReport report;
-    auto wall = load_wall(scene_.wall, &report);
-    if (!wall) return Status(wall.status().code(), "wall: " + wall.status().message());
+    auto wall = load_scene_wall(scene_);
+    if (!wall) return wall.status();
     wall_ = std::move(*wall);
-    const double unit = scene_.length_scale();
-    if (unit != 1) {
-      for (auto& v : wall_.vertices) v = v * unit;
+    if (scene_.length_scale() != 1)
       note("wall and scene lengths in " + scene_.length_unit + ", run in metres");
-    }
     result_.triangles = wall_.triangles.size();
     const WorkEstimate work =
         estimate_work(wall_, scene_.dynamics, scene_.particles.count, scene_.particles.r_max);
@@ -409,7 +373,7 @@ class JobRunner {
       result_.cost.peak_device_bytes =
           scene_.dynamics.backend == sim::Backend::kCuda ? sim_->device_bytes() : 0;
     }
-    result_.cost.peak_host_bytes = peak_rss_bytes();
+    result_.cost.peak_host_bytes = own_peak_resident_bytes();
     result_.cost.total_s = seconds_since(t_start_);
     if (owns_dir_) {
       result_.artifacts = list_artifacts(paths_, nullptr);

@@ -2,6 +2,7 @@
 // argument errors. No wall-clock assertions: the machine running the tests is shared.
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <map>
 #include <set>
 #include <string>
@@ -13,6 +14,10 @@
 
 namespace collido::app {
 namespace {
+
+// calibrate runs each configuration in `collidoscope calibrate-exec`; this test calls the
+// command inside its own binary, so it names the real one.
+[[maybe_unused]] const bool kExeSet = setenv("COLLIDOSCOPE_EXE", COLLIDO_BINARY, 1) == 0;
 
 std::string tmp(const std::string& name) {
   return testing::TempDir() + "/cmd_calibrate_test_" + name;

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -17,6 +18,7 @@
 #include "job/checkpoint.h"
 #include "job/child.h"
 #include "job/job.h"
+#include "job/subprocess.h"
 #include "sim/snapshot.h"
 #ifdef COLLIDO_HAVE_RENDER
 #include "render/video.h"
@@ -254,6 +256,32 @@ TEST(Job, AKilledRunResumesToTheSameEnd) {
     EXPECT_EQ(read_file(sim::snapshot_path(dir, 30)), read_file(sim::snapshot_path(ref, 30)));
   }
   EXPECT_GE(killed, 2);
+}
+
+TEST(Job, ASpawnedChildGetsTheReportPipeAndNothingElseOfTheParent) {
+  // A parent as the service is: SIGPIPE ignored, a descriptor without close-on-exec.
+  struct sigaction old {};
+  struct sigaction ignore {};
+  ignore.sa_handler = SIG_IGN;
+  sigaction(SIGPIPE, &ignore, &old);
+  const int opened = ::open("/dev/null", O_RDONLY);
+  const int leaked = ::fcntl(opened, F_DUPFD, 10);  // above the report pipe's 3
+  ::close(opened);
+  ASSERT_GE(leaked, 10);
+  auto child = Subprocess::start(
+      {"/bin/sh", "-c", "ls /proc/self/fd | tr '\\n' ' ' >&3; echo >&3; grep SigIgn /proc/self/status >&3"});
+  ASSERT_TRUE(child) << child.status().message();
+  std::vector<std::string> lines;
+  const ExitInfo e = (*child)->wait([&](const std::string& l) { lines.push_back(l); });
+  ::close(leaked);
+  sigaction(SIGPIPE, &old, nullptr);
+  EXPECT_EQ(e.exit_code, 0);
+  ASSERT_EQ(lines.size(), 2u);
+  std::istringstream fds(lines[0]);
+  for (int fd; fds >> fd;) EXPECT_NE(fd, leaked) << lines[0];  // (ls's own directory may show)
+  // SigIgn is a hex mask; SIGPIPE (13) is bit 12.
+  const unsigned long ignored = std::stoul(lines[1].substr(lines[1].find(':') + 1), nullptr, 16);
+  EXPECT_EQ(ignored & (1ul << (SIGPIPE - 1)), 0ul) << lines[1];
 }
 
 TEST(Job, JobExecReportsProgressAndRefusesBadSpecs) {

@@ -1,0 +1,82 @@
+#include "job/assess.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "job/wall_source.h"
+
+namespace collido::job {
+
+Expected<ResolvedScene> resolve_scene(const JobSpec& spec) {
+  auto parsed = scene::parse_scene(spec.scene_json);
+  if (!parsed) return parsed.status();
+  ResolvedScene out;
+  scene::Scene& s = out.scene;
+  s = std::move(*parsed);
+  scene::resolve_wall_path(&s, spec.scene_dir);
+  if (spec.vtp) s.vtp = true;
+  if (!spec.backend.empty()) {
+    s.backend_auto = spec.backend == "auto";
+    if (!s.backend_auto && !sim::parse_backend(spec.backend, &s.dynamics.backend))
+      return invalid_argument("backend: must be auto, cpu or cuda");
+  }
+  if (spec.duration > 0) {
+    s.duration = spec.duration;
+    if (Status st = scene::check_timing(s); !st) return st;
+  }
+  if (spec.render) {
+#ifdef COLLIDO_HAVE_RENDER
+    // The video plays at the scene's frame rate unless the spec says otherwise,
+    // so a second on screen is a simulated second.
+    out.render = spec.render_settings;
+    RenderSettings& rs = out.render;
+    if (rs.fps == 0) rs.fps = std::max(1, std::min(240, int(std::lround(s.fps))));
+    if (Status st = validate(rs); !st) return st;
+#else
+    return invalid_argument("render: this build has no renderer");
+#endif
+  }
+  if (spec.threads < 0 || spec.threads > 4096)
+    return invalid_argument("threads: must be in [0, 4096]");
+  return out;
+}
+
+Expected<sim::TriangleMesh> load_scene_wall(const scene::Scene& scene) {
+  sim::MeshReport report;
+  auto wall = load_wall(scene.wall, &report);
+  if (!wall) return Status(wall.status().code(), "wall: " + wall.status().message());
+  const double unit = scene.length_scale();
+  if (unit != 1)
+    for (auto& v : wall->vertices) v = v * unit;
+  return std::move(*wall);
+}
+
+Expected<JobAssessment> assess_job(const JobSpec& spec) {
+  auto resolved = resolve_scene(spec);
+  if (!resolved) return resolved.status();
+  JobAssessment a;
+  a.resolved = std::move(*resolved);
+  const scene::Scene& s = a.resolved.scene;
+  auto wall = load_scene_wall(s);
+  if (!wall) return wall.status();
+  a.particles = s.particles.count;
+  a.r_min = s.particles.r_min;
+  a.r_max = s.particles.r_max;
+  a.triangles = wall->triangles.size();
+  a.wall_area = sim::mesh_area(*wall);
+  const sim::Vec3d extent = sim::mesh_bounds(*wall).extent();
+  a.box[0] = extent.x, a.box[1] = extent.y, a.box[2] = extent.z;
+  a.frames = s.frames();
+  a.work = estimate_work(*wall, s.dynamics, s.particles.count, s.particles.r_max);
+  if (Status st = check_budget(a.work, spec.budget); !st) return st;
+  if (spec.render) {
+    const RenderSettings& rs = a.resolved.render;
+    a.render_pixels = uint64_t(rs.width) * uint64_t(rs.height);
+    if (rs.mp4) a.formats.push_back("mp4");
+    if (rs.webm) a.formats.push_back("webm");
+    if (rs.gif) a.formats.push_back("gif");
+  }
+  return a;
+}
+
+}  // namespace collido::job

@@ -1,0 +1,50 @@
+// What a job will be, known before it runs: the scene resolved as run_job()
+// would resolve it, the wall loaded and the budget checked, but no particle
+// placed and no engine built. The service answers a submission with it at
+// once (a bad scene is refused before it is queued), and it holds the inputs
+// the cost model prices a job by.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "common/status.h"
+#include "job/budget.h"
+#include "job/job.h"
+#include "scene/scene.h"
+#include "sim/mesh.h"
+
+namespace collido::job {
+
+// The scene of a spec with the spec's overrides applied (wall path, backend,
+// duration, ParaView frames) and the render settings resolved (fps 0 = the
+// scene's). Errors name the key.
+struct ResolvedScene {
+  scene::Scene scene;
+  RenderSettings render;  // meaningful when spec.render
+};
+Expected<ResolvedScene> resolve_scene(const JobSpec& spec);
+
+// The scene's wall in metres (a shape or a mesh file, scaled by the scene's unit).
+Expected<sim::TriangleMesh> load_scene_wall(const scene::Scene& scene);
+
+struct JobAssessment {
+  ResolvedScene resolved;
+  uint64_t particles = 0;
+  double r_min = 0, r_max = 0;  // m
+  uint64_t triangles = 0;       // of the wall as loaded
+  double wall_area = 0;         // m^2
+  double box[3] = {0, 0, 0};    // m: the wall's bounding box
+  uint64_t frames = 0;          // written after the initial one
+  WorkEstimate work;            // engine work and peak host memory, estimated
+  uint64_t render_pixels = 0;   // width x height of a rendered frame; 0 = no render
+  std::vector<std::string> formats;  // videos asked for: mp4, webm, gif
+};
+
+// Resolves, loads and checks the job without running it. The same errors as
+// run_job() gives for the same spec before its first frame, except those of
+// placement (a placement that cannot fit is only found by placing).
+Expected<JobAssessment> assess_job(const JobSpec& spec);
+
+}  // namespace collido::job

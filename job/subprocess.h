@@ -1,0 +1,65 @@
+// A child process that reports on a pipe: started with posix_spawn (a threaded
+// parent such as the service must never fork() a running engine), it writes
+// lines to an inherited descriptor (fd 3 by convention), and the parent reads
+// them until the child closes it, then reaps the child with wait4() for its
+// exit status and resource use. Used by `job-exec` (job/child.h) and by the
+// calibration sweep's `calibrate-exec` runs (job/calibrate.h); the protocol
+// spoken on the pipe (JSON lines) is theirs.
+#pragma once
+
+#include <signal.h>
+#include <sys/types.h>
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "common/status.h"
+
+namespace collido::job {
+
+// How a child ended.
+struct ExitInfo {
+  int exit_code = -1;  // -1 when it ended by a signal
+  int signal = 0;      // the signal that ended it, else 0
+  // wait4()'s ru_maxrss, bytes. Linux keeps the larger of the child's own
+  // peak and the peak of the memory it was spawned from, which is the
+  // parent's: it is the child's own only when the parent is smaller.
+  uint64_t peak_host_bytes = 0;
+};
+
+// "exit code N" or "killed by signal N (Name)", for messages.
+std::string describe(const ExitInfo& e);
+
+class Subprocess {
+ public:
+  // Starts argv[0] (a path, not searched in PATH) with argv, the write end of
+  // a pipe as report_fd and stdin from /dev/null; stdout and stderr go to
+  // log_path (appended) when given, else to the parent's.
+  static Expected<std::unique_ptr<Subprocess>> start(const std::vector<std::string>& argv,
+                                                     int report_fd = 3,
+                                                     const std::string& log_path = "");
+  ~Subprocess();  // a child still running is killed (SIGKILL) and reaped
+  Subprocess(const Subprocess&) = delete;
+  Subprocess& operator=(const Subprocess&) = delete;
+
+  // Calls on_line with each line the child writes (without its newline) until
+  // the child closes the pipe, then reaps it. Polls `cancel` every 100 ms and
+  // sends cancel_signal once it is set.
+  ExitInfo wait(const std::function<void(const std::string&)>& on_line,
+                const std::atomic<bool>* cancel = nullptr, int cancel_signal = SIGTERM);
+  // Sends sig unless the child has been reaped.
+  void send_signal(int sig);
+  pid_t pid() const { return pid_; }
+
+ private:
+  Subprocess(pid_t pid, int fd) : pid_(pid), fd_(fd) {}
+  pid_t pid_;
+  int fd_;
+  bool reaped_ = false;
+};
+
+}  // namespace collido::job
