@@ -15,7 +15,16 @@ packages=(
   libavcodec-dev libavformat-dev libavutil-dev libswscale-dev   # video (render)
   libfreetype-dev fonts-dejavu-core    # text overlay font (render)
   libpng-dev                           # PNG frames (render)
+  libpistache-dev                      # the REST service's HTTP server (service)
+  libsqlite3-dev                       # the service's embedded store
+  libsodium-dev                        # Argon2id password hashes, session tokens (service)
+  libcurl4-openssl-dev                 # the service tests' HTTP client
+  chromium                             # browser tests of the web UI (headless)
+  wrk                                  # HTTP load benchmark (bench/)
 )
+# The web UI's packages (scripts/install-web.sh) need node and npm: Debian's,
+# unless a node with npm is already installed (e.g. from NodeSource).
+command -v npm >/dev/null 2>&1 || packages+=(nodejs npm)
 
 missing=()
 for p in "${packages[@]}"; do

@@ -1,0 +1,175 @@
+// `collidoscope serve`: the REST service (service/), and `collidoscope admin`,
+// which makes the first administrator. Flags and printing only.
+#include <signal.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+#include <string>
+#include <thread>
+
+#include "app/cli.h"
+#include "app/commands.h"
+#include "service/http_server.h"
+#include "service/job_service.h"
+
+namespace collido::app {
+
+namespace {
+
+std::atomic<bool> g_stop{false};
+void on_signal(int) { g_stop.store(true); }
+
+std::string self_executable() {
+  std::error_code ec;
+  const auto p = std::filesystem::read_symlink("/proc/self/exe", ec);
+  return ec ? std::string() : p.string();
+}
+
+const std::vector<FlagSpec>& serve_flags() {
+  static const std::vector<FlagSpec> flags = {
+      {"host", true, "address to listen on (default 127.0.0.1)"},
+      {"port", true, "port (default 8080; 0 = a free one, printed)"},
+      {"data", true, "folder of the database, models and results (default var/)"},
+      {"threads", true, "HTTP reactor threads (default 2)"},
+      {"workers", true, "job workers (default: one; jobs take every CPU or the GPU)"},
+      {"job-threads", true, "CPU threads per job (default: all it may use)"},
+      {"max-upload-mb", true, "largest STL upload, MiB (default 64)"},
+      {"max-queued", true, "queued jobs a user may have (default 8)"},
+      {"memory-gb", true, "memory the jobs may use in all, GiB (default: this machine's)"},
+      {"public-url", true, "base URL of share links (default http://HOST:PORT)"},
+      {"web", true, "folder of the browser UI (default web/static when present)"},
+      {"demo", false, "start with the demo account and a demo job (make run)"},
+      {"help", false, "this help"},
+  };
+  return flags;
+}
+
+}  // namespace
+
+int cmd_serve(const Args& args) {
+  const char* cmd = "serve";
+  std::string error;
+  auto parsed = parse_args(args, serve_flags(), &error);
+  if (!parsed) return usage_error(cmd, error);
+  if (parsed->has("help")) {
+    print_help(
+        "usage: collidoscope serve [--host 127.0.0.1] [--port 8080] [--data var/] [--demo] ...\n\n"
+        "Serves the REST API (/api/v1, described at /api/v1/openapi.json), the result files\n"
+        "and share links, and runs queued jobs in worker processes. Stops on SIGINT/SIGTERM;\n"
+        "a job running then resumes from its checkpoint at the next start.\n"
+        "The first administrator: `collidoscope admin create NAME` (password from\n"
+        "COLLIDO_ADMIN_PASSWORD or standard input).",
+        serve_flags());
+    return kExitOk;
+  }
+  if (!parsed->positional().empty())
+    return usage_error(cmd, "unexpected argument '" + parsed->positional()[0] + "'");
+  const int64_t port = parsed->get_int("port", 8080, &error);
+  const int64_t threads = parsed->get_int("threads", 2, &error);
+  const int64_t workers = parsed->get_int("workers", -1, &error);
+  const int64_t job_threads = parsed->get_int("job-threads", 0, &error);
+  const int64_t upload_mb = parsed->get_int("max-upload-mb", 64, &error);
+  const int64_t max_queued = parsed->get_int("max-queued", 8, &error);
+  const double memory_gb = parsed->get_double("memory-gb", 0, &error);
+  if (!error.empty()) return usage_error(cmd, error);
+  if (port < 0 || port > 65535) return usage_error(cmd, "--port must be in 0..65535");
+  if (threads < 1 || threads > 64) return usage_error(cmd, "--threads must be in 1..64");
+  if (workers < -1 || workers > 64) return usage_error(cmd, "--workers must be in 0..64");
+  if (job_threads < 0 || job_threads > 4096) return usage_error(cmd, "--job-threads must be in 0..4096");
+  if (upload_mb < 1 || upload_mb > 4096) return usage_error(cmd, "--max-upload-mb must be in 1..4096");
+  if (max_queued < 1 || max_queued > 10000) return usage_error(cmd, "--max-queued must be in 1..10000");
+  if (memory_gb < 0 || memory_gb > 1e6) return usage_error(cmd, "--memory-gb must be in [0, 1e6]");
+
+  service::ServiceConfig config;
+  config.data_dir = parsed->get("data", "var");
+  config.job_executable = self_executable();
+  config.workers = int(workers);
+  config.job_threads = int(job_threads);
+  config.max_upload_bytes = uint64_t(upload_mb) << 20;
+  config.max_queued_per_user = int(max_queued);
+  config.host_bytes = uint64_t(memory_gb * double(1ull << 30));
+  service::ServerOptions options;
+  options.host = parsed->get("host", "127.0.0.1");
+  options.port = uint16_t(port);
+  options.threads = int(threads);
+  options.web_dir = parsed->get("web", std::filesystem::exists("web/static/index.html") ? "web/static" : "");
+
+  auto svc = service::JobService::open(config);
+  if (!svc) {
+    std::fprintf(stderr, "collidoscope serve: %s\n", svc.status().message().c_str());
+    return exit_code(svc.status());
+  }
+  auto server = service::Server::start(svc->get(), options);
+  if (!server) {
+    std::fprintf(stderr, "collidoscope serve: %s\n", server.status().message().c_str());
+    return exit_code(server.status());
+  }
+  const std::string url = "http://" + options.host + ":" + std::to_string((*server)->port());
+  // Share links name the address people reach the service at.
+  (*svc)->set_public_url(parsed->get("public-url", url));
+  struct sigaction sa {};
+  sa.sa_handler = on_signal;
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+  (*svc)->start_workers();
+  std::printf("collidoscope: serving on %s  (API %s/api/v1, data in %s)\n", url.c_str(), url.c_str(),
+              config.data_dir.c_str());
+  if (parsed->has("demo")) {
+    auto demo = (*svc)->start_demo();
+    if (!demo) {
+      std::fprintf(stderr, "collidoscope serve: demo: %s\n", demo.status().message().c_str());
+    } else {
+      std::printf("collidoscope: sign in as '%s' with password '%s' (kept in %s/demo-password)\n",
+                  demo->name.c_str(), demo->password.c_str(), config.data_dir.c_str());
+      std::printf("collidoscope: demo job %s (%s): %s/api/v1/jobs/%s\n", demo->job_id.c_str(),
+                  demo->state.c_str(), url.c_str(), demo->job_id.c_str());
+      if (!options.web_dir.empty()) std::printf("collidoscope: open %s/ in a browser\n", url.c_str());
+    }
+  }
+  std::fflush(stdout);
+  while (!g_stop.load()) std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  std::printf("collidoscope: stopping (a running job resumes at the next start)\n");
+  (*server)->stop();
+  (*svc)->stop_workers();
+  return kExitOk;
+}
+
+int cmd_admin(const Args& args) {
+  const char* cmd = "admin";
+  std::string error;
+  static const std::vector<FlagSpec> flags = {
+      {"data", true, "the service's data folder (default var/)"}, {"help", false, "this help"}};
+  auto parsed = parse_args(args, flags, &error);
+  if (!parsed) return usage_error(cmd, error);
+  if (parsed->has("help") || parsed->positional().size() != 2 || parsed->positional()[0] != "create") {
+    print_help(
+        "usage: collidoscope admin create NAME [--data var/]\n\n"
+        "Makes an administrator. The password comes from COLLIDO_ADMIN_PASSWORD, else the\n"
+        "first line of standard input; there is no default password.",
+        flags);
+    return parsed->has("help") ? kExitOk : kExitUsage;
+  }
+  std::string password;
+  if (const char* env = std::getenv("COLLIDO_ADMIN_PASSWORD")) password = env;
+  else std::getline(std::cin, password);
+  service::ServiceConfig config;
+  config.data_dir = parsed->get("data", "var");
+  auto svc = service::JobService::open(config);
+  if (!svc) {
+    std::fprintf(stderr, "collidoscope admin: %s\n", svc.status().message().c_str());
+    return exit_code(svc.status());
+  }
+  if (Status st = (*svc)->create_admin(parsed->positional()[1], password); !st) {
+    std::fprintf(stderr, "collidoscope admin: %s\n", st.message().c_str());
+    return exit_code(st);
+  }
+  std::printf("administrator '%s' created\n", parsed->positional()[1].c_str());
+  return kExitOk;
+}
+
+}  // namespace collido::app

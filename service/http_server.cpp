@@ -1,0 +1,899 @@
+#include "service/http_server.h"
+
+#include <signal.h>
+#include <strings.h>
+#include <sys/socket.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <pistache/endpoint.h>
+#include <pistache/http.h>
+#include <pistache/peer.h>
+#include <sstream>
+
+#include "job/run_dir.h"
+
+namespace collido::service {
+
+namespace fs = std::filesystem;
+using namespace Pistache;
+
+namespace {
+
+constexpr const char* kSessionCookie = "collido_session";
+constexpr size_t kMaxHeaderBytes = 16 << 10;
+
+// ---- requests and responses -------------------------------------------------
+
+struct Request {
+  std::string method;
+  std::vector<std::string> segments;  // the path, split and percent-decoded
+  std::map<std::string, std::string> params;  // {name} and {path*} captures
+  const Http::Request* http = nullptr;
+  std::optional<User> user;
+  std::string token;  // the session token the request came with
+  std::string query(const std::string& key) const {
+    auto v = http->query().get(key);
+    return v ? *v : std::string();
+  }
+};
+
+struct Response {
+  int status = 200;
+  std::string body;
+  std::string mime = "application/json";
+  std::vector<std::pair<std::string, std::string>> headers;
+
+  // Sets a header, replacing one of the same name.
+  void set_header(const std::string& name, const std::string& value) {
+    for (auto& [k, v] : headers)
+      if (strcasecmp(k.c_str(), name.c_str()) == 0) {
+        v = value;
+        return;
+      }
+    headers.emplace_back(name, value);
+  }
+};
+
+// The web UI's file types (a run's own files take job::mime_type).
+std::string web_mime_type(const std::string& path) {
+  const std::string ext = fs::path(path).extension().string();
+  static const std::pair<const char*, const char*> kTypes[] = {
+      {".html", "text/html; charset=utf-8"}, {".js", "text/javascript; charset=utf-8"},
+      {".mjs", "text/javascript; charset=utf-8"}, {".css", "text/css; charset=utf-8"},
+      {".svg", "image/svg+xml"}, {".ico", "image/x-icon"}, {".png", "image/png"},
+      {".json", "application/json"}, {".map", "application/json"}, {".woff2", "font/woff2"},
+      {".txt", "text/plain; charset=utf-8"}};
+  for (const auto& [e, type] : kTypes)
+    if (ext == e) return type;
+  return "application/octet-stream";
+}
+
+Response json_response(const Reply& r) {
+  Response out;
+  out.status = r.status;
+  out.body = r.status == 204 ? std::string() : r.body.dump() + "\n";
+  out.headers = r.headers;
+  return out;
+}
+Response error_response(int status, const std::string& message) {
+  return json_response(error_reply(status, message));
+}
+
+std::string percent_decode(const std::string& s, bool* ok) {
+  std::string out;
+  for (size_t i = 0; i < s.size(); ++i) {
+    if (s[i] == '%') {
+      if (i + 2 >= s.size() || !std::isxdigit((unsigned char)s[i + 1]) ||
+          !std::isxdigit((unsigned char)s[i + 2])) {
+        *ok = false;
+        return {};
+      }
+      out += char(std::stoi(s.substr(i + 1, 2), nullptr, 16));
+      i += 2;
+    } else {
+      out += s[i];
+    }
+  }
+  if (out.find('\0') != std::string::npos) *ok = false;
+  return out;
+}
+
+std::vector<std::string> split_path(const std::string& path) {
+  std::vector<std::string> out;
+  std::string part;
+  std::istringstream in(path);
+  while (std::getline(in, part, '/'))
+    if (!part.empty()) out.push_back(part);
+  return out;
+}
+
+std::string html_escape(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    switch (c) {
+      case '&': out += "&amp;"; break;
+      case '<': out += "&lt;"; break;
+      case '>': out += "&gt;"; break;
+      case '"': out += "&quot;"; break;
+      case '\'': out += "&#39;"; break;
+      default: out += c;
+    }
+  }
+  return out;
+}
+
+// ---- files, with Range ------------------------------------------------------
+
+// A byte range of a file of `size` bytes from a Range header: first and last
+// byte. nullopt = answer the whole file (no header, a syntax we ignore, or
+// several ranges, which RFC 9110 lets a server answer whole); *unsatisfiable
+// when the range starts beyond the end.
+std::optional<std::pair<uint64_t, uint64_t>> parse_range(const std::string& header, uint64_t size,
+                                                         bool* unsatisfiable) {
+  *unsatisfiable = false;
+  const std::string prefix = "bytes=";
+  if (header.compare(0, prefix.size(), prefix) != 0) return std::nullopt;
+  const std::string spec = header.substr(prefix.size());
+  if (spec.find(',') != std::string::npos) return std::nullopt;
+  const auto dash = spec.find('-');
+  if (dash == std::string::npos) return std::nullopt;
+  auto number = [](const std::string& t, uint64_t* v) {
+    if (t.empty() || t.size() > 19 ||
+        !std::all_of(t.begin(), t.end(), [](unsigned char c) { return std::isdigit(c); }))
+      return false;
+    *v = std::stoull(t);
+    return true;
+  };
+  const std::string a = spec.substr(0, dash), b = spec.substr(dash + 1);
+  uint64_t first = 0, last = 0;
+  if (a.empty()) {  // the last N bytes
+    uint64_t n = 0;
+    if (!number(b, &n)) return std::nullopt;
+    if (n == 0 || size == 0) {
+      *unsatisfiable = true;
+      return std::nullopt;
+    }
+    first = n >= size ? 0 : size - n;
+    last = size - 1;
+  } else {
+    if (!number(a, &first)) return std::nullopt;
+    if (b.empty()) {
+      last = size ? size - 1 : 0;
+    } else {
+      if (!number(b, &last) || last < first) return std::nullopt;
+      last = std::min(last, size ? size - 1 : 0);
+    }
+    if (first >= size) {
+      *unsatisfiable = true;
+      return std::nullopt;
+    }
+  }
+  return std::make_pair(first, last);
+}
+
+Response file_response(const std::string& path, const Http::Request& req) {
+  std::error_code ec;
+  const uint64_t size = fs::file_size(path, ec);
+  if (ec) return error_response(404, "no such file");
+  Response out;
+  out.mime = job::mime_type(path);
+  out.headers.emplace_back("Accept-Ranges", "bytes");
+  out.headers.emplace_back("Cache-Control", "private, max-age=60");
+  uint64_t first = 0, count = size;
+  auto range_header = req.headers().tryGetRaw("Range");
+  if (range_header) {
+    bool unsatisfiable = false;
+    auto range = parse_range(range_header->value(), size, &unsatisfiable);
+    if (unsatisfiable) {
+      out.status = 416;
+      out.mime = "application/json";
+      out.body = error_reply(416, "the range starts beyond the file's " + std::to_string(size) +
+                                      " bytes").body.dump();
+      out.headers.emplace_back("Content-Range", "bytes */" + std::to_string(size));
+      return out;
+    }
+    if (range) {
+      first = range->first;
+      count = range->second - range->first + 1;
+      out.status = 206;
+      out.headers.emplace_back("Content-Range", "bytes " + std::to_string(range->first) + "-" +
+                                                    std::to_string(range->second) + "/" +
+                                                    std::to_string(size));
+    }
+  }
+  std::ifstream in(path, std::ios::binary);
+  out.body.resize(count);
+  in.seekg(std::streamoff(first));
+  if (count && !in.read(out.body.data(), std::streamsize(count)))
+    return error_response(500, "could not read the file");
+  return out;
+}
+
+// ---- routes -----------------------------------------------------------------
+
+enum class Auth { kNone, kUser, kAdmin };
+
+struct Route {
+  std::string method;
+  std::string pattern;
+  Auth auth;
+  std::function<Response(Request&)> handle;
+  std::vector<std::string> parts;  // the pattern, split
+};
+
+// The pattern's parts match the path: literals equal, {name} takes one
+// segment, {name*} the rest (one or more).
+bool match(const Route& r, Request& req) {
+  const auto& p = r.parts;
+  const auto& s = req.segments;
+  std::map<std::string, std::string> params;
+  size_t i = 0;
+  for (; i < p.size(); ++i) {
+    const std::string& part = p[i];
+    if (part.size() > 3 && part.front() == '{' && part[part.size() - 2] == '*') {
+      if (i >= s.size()) return false;
+      std::string rest;
+      for (size_t k = i; k < s.size(); ++k) rest += (k > i ? "/" : "") + s[k];
+      params[part.substr(1, part.size() - 3)] = rest;
+      req.params = std::move(params);
+      return true;
+    }
+    if (i >= s.size()) return false;
+    if (part.front() == '{') params[part.substr(1, part.size() - 2)] = s[i];
+    else if (part != s[i]) return false;
+  }
+  if (i != s.size()) return false;
+  req.params = std::move(params);
+  return true;
+}
+
+std::optional<int64_t> id_param(const Request& req, const char* name) {
+  const std::string& s = req.params.at(name);
+  if (s.empty() || s.size() > 18 ||
+      !std::all_of(s.begin(), s.end(), [](unsigned char c) { return std::isdigit(c); }))
+    return std::nullopt;
+  return std::stoll(s);
+}
+
+// The body as JSON, or the 400 that says why not.
+std::optional<json> json_body(const Request& req, Response* error, bool allow_empty = false) {
+  const std::string& body = req.http->body();
+  if (body.empty() && allow_empty) return json(nullptr);
+  json j = json::parse(body, nullptr, false);
+  if (j.is_discarded()) {
+    *error = error_response(400, body.empty() ? "the request has no JSON body"
+                                              : "the body is not valid JSON");
+    return std::nullopt;
+  }
+  return j;
+}
+
+bool valid_token(const std::string& t) {
+  return !t.empty() && t.size() <= 128 && std::all_of(t.begin(), t.end(), [](unsigned char c) {
+    return std::isalnum(c) || c == '-' || c == '_';
+  });
+}
+
+std::string share_page(const std::string& token, const Reply& info, bool embed) {
+  const json& links = info.body["links"];
+  const bool done = info.body.value("state", "") == "done";
+  std::ostringstream h;
+  const std::string t = html_escape(token);
+  h << "<!doctype html><html lang=\"en\"><head><meta charset=\"utf-8\">"
+       "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
+       "<title>Collidoscope result</title>"
+       "<link rel=\"alternate\" type=\"application/json+oembed\" href=\"/api/v1/oembed?url=/s/"
+    << t << "\" title=\"Collidoscope result\">"
+    << "<style>body{margin:0;font-family:system-ui,sans-serif;background:#111;color:#eee}"
+       "main{max-width:960px;margin:auto;padding:"
+    << (embed ? "0" : "1rem")
+    << "}video,img{width:100%;height:auto;display:block}a{color:#8cf}</style></head><body><main>";
+  if (!embed) h << "<h1>Collidoscope result</h1>";
+  if (!done) {
+    h << "<p>This result is not ready yet (" << html_escape(info.body.value("state", ""))
+      << "). Reload the page in a moment.</p>";
+  } else {
+    h << "<video controls loop playsinline preload=\"metadata\" poster=\""
+      << html_escape(links.value("poster", "")) << "\">";
+    if (links.contains("webm"))
+      h << "<source src=\"" << html_escape(links["webm"].get<std::string>()) << "\" type=\"video/webm\">";
+    if (links.contains("mp4"))
+      h << "<source src=\"" << html_escape(links["mp4"].get<std::string>()) << "\" type=\"video/mp4\">";
+    if (links.contains("gif"))
+      h << "<img src=\"" << html_escape(links["gif"].get<std::string>()) << "\" alt=\"collision animation\">";
+    h << "</video>";
+    if (!embed) {
+      h << "<p>";
+      for (const char* k : {"mp4", "webm", "gif", "poster", "stats", "manifest"})
+        if (links.contains(k))
+          h << "<a href=\"" << html_escape(links[k].get<std::string>()) << "\">" << k << "</a> ";
+      h << "</p><p>Embed: <code>&lt;iframe src=\"/embed/" << t
+        << "\" width=\"640\" height=\"360\"&gt;&lt;/iframe&gt;</code></p>";
+    }
+  }
+  h << "</main></body></html>\n";
+  return h.str();
+}
+
+std::vector<Route> make_routes(JobService* svc, const ServerOptions& opt) {
+  std::vector<Route> r;
+  auto add = [&](const char* m, const char* p, Auth a, std::function<Response(Request&)> h) {
+    r.push_back({m, p, a, std::move(h), split_path(p)});
+  };
+  auto reply = [](Reply rep) { return json_response(rep); };
+
+  add("GET", "/api/v1/health", Auth::kNone, [=](Request&) { return reply(svc->health()); });
+  add("GET", "/api/v1/openapi.json", Auth::kNone, [](Request&) {
+    Response out;
+    out.body = openapi_document();
+    return out;
+  });
+  add("GET", "/metrics", Auth::kNone, [=](Request&) {
+    Response out;
+    out.body = svc->metrics();
+    out.mime = "text/plain; version=0.0.4";
+    return out;
+  });
+  add("POST", "/api/v1/accounts", Auth::kNone, [=](Request& q) {
+    Response e;
+    auto b = json_body(q, &e);
+    return b ? reply(svc->create_account(*b)) : e;
+  });
+  add("POST", "/api/v1/sessions", Auth::kNone, [=](Request& q) {
+    Response e;
+    auto b = json_body(q, &e);
+    if (!b) return e;
+    std::string token;
+    Response out = reply(svc->create_session(*b, unix_now(), &token));
+    if (!token.empty())
+      out.headers.emplace_back(
+          "Set-Cookie", std::string(kSessionCookie) + "=" + token +
+                            "; Path=/; HttpOnly; SameSite=Strict; Max-Age=" +
+                            std::to_string(int64_t(svc->config().session_ttl_s)));
+    return out;
+  });
+  add("DELETE", "/api/v1/sessions", Auth::kUser, [=](Request& q) {
+    Response out = reply(svc->delete_session(q.token));
+    out.headers.emplace_back("Set-Cookie", std::string(kSessionCookie) +
+                                               "=; Path=/; HttpOnly; SameSite=Strict; Max-Age=0");
+    return out;
+  });
+  add("GET", "/api/v1/me", Auth::kUser, [](Request& q) {
+    Reply rep;
+    rep.body = {{"id", q.user->id}, {"name", q.user->name}, {"role", q.user->role}};
+    return json_response(rep);
+  });
+  add("GET", "/api/v1/models", Auth::kUser, [=](Request& q) { return reply(svc->list_models(*q.user)); });
+  add("POST", "/api/v1/models", Auth::kUser, [=](Request& q) {
+    Response e;
+    auto b = json_body(q, &e);
+    return b ? reply(svc->create_model(*q.user, *b)) : e;
+  });
+  add("GET", "/api/v1/models/{id}", Auth::kUser, [=](Request& q) {
+    auto id = id_param(q, "id");
+    return id ? reply(svc->get_model(*q.user, *id)) : error_response(404, "no such model");
+  });
+  add("DELETE", "/api/v1/models/{id}", Auth::kUser, [=](Request& q) {
+    auto id = id_param(q, "id");
+    return id ? reply(svc->delete_model(*q.user, *id)) : error_response(404, "no such model");
+  });
+  add("PUT", "/api/v1/models/{id}/stl", Auth::kUser, [=](Request& q) {
+    auto id = id_param(q, "id");
+    return id ? reply(svc->upload_stl(*q.user, *id, q.http->body()))
+              : error_response(404, "no such model");
+  });
+  add("GET", "/api/v1/models/{id}/stl", Auth::kUser, [=](Request& q) {
+    auto id = id_param(q, "id");
+    if (!id) return error_response(404, "no such model");
+    auto path = svc->model_stl_path(*q.user, *id);
+    if (!path) return json_response(error_reply(http_status_of(path.status()), path.status().message()));
+    return file_response(*path, *q.http);
+  });
+  add("GET", "/api/v1/algorithms", Auth::kNone, [=](Request&) { return reply(svc->algorithms()); });
+  add("POST", "/api/v1/predict", Auth::kUser, [=](Request& q) {
+    Response e;
+    auto b = json_body(q, &e);
+    return b ? reply(svc->predict(*q.user, *b)) : e;
+  });
+  add("POST", "/api/v1/jobs", Auth::kUser, [=](Request& q) {
+    Response e;
+    auto b = json_body(q, &e);
+    return b ? reply(svc->submit(*q.user, *b)) : e;
+  });
+  add("GET", "/api/v1/jobs", Auth::kUser, [=](Request& q) { return reply(svc->list_jobs(*q.user)); });
+  add("GET", "/api/v1/jobs/{id}", Auth::kUser,
+      [=](Request& q) { return reply(svc->get_job(*q.user, q.params["id"])); });
+  add("DELETE", "/api/v1/jobs/{id}", Auth::kUser,
+      [=](Request& q) { return reply(svc->delete_job(*q.user, q.params["id"])); });
+  add("POST", "/api/v1/jobs/{id}/cancel", Auth::kUser,
+      [=](Request& q) { return reply(svc->cancel_job(*q.user, q.params["id"])); });
+  add("GET", "/api/v1/jobs/{id}/files/{path*}", Auth::kUser, [=](Request& q) {
+    auto path = svc->job_file(*q.user, q.params["id"], q.params["path"]);
+    return path ? file_response(*path, *q.http) : error_response(404, path.status().message());
+  });
+  add("POST", "/api/v1/jobs/{id}/shares", Auth::kUser, [=](Request& q) {
+    Response e;
+    auto b = json_body(q, &e, true);
+    return b ? reply(svc->create_share(*q.user, q.params["id"], *b)) : e;
+  });
+  add("DELETE", "/api/v1/shares/{token}", Auth::kUser,
+      [=](Request& q) { return reply(svc->delete_share(*q.user, q.params["token"])); });
+  add("GET", "/api/v1/shares/{token}", Auth::kNone,
+      [=](Request& q) { return reply(svc->share_info(q.params["token"])); });
+  add("GET", "/api/v1/oembed", Auth::kNone, [=](Request& q) {
+    // ?url=<public url>/s/<token>: the video as an oEmbed "video" with an iframe player.
+    const std::string url = q.query("url");
+    const auto at = url.rfind("/s/");
+    const std::string token = at == std::string::npos ? "" : url.substr(at + 3);
+    if (!valid_token(token)) return error_response(404, "url: not a share link of this server");
+    Reply info = svc->share_info(token);
+    if (info.status != 200) return json_response(info);
+    const std::string base = svc->public_url();
+    int width = 640, height = 360;
+    if (auto mw = q.query("maxwidth"); !mw.empty() && std::all_of(mw.begin(), mw.end(), ::isdigit) &&
+                                       mw.size() < 6)
+      width = std::max(64, std::min(width, std::stoi(mw))), height = width * 9 / 16;
+    Reply rep;
+    rep.body = {{"version", "1.0"},
+                {"type", "video"},
+                {"provider_name", "Collidoscope"},
+                {"provider_url", base + "/"},
+                {"title", "Collidoscope result"},
+                {"width", width},
+                {"height", height},
+                {"html", "<iframe src=\"" + base + "/embed/" + token + "\" width=\"" +
+                             std::to_string(width) + "\" height=\"" + std::to_string(height) +
+                             "\" frameborder=\"0\" allowfullscreen></iframe>"}};
+    if (info.body["links"].contains("poster")) {
+      rep.body["thumbnail_url"] = base + info.body["links"]["poster"].get<std::string>();
+      rep.body["thumbnail_width"] = svc->config().render.width;
+      rep.body["thumbnail_height"] = svc->config().render.height;
+    }
+    return json_response(rep);
+  });
+  auto page = [=](Request& q, bool embed) {
+    const std::string token = q.params["token"];
+    Reply info = valid_token(token) ? svc->share_info(token) : error_reply(404, "no such share");
+    Response out;
+    out.mime = "text/html; charset=utf-8";
+    if (info.status != 200) {
+      out.status = 404;
+      out.body = "<!doctype html><title>Not found</title><p>This share link does not exist or "
+                 "was revoked.</p>\n";
+      return out;
+    }
+    out.body = share_page(token, info, embed);
+    out.headers.emplace_back("Content-Security-Policy",
+                             embed ? "default-src 'self'; style-src 'unsafe-inline'"
+                                   : "default-src 'self'; style-src 'unsafe-inline'; frame-ancestors 'none'");
+    return out;
+  };
+  add("GET", "/s/{token}", Auth::kNone, [=](Request& q) { return page(q, false); });
+  add("GET", "/embed/{token}", Auth::kNone, [=](Request& q) { return page(q, true); });
+  add("GET", "/s/{token}/{path*}", Auth::kNone, [=](Request& q) {
+    auto path = svc->shared_file(q.params["token"], q.params["path"]);
+    return path ? file_response(*path, *q.http) : error_response(404, "no such file");
+  });
+  add("GET", "/api/v1/admin/logs", Auth::kAdmin, [=](Request& q) {
+    const std::string limit = q.query("limit"), before = q.query("before");
+    auto num = [](const std::string& s, int64_t dflt) -> int64_t {
+      if (s.empty() || s.size() > 18 || !std::all_of(s.begin(), s.end(), ::isdigit)) return dflt;
+      return std::stoll(s);
+    };
+    return reply(svc->admin_logs(*q.user, size_t(num(limit, 100)), num(before, 0)));
+  });
+  if (!opt.web_dir.empty()) {
+    const std::string root = opt.web_dir;
+    auto serve_static = [root](const std::string& rel, const Http::Request& http) {
+      std::error_code ec;
+      const fs::path base = fs::canonical(root, ec);
+      if (ec) return error_response(404, "no such page");
+      const fs::path full = fs::canonical(base / rel, ec);
+      const std::string b = base.string() + "/";
+      if (ec || full.string().compare(0, b.size(), b) != 0 || !fs::is_regular_file(full))
+        return error_response(404, "no such page");
+      Response out = file_response(full.string(), http);
+      if (out.status != 416) out.mime = web_mime_type(full.string());
+      out.set_header("Cache-Control", "no-cache");  // revalidate: a new build shows at once
+      return out;
+    };
+    add("GET", "/", Auth::kNone, [=](Request& q) { return serve_static("index.html", *q.http); });
+    add("GET", "/ui/{path*}", Auth::kNone,
+        [=](Request& q) { return serve_static(q.params["path"], *q.http); });
+  }
+  return r;
+}
+
+// ---- the request guard and the handler --------------------------------------
+
+// Per connection: where the guard is in the byte stream of its requests.
+struct PeerGuard {
+  std::string head;        // header bytes of the request being read
+  uint64_t body_left = 0;  // body bytes of the current request still to come
+  bool discarding = false; // refused: everything after is dropped
+};
+
+struct Shared {
+  JobService* service = nullptr;
+  ServerOptions options;
+  std::vector<Route> routes;
+  uint64_t max_upload = 0;
+  size_t max_request = 0;  // Pistache's limit: the largest body and the headers
+};
+
+// Tcp::Handler::associateTransport is private (Transport is its friend); the
+// inner handler below needs it. An explicit instantiation may name a private
+// member (C++17 [temp.explicit]/14), which hands us a pointer to it.
+using AssociateFn = void (Tcp::Handler::*)(Tcp::Transport*);
+struct AssociateTag {
+  friend AssociateFn associate_fn(AssociateTag);
+};
+template <AssociateFn F>
+struct Expose {
+  friend AssociateFn associate_fn(AssociateTag) { return F; }
+};
+template struct Expose<&Tcp::Handler::associateTransport>;
+
+// A response header by name. Pistache 0.0.5 keeps headers added with
+// addRaw() but writes only typed ones onto the wire, so every header of ours
+// is a typed header of this one kind.
+class NamedHeader : public Http::Header::Header {
+ public:
+  NamedHeader(std::string name, std::string value) : name_(std::move(name)), value_(std::move(value)) {}
+  const char* name() const override { return name_.c_str(); }
+  void write(std::ostream& os) const override { os << value_; }
+#ifdef SAFE_HEADER_CAST
+  uint64_t hash() const override { return std::hash<std::string>()(name_); }
+#endif
+
+ private:
+  std::string name_, value_;
+};
+
+// Routes parsed requests (Pistache's parser, our routes).
+class Router : public Http::Handler {
+ public:
+  HTTP_PROTOTYPE(Router)
+  explicit Router(std::shared_ptr<const Shared> shared) : shared_(std::move(shared)) {}
+
+  void onRequest(const Http::Request& http, Http::ResponseWriter writer) override {
+    Response out = dispatch(http);
+    // HTTP/1.1 keeps a connection open unless a side says "close"; 0.0.5
+    // closes one that sent no Connection header, which costs every client
+    // (wrk, curl, browsers' fetch) a new connection per request.
+    const auto conn = http.headers().tryGet<Http::Header::Connection>();
+    if (!conn && http.version() == Http::Version::Http11) {
+      writer.headers().remove<Http::Header::Connection>();
+      writer.headers().add<Http::Header::Connection>(Http::ConnectionControl::KeepAlive);
+    }
+    for (const auto& [k, v] : out.headers) writer.headers().add(std::make_shared<NamedHeader>(k, v));
+    writer.headers().add(std::make_shared<NamedHeader>("X-Content-Type-Options", "nosniff"));
+    // Pistache's MediaType knows a fixed set of top-level types; others
+    // (model/stl) go out as a raw header.
+    Http::Mime::MediaType mime;
+    try {
+      mime = Http::Mime::MediaType::fromString(out.mime);
+    } catch (...) {
+      writer.headers().add(std::make_shared<NamedHeader>("Content-Type", out.mime));
+    }
+    writer.send(static_cast<Http::Code>(out.status), out.body.data(), out.body.size(), mime);
+  }
+
+ private:
+  Response dispatch(const Http::Request& http) {
+    Request req;
+    req.http = &http;
+    req.method = Http::methodString(http.method());
+    bool ok = true;
+    for (const std::string& part : split_path(http.resource())) {
+      req.segments.push_back(percent_decode(part, &ok));
+      if (!ok) return error_response(404, "no such resource");
+    }
+    bool path_known = false;
+    for (const Route& route : shared_->routes) {
+      if (!match(route, req)) continue;
+      path_known = true;
+      if (route.method != req.method) continue;
+      if (route.auth != Auth::kNone) {
+        req.token = session_token(http);
+        auto user = shared_->service->authenticate(req.token);
+        if (!user) return error_response(401, "sign in first (POST /api/v1/sessions)");
+        if (route.auth == Auth::kAdmin && user->role != "admin")
+          return error_response(403, "administrators only");
+        req.user = *user;
+      }
+      try {
+        return route.handle(req);
+      } catch (const std::exception& e) {  // a bug of ours: answer, do not kill the reactor
+        return error_response(500, std::string("internal error: ") + e.what());
+      }
+    }
+    if (path_known) return error_response(405, "method " + req.method + " is not allowed here");
+    return error_response(404, "no such resource");
+  }
+
+  static std::string session_token(const Http::Request& http) {
+    if (auto auth = http.headers().tryGet<Http::Header::Authorization>()) {
+      const std::string v = auth->value();
+      if (v.compare(0, 7, "Bearer ") == 0) return v.substr(7);
+    }
+    if (http.cookies().has(kSessionCookie)) return http.cookies().get(kSessionCookie).value;
+    return {};
+  }
+
+  std::shared_ptr<const Shared> shared_;
+};
+
+// What the endpoint runs: reads each request's head as it arrives and refuses
+// a body over its route's limit before Pistache's parser reserves it, then
+// hands the bytes to the Router. (Http::Handler's onInput is private, so the
+// guard cannot call it as a base; the Router is a second handler that shares
+// this one's transport.)
+class Handler : public Http::Handler {
+ public:
+  HTTP_PROTOTYPE(Handler)
+
+  explicit Handler(std::shared_ptr<const Shared> shared)
+      : shared_(shared), router_(std::make_shared<Router>(shared)) {
+    router_->setMaxRequestSize(shared->max_request);
+  }
+  // Each reactor thread gets a copy (Prototype::clone): with a Router of its own.
+  Handler(const Handler& other) : Http::Handler(other), shared_(other.shared_),
+        router_(std::make_shared<Router>(other.shared_)) {
+    router_->setMaxRequestSize(shared_->max_request);
+  }
+
+  void onRequest(const Http::Request&, Http::ResponseWriter) override {}  // the Router answers
+
+  void onConnection(const std::shared_ptr<Tcp::Peer>& peer) override {
+    associate();
+    static_cast<Tcp::Handler&>(*router_).onConnection(peer);
+    peer->putData("collido-guard", std::make_shared<PeerGuard>());
+  }
+
+  void onInput(const char* buffer, size_t len, const std::shared_ptr<Tcp::Peer>& peer) override {
+    associate();
+    auto guard = std::static_pointer_cast<PeerGuard>(peer->tryGetData("collido-guard"));
+    if (!guard) {
+      static_cast<Tcp::Handler&>(*router_).onInput(buffer, len, peer);
+      return;
+    }
+    if (guard->discarding) return;
+    std::string forward;
+    if (!inspect(*guard, buffer, len, peer, &forward)) return;
+    if (!forward.empty()) static_cast<Tcp::Handler&>(*router_).onInput(forward.data(), forward.size(), peer);
+  }
+
+  void onDisconnection(const std::shared_ptr<Tcp::Peer>& peer) override {
+    static_cast<Tcp::Handler&>(*router_).onDisconnection(peer);
+  }
+
+ private:
+  // Reads request heads as they arrive; false when the request is refused
+  // (answered here, the connection closed for writing and the rest dropped).
+  // What the Router should see goes to *forward: body bytes as they come, a
+  // head once it is whole and cleaned of headers Pistache cannot parse.
+  bool inspect(PeerGuard& g, const char* buf, size_t len, const std::shared_ptr<Tcp::Peer>& peer,
+               std::string* forward) {
+    size_t i = 0;
+    while (i < len) {
+      if (g.body_left > 0) {
+        const size_t take = size_t(std::min<uint64_t>(g.body_left, len - i));
+        forward->append(buf + i, take);
+        g.body_left -= take;
+        i += take;
+        continue;
+      }
+      const size_t before = g.head.size();
+      g.head.append(buf + i, len - i);
+      const size_t from = before >= 3 ? before - 3 : 0;
+      const size_t end = g.head.find("\r\n\r\n", from);
+      if (end == std::string::npos) {
+        if (g.head.size() > kMaxHeaderBytes)
+          return refuse(g, peer, 431, "Request Header Fields Too Large", "the headers are too large");
+        return true;
+      }
+      const std::string head = g.head.substr(0, end);
+      i += end + 4 - before;
+      g.head.clear();
+      uint64_t length = 0;
+      std::string path;
+      bool chunked = false, bad = false;
+      parse_head(head, &path, &length, &chunked, &bad);
+      if (bad) return refuse(g, peer, 400, "Bad Request", "a malformed Content-Length");
+      if (chunked)
+        return refuse(g, peer, 411, "Length Required", "send the body with a Content-Length");
+      const uint64_t limit = limit_for(path);
+      if (length > limit)
+        return refuse(g, peer, 413, "Payload Too Large",
+                      "the body is " + std::to_string(length) + " bytes; this route takes at most " +
+                          std::to_string(limit));
+      forward->append(without_unparsable_headers(head));
+      forward->append("\r\n\r\n");
+      g.body_left = length;
+    }
+    return true;
+  }
+
+  // Pistache parses the headers it knows (Content-Type, Accept, Host, ...)
+  // and answers 415 or 400 for the whole request when one fails: a
+  // `Content-Type: model/stl` upload (the registered type for STL) would be
+  // refused. None of those headers steers a route of ours, so a value that
+  // does not parse is dropped instead.
+  static std::string without_unparsable_headers(const std::string& head) {
+    std::string out;
+    size_t pos = 0;
+    bool first = true;
+    while (pos <= head.size()) {
+      size_t eol = head.find("\r\n", pos);
+      if (eol == std::string::npos) eol = head.size();
+      const std::string line = head.substr(pos, eol - pos);
+      pos = eol + 2;
+      bool keep = true;
+      const auto colon = line.find(':');
+      if (!first && colon != std::string::npos) {
+        const std::string name = line.substr(0, colon);
+        std::string value = line.substr(colon + 1);
+        value.erase(0, value.find_first_not_of(" \t"));
+        auto& registry = Http::Header::Registry::instance();
+        if (registry.isRegistered(name)) {
+          try {
+            registry.makeHeader(name)->parseRaw(value.data(), value.size());
+          } catch (...) {
+            keep = false;
+          }
+        }
+      }
+      if (keep) {
+        if (!first) out += "\r\n";
+        out += line;
+      }
+      first = false;
+    }
+    return out;
+  }
+
+  static void parse_head(const std::string& head, std::string* path, uint64_t* length,
+                         bool* chunked, bool* bad) {
+    std::istringstream in(head);
+    std::string line;
+    bool first = true, seen_length = false;
+    while (std::getline(in, line)) {
+      if (!line.empty() && line.back() == '\r') line.pop_back();
+      if (first) {
+        first = false;
+        const auto a = line.find(' ');
+        const auto b = a == std::string::npos ? a : line.find(' ', a + 1);
+        if (a != std::string::npos) *path = line.substr(a + 1, b == std::string::npos ? b : b - a - 1);
+        continue;
+      }
+      const auto colon = line.find(':');
+      if (colon == std::string::npos) continue;
+      std::string key = line.substr(0, colon), value = line.substr(colon + 1);
+      for (char& c : key) c = char(std::tolower((unsigned char)c));
+      value.erase(0, value.find_first_not_of(" \t"));
+      while (!value.empty() && (value.back() == ' ' || value.back() == '\t')) value.pop_back();
+      if (key == "content-length") {
+        if (value.empty() || value.size() > 19 ||
+            !std::all_of(value.begin(), value.end(), [](unsigned char c) { return std::isdigit(c); }) ||
+            (seen_length && std::stoull(value) != *length)) {
+          *bad = true;
+          return;
+        }
+        *length = std::stoull(value);
+        seen_length = true;
+      } else if (key == "transfer-encoding") {
+        for (char& c : value) c = char(std::tolower((unsigned char)c));
+        if (value.find("chunked") != std::string::npos) *chunked = true;
+      }
+    }
+  }
+
+  // The largest body a path may carry: an STL upload, else a JSON document.
+  uint64_t limit_for(const std::string& path) const {
+    const auto q = path.find('?');
+    const auto parts = split_path(path.substr(0, q));
+    if (parts.size() == 5 && parts[0] == "api" && parts[1] == "v1" && parts[2] == "models" &&
+        parts[4] == "stl")
+      return shared_->max_upload;
+    return shared_->options.max_json_bytes;
+  }
+
+  bool refuse(PeerGuard& g, const std::shared_ptr<Tcp::Peer>& peer, int code, const char* reason,
+              const std::string& message) {
+    const std::string body = error_reply(code, message).body.dump() + "\n";
+    const std::string msg = "HTTP/1.1 " + std::to_string(code) + " " + reason +
+                            "\r\nContent-Type: application/json\r\nContent-Length: " +
+                            std::to_string(body.size()) + "\r\nConnection: close\r\n\r\n" + body;
+    // A short answer fits the socket buffer; MSG_NOSIGNAL: the client may be gone.
+    (void)::send(peer->fd(), msg.data(), msg.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+    ::shutdown(peer->fd(), SHUT_WR);
+    g.discarding = true;
+    g.head.clear();
+    return false;
+  }
+
+  void associate() {
+    if (!associated_) {
+      ((*router_).*associate_fn(AssociateTag{}))(transport());
+      associated_ = true;
+    }
+  }
+
+  std::shared_ptr<const Shared> shared_;
+  std::shared_ptr<Router> router_;
+  bool associated_ = false;
+};
+
+}  // namespace
+
+std::vector<RouteInfo> route_table() {
+  ServerOptions with_ui;
+  with_ui.web_dir = "/";
+  std::vector<RouteInfo> out;
+  for (const Route& r : make_routes(nullptr, with_ui)) out.push_back({r.method, r.pattern});
+  return out;
+}
+
+struct Server::Impl {
+  std::shared_ptr<Shared> shared;
+  std::unique_ptr<Http::Endpoint> endpoint;
+  bool stopped = false;
+};
+
+Server::Server(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Server::~Server() { stop(); }
+
+uint16_t Server::port() const { return uint16_t(impl_->endpoint->getPort()); }
+
+void Server::stop() {
+  if (impl_ && !impl_->stopped) {
+    impl_->endpoint->shutdown();
+    impl_->stopped = true;
+  }
+}
+
+Expected<std::unique_ptr<Server>> Server::start(JobService* service, const ServerOptions& options) {
+  // A viewer who closes a video mid-download must not end the process: writes
+  // to a closed socket give EPIPE instead of SIGPIPE (a process-wide setting a
+  // socket server needs; nothing else of ours handles SIGPIPE).
+  ::signal(SIGPIPE, SIG_IGN);
+  if (options.threads < 1 || options.threads > 64) return invalid_argument("threads: in [1, 64]");
+  auto shared = std::make_shared<Shared>();
+  shared->service = service;
+  shared->options = options;
+  shared->routes = make_routes(service, options);
+  shared->max_upload = service->config().max_upload_bytes;
+  auto impl = std::make_unique<Impl>();
+  impl->shared = shared;
+  try {
+    Address addr(options.host, Port(options.port));
+    impl->endpoint = std::make_unique<Http::Endpoint>(addr);
+    // Pistache's own limit covers headers and body together; the guard holds
+    // each route to its own body limit first.
+    shared->max_request = size_t(std::max<uint64_t>(shared->max_upload, options.max_json_bytes)) +
+                          kMaxHeaderBytes;
+    const size_t max_request = shared->max_request;
+    auto opts = Http::Endpoint::options()
+                    .threads(options.threads)
+                    .flags(Tcp::Options::ReuseAddr)
+                    .maxRequestSize(max_request)
+                    .maxResponseSize(size_t(1) << 30);
+    impl->endpoint->init(opts);
+    impl->endpoint->setHandler(std::make_shared<Handler>(shared));
+    impl->endpoint->serveThreaded();
+  } catch (const std::exception& e) {
+    return io_error("cannot listen on " + options.host + ":" + std::to_string(options.port) + ": " +
+                    e.what());
+  }
+  return std::unique_ptr<Server>(new Server(std::move(impl)));
+}
+
+}  // namespace collido::service

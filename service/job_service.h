@@ -1,0 +1,166 @@
+// What the REST handlers call: accounts and sessions, models, predictions,
+// jobs and their queue, share links, health and metrics. Each call validates
+// its input and answers with an HTTP status and a JSON body, so a handler is
+// one line over it (parse the request, call, send). Long work never happens
+// here: a submitted job goes to the queue and a worker (workers.h) runs it in
+// a `collidoscope job-exec` child process.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "common/status.h"
+#include "job/job.h"
+#include "service/auth.h"
+#include "service/store.h"
+
+namespace collido::service {
+
+using json = nlohmann::json;
+
+struct ServiceConfig {
+  std::string data_dir = "var";  // the database, uploaded models and job results
+  std::string job_executable;    // `collidoscope`, run as `job-exec` for each job
+  uint64_t max_upload_bytes = 64ull << 20;  // an STL body
+  int workers = -1;              // -1: one per visible GPU, else one on the CPU
+  int job_threads = 0;           // CPU threads per job; 0 = the CPUs it may use
+  int max_queued_per_user = 8;
+  double session_ttl_s = 7 * 24 * 3600.0;
+  std::string public_url;        // "http://host:port", for share links and oEmbed
+  // Memory the jobs of this machine may use in all (0 = its physical memory):
+  // a job predicted above it is refused, one above what is free now waits.
+  uint64_t host_bytes = 0;
+  job::RenderSettings render = job::job_render_defaults();
+};
+
+// An answer: the HTTP status, a JSON body, extra headers.
+struct Reply {
+  int status = 200;
+  json body = json::object();
+  std::vector<std::pair<std::string, std::string>> headers;
+};
+Reply error_reply(int status, const std::string& message);
+// The HTTP status of a library error (400, 404, 409, 422, 500, ...).
+int http_status_of(const Status& st);
+
+class WorkerPool;
+
+class JobService {
+ public:
+  // Opens (or creates) the store under config.data_dir, adds the preset models
+  // and the algorithm list, and queues again the jobs a stopped server left running.
+  static Expected<std::unique_ptr<JobService>> open(const ServiceConfig& config);
+  ~JobService();
+
+  // Starts the workers (config.workers of them); stop() cancels nothing: a job
+  // running then is left for the next start to resume from its checkpoint.
+  void start_workers();
+  void stop_workers();
+  // Wakes a worker: a job was queued.
+  void notify_queued();
+
+  const ServiceConfig& config() const { return config_; }
+  // The base URL of share links; set once the port is known (requests may already come).
+  void set_public_url(const std::string& url);
+  std::string public_url() const;
+  Store& store() { return *store_; }
+
+  // Accounts and sessions.
+  Reply create_account(const json& body);
+  // On success *token is the new session's token (for the cookie).
+  Reply create_session(const json& body, double now, std::string* token);
+  Reply delete_session(const std::string& token);
+  // The user a session token belongs to; kNotFound when none (expired, unknown).
+  Expected<User> authenticate(const std::string& token);
+  // The first administrator (`collidoscope admin create`); kInvalidArgument when taken.
+  Status create_admin(const std::string& name, const std::string& password);
+
+  // Models.
+  Reply list_models(const User& u);
+  Reply get_model(const User& u, int64_t id);
+  Reply create_model(const User& u, const json& body);
+  Reply upload_stl(const User& u, int64_t id, const std::string& bytes);
+  // The path of a model's STL (an uploaded file, or the parametric shape
+  // written once on first request).
+  Expected<std::string> model_stl_path(const User& u, int64_t id);
+  Reply delete_model(const User& u, int64_t id);
+
+  Reply algorithms();
+
+  // Jobs.
+  Reply predict(const User& u, const json& body);
+  Reply submit(const User& u, const json& body);
+  Reply list_jobs(const User& u);
+  Reply get_job(const User& u, const std::string& id);
+  Reply cancel_job(const User& u, const std::string& id);
+  Reply delete_job(const User& u, const std::string& id);
+  // A result file of the caller's job, or of a shared one; "" file = the
+  // manifest. kNotFound for anything outside the run directory.
+  Expected<std::string> job_file(const User& u, const std::string& id, const std::string& file);
+  Expected<std::string> shared_file(const std::string& token, const std::string& file);
+
+  // Share links.
+  Reply create_share(const User& u, const std::string& job_id, const json& body);
+  Reply delete_share(const User& u, const std::string& token);
+  // The shared job's public view: state, links, poster, video.
+  Reply share_info(const std::string& token);
+
+  // The demo `serve --demo` starts with (make run): the account "demo", its
+  // password kept in DATA/demo-password (made on the first start, mode 0600),
+  // and a short pour into the paper's wall1, submitted (or its earlier result reused).
+  struct Demo {
+    std::string name, password, job_id, state;
+  };
+  Expected<Demo> start_demo();
+
+  // Administration.
+  Reply admin_logs(const User& u, size_t limit, int64_t before_id);
+
+  Reply health();
+  // Prometheus text: queue length, jobs by state, prediction error of finished jobs.
+  std::string metrics();
+
+  // Used by the workers.
+  void job_started(const Job& j);
+  void job_progress(const std::string& id, const std::string& stage, double progress);
+  void job_finished(const Job& j, const std::string& state, const std::string& error,
+                    const json& manifest, uint64_t peak_host_bytes);
+  std::shared_ptr<std::atomic<bool>> cancel_flag(const std::string& id);
+  void forget_cancel_flag(const std::string& id);
+  std::string job_dir(const std::string& id) const;
+
+ private:
+  explicit JobService(ServiceConfig config);
+  Status seed();
+  // The scene of a request with its wall resolved to what job-exec can load,
+  // and the key that says when two submissions give the same result.
+  struct PreparedJob {
+    json scene;            // as submitted (canonical)
+    job::JobSpec spec;     // what job-exec runs (out_dir not yet set)
+    std::string key;
+    json assessment;       // what is known before it runs
+    uint64_t host_bytes = 0;
+  };
+  Expected<PreparedJob> prepare(const User& u, const json& body);
+  json job_json(const Job& j);
+  json links_of(const std::string& base, const Job& j);
+  Expected<Job> own_job(const User& u, const std::string& id);
+  Expected<std::string> file_in_run(const Job& j, const std::string& file);
+
+  ServiceConfig config_;
+  std::unique_ptr<Store> store_;
+  LoginThrottle throttle_;
+  std::unique_ptr<WorkerPool> workers_;
+  mutable std::mutex url_mu_;
+  std::mutex cancel_mu_;
+  std::map<std::string, std::shared_ptr<std::atomic<bool>>> cancel_flags_;
+  std::atomic<uint64_t> finished_since_start_{0};
+};
+
+}  // namespace collido::service

@@ -1,0 +1,511 @@
+// The service over real HTTP: a server on 127.0.0.1 port 0, libcurl as the
+// client, jobs in collidoscope job-exec children. Every wait is bounded.
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <regex>
+#include <set>
+#include <sstream>
+#include <thread>
+
+#include "common/atomic_file.h"
+#include "service/http_server.h"
+#include "service/job_service.h"
+#include "service/store.h"
+#include "tests/service/http_client.h"
+
+extern char** environ;
+
+namespace collido::service {
+namespace {
+
+namespace fs = std::filesystem;
+using collido::test::http;
+using collido::test::HttpResponse;
+
+std::string temp_dir(const std::string& name) {
+  const fs::path p = fs::temp_directory_path() / (name + "_" + std::to_string(::getpid()));
+  fs::remove_all(p);
+  fs::create_directories(p);
+  return p.string();
+}
+
+std::string read_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// A scene that runs in about a second on one thread, rendered small.
+json tiny_job(const json& wall, int particles = 40, double duration = 0.3) {
+  return {{"scene",
+           {{"wall", wall},
+            {"particles", {{"count", particles}, {"radius", 0.5}}},
+            {"placement", {{"kind", "pour"}}},
+            {"duration", duration},
+            {"fps", 10}}},
+          {"render", {{"width", 160}, {"height", 96}, {"formats", {"mp4", "gif"}}}}};
+}
+
+class Client {
+ public:
+  explicit Client(std::string base) : base_(std::move(base)) {}
+  HttpResponse call(const std::string& method, const std::string& path, const std::string& body = "",
+                    std::vector<std::string> headers = {}) const {
+    if (!token.empty()) headers.push_back("Authorization: Bearer " + token);
+    return http(method, base_ + path, body, headers);
+  }
+  json call_json(const std::string& method, const std::string& path, const json& body = nullptr,
+                 long expect = 200) const {
+    auto r = call(method, path, body.is_null() ? "" : body.dump());
+    EXPECT_EQ(r.status, expect) << method << " " << path << ": " << r.body;
+    return json::parse(r.body, nullptr, false);
+  }
+  // Makes an account and signs in with it.
+  void sign_up(const std::string& name, const std::string& password = "correct horse") {
+    call_json("POST", "/api/v1/accounts", {{"name", name}, {"password", password}}, 201);
+    token = call_json("POST", "/api/v1/sessions", {{"name", name}, {"password", password}})["token"];
+  }
+  // Polls a job until it ends (or the bound passes); the last view of it.
+  json wait_job(const std::string& id, double bound_s = 180) const {
+    const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(bound_s);
+    json j;
+    while (std::chrono::steady_clock::now() < end) {
+      j = call_json("GET", "/api/v1/jobs/" + id);
+      const std::string s = j.value("state", "");
+      if (s == "done" || s == "failed" || s == "cancelled") return j;
+      std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    }
+    ADD_FAILURE() << "job " << id << " did not end in " << bound_s << " s: " << j.dump();
+    return j;
+  }
+  std::string token;
+  const std::string& base() const { return base_; }
+
+ private:
+  std::string base_;
+};
+
+class ServiceTest : public ::testing::Test {
+ protected:
+  void SetUp() override { start(); }
+  void TearDown() override {
+    server_.reset();
+    svc_.reset();
+  }
+  void start(uint64_t host_bytes = 0, int max_queued = 8) {
+    if (dir_.empty()) dir_ = temp_dir(::testing::UnitTest::GetInstance()->current_test_info()->name());
+    ServiceConfig c;
+    c.data_dir = dir_;
+    c.job_executable = COLLIDO_BINARY;
+    c.workers = 1;
+    c.job_threads = 1;
+    c.max_upload_bytes = 1 << 20;
+    c.host_bytes = host_bytes;
+    c.max_queued_per_user = max_queued;
+    auto svc = JobService::open(c);
+    ASSERT_TRUE(svc) << svc.status().message();
+    svc_ = std::move(*svc);
+    ServerOptions o;
+    o.port = 0;
+    o.max_json_bytes = 64 << 10;
+    auto server = Server::start(svc_.get(), o);
+    ASSERT_TRUE(server) << server.status().message();
+    server_ = std::move(*server);
+    base_ = "http://127.0.0.1:" + std::to_string(server_->port());
+    svc_->set_public_url(base_);
+    svc_->start_workers();
+  }
+  Client client() const { return Client(base_); }
+
+  std::string dir_, base_;
+  std::unique_ptr<JobService> svc_;
+  std::unique_ptr<Server> server_;
+};
+
+TEST_F(ServiceTest, SubmitWatchDownloadShareRevoke) {
+  Client c = client();
+  c.sign_up("ada");
+  // A parametric model, then a prediction and a job on it.
+  json model = c.call_json("POST", "/api/v1/models",
+                           {{"name", "mug"}, {"parts", {{{"shape", "cylinder"}, {"r", 5}, {"h", 10}, {"segments", 24}}}}},
+                           201);
+  ASSERT_TRUE(model.contains("id"));
+  EXPECT_EQ(model["kind"], "parametric");
+  EXPECT_GT(model["triangles"].get<int>(), 0);
+  const json wall = {{"model", model["id"]}};
+  json pred = c.call_json("POST", "/api/v1/predict", tiny_job(wall));
+  EXPECT_GT(pred["peak_host_bytes"]["value"].get<double>(), 0);
+  EXPECT_EQ(pred["inputs"]["particles"], 40);
+
+  json job = c.call_json("POST", "/api/v1/jobs", tiny_job(wall), 202);
+  const std::string id = job["id"];
+  EXPECT_EQ(job["state"], "queued");
+  EXPECT_TRUE(job["links"].contains("mp4"));
+  EXPECT_FALSE(job["links"].contains("webm"));  // not asked for
+  job = c.wait_job(id);
+  ASSERT_EQ(job["state"], "done") << job.dump();
+  EXPECT_DOUBLE_EQ(job["progress"].get<double>(), 1.0);
+  EXPECT_GT(job["cost"]["total_s"].get<double>(), 0);
+  EXPECT_GT(job["cost"]["peak_host_bytes"].get<double>(), 0);
+
+  // The video whole, then by Range.
+  const std::string mp4 = job["links"]["mp4"];
+  auto whole = c.call("GET", mp4);
+  ASSERT_EQ(whole.status, 200);
+  EXPECT_EQ(whole.headers["content-type"], "video/mp4");
+  EXPECT_EQ(whole.headers["accept-ranges"], "bytes");
+  EXPECT_EQ(whole.headers.count("content-disposition"), 0u);  // plays inline
+  ASSERT_GT(whole.body.size(), 1000u);
+  EXPECT_EQ(whole.body.substr(4, 4), "ftyp");
+  auto part = c.call("GET", mp4, "", {"Range: bytes=100-199"});
+  EXPECT_EQ(part.status, 206);
+  EXPECT_EQ(part.body, whole.body.substr(100, 100));
+  EXPECT_EQ(part.headers["content-range"], "bytes 100-199/" + std::to_string(whole.body.size()));
+  auto tail = c.call("GET", mp4, "", {"Range: bytes=-10"});
+  EXPECT_EQ(tail.status, 206);
+  EXPECT_EQ(tail.body, whole.body.substr(whole.body.size() - 10));
+  auto beyond = c.call("GET", mp4, "", {"Range: bytes=" + std::to_string(whole.body.size()) + "-"});
+  EXPECT_EQ(beyond.status, 416);
+  EXPECT_EQ(beyond.headers["content-range"], "bytes */" + std::to_string(whole.body.size()));
+  EXPECT_EQ(c.call("GET", job["links"]["gif"]).headers["content-type"], "image/gif");
+
+  // Every artifact the manifest lists is there whole; no temporary file is left.
+  json manifest = c.call_json("GET", job["links"]["manifest"]);
+  for (const json& a : manifest["artifacts"]) {
+    const std::string path = a["path"];
+    if (path.back() == '/') continue;
+    auto f = c.call("GET", "/api/v1/jobs/" + id + "/files/" + path);
+    EXPECT_EQ(f.status, 200) << path;
+    EXPECT_EQ(f.body.size(), a["bytes"].get<size_t>()) << path;
+  }
+
+  // Shared: opens without a session, then revoked.
+  json share = c.call_json("POST", "/api/v1/jobs/" + id + "/shares", nullptr, 201);
+  const std::string token = share["token"];
+  EXPECT_EQ(share["url"], c.base() + "/s/" + token);
+  Client anon = client();
+  auto page = anon.call("GET", "/s/" + token);
+  EXPECT_EQ(page.status, 200);
+  EXPECT_NE(page.body.find("<video"), std::string::npos);
+  auto shared_video = anon.call("GET", "/s/" + token + "/render/video.mp4", "", {"Range: bytes=0-99"});
+  EXPECT_EQ(shared_video.status, 206);
+  EXPECT_EQ(shared_video.body, whole.body.substr(0, 100));
+  json oembed = anon.call_json("GET", "/api/v1/oembed?url=" + c.base() + "/s/" + token);
+  EXPECT_EQ(oembed["type"], "video");
+  EXPECT_NE(oembed["html"].get<std::string>().find("/embed/" + token), std::string::npos);
+  EXPECT_EQ(anon.call("GET", "/embed/" + token).status, 200);
+  EXPECT_EQ(anon.call("GET", mp4).status, 401);  // the owner's link needs the session
+  EXPECT_EQ(c.call("DELETE", "/api/v1/shares/" + token).status, 204);
+  EXPECT_EQ(anon.call("GET", "/s/" + token + "/render/video.mp4").status, 404);
+  EXPECT_EQ(anon.call("GET", "/s/" + token).status, 404);
+
+  // The same scene again: the earlier result at once; fresh runs it again.
+  json again = c.call_json("POST", "/api/v1/jobs", tiny_job(wall), 200);
+  EXPECT_EQ(again["state"], "done");
+  EXPECT_EQ(again["reused_from"], id);
+  EXPECT_EQ(c.call("GET", again["links"]["mp4"].get<std::string>()).body, whole.body);
+  json fresh = tiny_job(wall);
+  fresh["fresh"] = true;
+  EXPECT_EQ(c.call_json("POST", "/api/v1/jobs", fresh, 202)["state"], "queued");
+
+  // The finished job wrote its log row.
+  auto rows = svc_->store().logs(10, 0);
+  ASSERT_TRUE(rows);
+  ASSERT_GE(rows->size(), 1u);
+  EXPECT_EQ(rows->back().job_id, id);
+  EXPECT_GT(rows->back().total_s, 0);
+  EXPECT_GT(rows->back().predicted_host_bytes, 0u);
+}
+
+TEST_F(ServiceTest, AccountsSessionsAndOwnership) {
+  Client a = client(), b = client();
+  a.sign_up("alice");
+  b.sign_up("bob");
+  EXPECT_EQ(a.call("POST", "/api/v1/accounts", R"({"name":"alice","password":"another one"})").status, 409);
+  EXPECT_EQ(a.call("POST", "/api/v1/accounts", R"({"name":"carol","password":"short"})").status, 400);
+  EXPECT_EQ(a.call("POST", "/api/v1/accounts", R"({"name":"../x","password":"long enough"})").status, 400);
+  // Wrong password: 401, and after three the name must wait (429, Retry-After).
+  Client anon = client();
+  for (int i = 0; i < 3; ++i)
+    EXPECT_EQ(anon.call("POST", "/api/v1/sessions", R"({"name":"alice","password":"wrong guess"})").status, 401);
+  auto slowed = anon.call("POST", "/api/v1/sessions", R"({"name":"alice","password":"correct horse"})");
+  EXPECT_EQ(slowed.status, 429);
+  EXPECT_FALSE(slowed.headers["retry-after"].empty());
+  EXPECT_EQ(anon.call("POST", "/api/v1/sessions", R"({"name":"nobody","password":"whatever1"})").status, 401);
+  // The cookie signs in as the token does.
+  auto login = anon.call("POST", "/api/v1/sessions", R"({"name":"bob","password":"correct horse"})");
+  ASSERT_EQ(login.status, 200);
+  const std::string cookie = login.headers["set-cookie"];
+  EXPECT_NE(cookie.find("HttpOnly"), std::string::npos);
+  EXPECT_NE(cookie.find("SameSite=Strict"), std::string::npos);
+  const std::string pair = cookie.substr(0, cookie.find(';'));
+  auto me = anon.call("GET", "/api/v1/me", "", {"Cookie: " + pair});
+  EXPECT_EQ(me.status, 200);
+  EXPECT_EQ(json::parse(me.body)["name"], "bob");
+  EXPECT_EQ(anon.call("GET", "/api/v1/me", "", {"Authorization: Bearer forged"}).status, 401);
+  EXPECT_EQ(anon.call("GET", "/api/v1/jobs").status, 401);
+
+  // Bob's job and model are not Alice's to see, fetch, cancel, share or delete.
+  json job = b.call_json("POST", "/api/v1/jobs", tiny_job("wall1", 20, 0.2), 202);
+  const std::string id = job["id"];
+  for (auto [method, path] : std::vector<std::pair<std::string, std::string>>{
+           {"GET", "/api/v1/jobs/" + id},
+           {"POST", "/api/v1/jobs/" + id + "/cancel"},
+           {"POST", "/api/v1/jobs/" + id + "/shares"},
+           {"DELETE", "/api/v1/jobs/" + id},
+           {"GET", "/api/v1/jobs/" + id + "/files/result.json"},
+           {"GET", "/api/v1/jobs/nosuchjob"}})
+    EXPECT_EQ(a.call(method, path).status, 404) << method << " " << path;
+  json model = b.call_json("POST", "/api/v1/models", {{"name", "cup"}, {"spec", "cylinder:r=2,h=3"}}, 201);
+  const std::string mid = std::to_string(model["id"].get<int>());
+  EXPECT_EQ(a.call("GET", "/api/v1/models/" + mid).status, 404);
+  EXPECT_EQ(a.call("DELETE", "/api/v1/models/" + mid).status, 404);
+  EXPECT_EQ(a.call("POST", "/api/v1/jobs", tiny_job({{"model", model["id"]}}).dump()).status, 400);
+  // Presets are everyone's; an admin route is not.
+  json models = a.call_json("GET", "/api/v1/models");
+  std::set<std::string> names;
+  for (const json& m : models) names.insert(m["name"].get<std::string>());
+  EXPECT_TRUE(names.count("wall1") && names.count("wall2"));
+  EXPECT_FALSE(names.count("cup"));
+  EXPECT_EQ(a.call("GET", "/api/v1/admin/logs").status, 403);
+  EXPECT_EQ(b.call("DELETE", "/api/v1/sessions").status, 204);
+  EXPECT_EQ(b.call("GET", "/api/v1/me").status, 401);
+  EXPECT_EQ(b.call("GET", "/api/v1/jobs/" + id).status, 401);
+}
+
+TEST_F(ServiceTest, BadInputGetsClearErrorsAndTheServerGoesOn) {
+  Client c = client();
+  c.sign_up("mallory");
+  auto bad = c.call("POST", "/api/v1/jobs", "{\"scene\": ");
+  EXPECT_EQ(bad.status, 400);
+  EXPECT_NE(json::parse(bad.body)["error"].get<std::string>().find("JSON"), std::string::npos);
+  // Scenes: unknown keys, impossible values, a server path as the wall.
+  json s = tiny_job("wall1");
+  s["scene"]["particles"]["count"] = -5;
+  EXPECT_EQ(c.call("POST", "/api/v1/jobs", s.dump()).status, 400);
+  s = tiny_job("/etc/passwd");
+  auto path_wall = c.call("POST", "/api/v1/jobs", s.dump());
+  EXPECT_EQ(path_wall.status, 400);
+  EXPECT_NE(path_wall.body.find("model"), std::string::npos);
+  s = tiny_job({{"file", "/etc/passwd"}});
+  EXPECT_EQ(c.call("POST", "/api/v1/jobs", s.dump()).status, 400);
+  s = tiny_job("wall1");
+  s["scene"]["colour"] = "red";
+  EXPECT_EQ(c.call("POST", "/api/v1/jobs", s.dump()).status, 400);
+  s = tiny_job("wall1");
+  s["render"]["width"] = 100000;
+  EXPECT_EQ(c.call("POST", "/api/v1/predict", s.dump()).status, 400);
+  // A body over the JSON limit, and a forged huge Content-Length: 413, and on.
+  EXPECT_EQ(c.call("POST", "/api/v1/jobs", std::string(100 << 10, ' ')).status, 413);
+  EXPECT_EQ(c.call("GET", "/api/v1/health").status, 200);
+  auto forged = c.call("POST", "/api/v1/jobs", "{}", {"Content-Length: 99999999999999"});
+  EXPECT_EQ(forged.status, 413);
+  EXPECT_EQ(c.call("GET", "/api/v1/health").status, 200);
+  // STL uploads: bytes that do not parse get the loader's message; too large, 413.
+  json model = c.call_json("POST", "/api/v1/models", {{"name", "upload"}, {"kind", "stl"}}, 201);
+  const std::string stl = "/api/v1/models/" + std::to_string(model["id"].get<int>()) + "/stl";
+  auto junk = c.call("PUT", stl, "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 zero\n");
+  EXPECT_EQ(junk.status, 422);
+  EXPECT_FALSE(json::parse(junk.body)["error"].get<std::string>().empty());
+  EXPECT_EQ(c.call("PUT", stl, std::string(2 << 20, 'x')).status, 413);
+  EXPECT_EQ(c.call("GET", stl).status, 404);  // nothing stored
+  // A real STL is taken and served back byte for byte.
+  const std::string ascii =
+      "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\n"
+      "endloop\nendfacet\nendsolid t\n";
+  auto ok = c.call("PUT", stl, ascii, {"Content-Type: model/stl"});
+  EXPECT_EQ(ok.status, 200) << ok.body;
+  EXPECT_EQ(json::parse(ok.body)["triangles"], 1);
+  EXPECT_EQ(c.call("GET", stl).body, ascii);
+  // Unknown ids, traversal, methods.
+  EXPECT_EQ(c.call("GET", "/api/v1/models/999999").status, 404);
+  EXPECT_EQ(c.call("GET", "/api/v1/models/abc").status, 404);
+  EXPECT_EQ(c.call("GET", "/api/v1/jobs/x/files/../../collidoscope.db").status, 404);
+  EXPECT_EQ(c.call("GET", "/api/v1/jobs/x/files/%2e%2e/%2e%2e/collidoscope.db").status, 404);
+  EXPECT_EQ(c.call("GET", "/s/../collidoscope.db").status, 404);
+  EXPECT_EQ(c.call("GET", "/nothing/here").status, 404);
+  EXPECT_EQ(c.call("PATCH", "/api/v1/jobs").status, 405);
+  // Strings that look like SQL are stored and returned as they are.
+  const std::string sly = "x'); DROP TABLE users; --\"";
+  json m2 = c.call_json("POST", "/api/v1/models", {{"name", sly}, {"spec", "box:x=1,y=1,z=1"}}, 201);
+  EXPECT_EQ(c.call_json("GET", "/api/v1/models/" + std::to_string(m2["id"].get<int>()))["name"], sly);
+  EXPECT_EQ(c.call("POST", "/api/v1/sessions", json{{"name", sly}, {"password", sly}}.dump()).status, 401);
+  EXPECT_EQ(c.call("GET", "/api/v1/me").status, 200);
+}
+
+TEST_F(ServiceTest, ClientClosingMidVideoLeavesTheServerRunning) {
+  Client c = client();
+  c.sign_up("viewer");
+  // A 1 MiB file to download: an STL upload is the quickest one to make.
+  json model = c.call_json("POST", "/api/v1/models", {{"name", "big"}, {"kind", "stl"}}, 201);
+  const std::string stl = "/api/v1/models/" + std::to_string(model["id"].get<int>()) + "/stl";
+  std::string bin(80, ' ');
+  const uint32_t n = 10000;
+  bin.append(reinterpret_cast<const char*>(&n), 4);
+  for (uint32_t i = 0; i < n; ++i) {
+    float f[12] = {0, 0, 1, float(i), 0, 0, float(i) + 1, 0, 0, float(i), 1, 0};
+    bin.append(reinterpret_cast<const char*>(f), sizeof f);
+    bin.append(2, '\0');
+  }
+  ASSERT_EQ(c.call("PUT", stl, bin).status, 200);
+  for (int round = 0; round < 5; ++round) {
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_port = htons(server_->port());
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    ASSERT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+    const std::string req = "GET " + stl + " HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " + c.token + "\r\n\r\n";
+    ASSERT_EQ(::send(fd, req.data(), req.size(), 0), ssize_t(req.size()));
+    char buf[512];
+    ASSERT_GT(::recv(fd, buf, sizeof buf, 0), 0);
+    linger l{1, 0};  // close with a reset, as a browser tab that goes away
+    ::setsockopt(fd, SOL_SOCKET, SO_LINGER, &l, sizeof l);
+    ::close(fd);
+  }
+  EXPECT_EQ(c.call("GET", "/api/v1/health").status, 200);
+  EXPECT_EQ(c.call("GET", stl).body.size(), bin.size());
+}
+
+TEST_F(ServiceTest, AdmissionQueueLimitAndCancel) {
+  Client c = client();
+  c.sign_up("busy");
+  // A job that runs a while, cancelled while it runs.
+  json long_job = tiny_job("wall1", 400, 20);
+  json job = c.call_json("POST", "/api/v1/jobs", long_job, 202);
+  const std::string id = job["id"];
+  for (int i = 0; i < 300 && c.call_json("GET", "/api/v1/jobs/" + id)["state"] != "running"; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  // While it runs, the queue fills up to the limit (8) and no further.
+  int queued = 0;
+  for (int i = 0; i < 9; ++i) {
+    json s = tiny_job("wall1", 20 + i, 0.2);
+    auto r = c.call("POST", "/api/v1/jobs", s.dump());
+    if (r.status == 202) ++queued;
+    else
+      EXPECT_EQ(r.status, 429) << r.body;
+  }
+  EXPECT_EQ(queued, 8);
+  json cancelled = c.call_json("POST", "/api/v1/jobs/" + id + "/cancel", nullptr, 202);
+  EXPECT_EQ(c.wait_job(id, 60)["state"], "cancelled");
+  EXPECT_EQ(c.call("POST", "/api/v1/jobs/" + id + "/cancel").status, 409);
+  for (const json& j : c.call_json("GET", "/api/v1/jobs"))
+    if (j["state"] == "queued") c.call("POST", "/api/v1/jobs/" + j["id"].get<std::string>() + "/cancel");
+  std::string metrics = c.call("GET", "/metrics").body;
+  EXPECT_NE(metrics.find("collidoscope_jobs{state=\"cancelled\"}"), std::string::npos);
+  EXPECT_NE(metrics.find("collidoscope_queue_length 0"), std::string::npos) << metrics;
+}
+
+TEST_F(ServiceTest, AJobThatCanNeverFitIsRefusedWithTheFigures) {
+  server_.reset();
+  svc_.reset();
+  start(/*host_bytes=*/16 << 20);
+  Client c = client();
+  c.sign_up("big");
+  auto r = c.call("POST", "/api/v1/jobs", tiny_job("wall1", 200000, 0.2).dump());
+  EXPECT_EQ(r.status, 409) << r.body;
+  EXPECT_NE(r.body.find("memory"), std::string::npos) << r.body;
+  EXPECT_NE(r.body.find("iB"), std::string::npos) << r.body;  // the figures, in bytes units
+}
+
+TEST(OpenApi, DescribesEveryRouteAndNoOther) {
+  const json doc = json::parse(openapi_document());
+  ASSERT_EQ(doc["openapi"].get<std::string>().substr(0, 2), "3.");
+  std::set<std::string> documented, routed;
+  for (auto p = doc["paths"].begin(); p != doc["paths"].end(); ++p)
+    for (auto m = p->begin(); m != p->end(); ++m) {
+      std::string method = m.key();
+      for (char& ch : method) ch = char(std::toupper((unsigned char)ch));
+      documented.insert(method + " " + p.key());
+    }
+  for (const RouteInfo& r : route_table())
+    routed.insert(r.method + " " + std::regex_replace(r.pattern, std::regex("\\{(\\w+)\\*\\}"), "{$1}"));
+  EXPECT_EQ(documented, routed);
+}
+
+// The server as its own process, killed with SIGKILL while a job runs: it
+// comes back with the job resumed and finished and the database intact.
+TEST(ServeProcess, KilledServerResumesItsJob) {
+  const std::string dir = temp_dir("serve_kill");
+  auto start = [&](const std::string& log) {
+    const std::string out = dir + "/" + log;
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_addopen(&fa, 1, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_adddup2(&fa, 1, 2);
+    std::vector<std::string> args = {COLLIDO_BINARY, "serve", "--port", "0", "--data", dir + "/var",
+                                     "--job-threads", "1", "--web", ""};
+    std::vector<char*> argv;
+    for (auto& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    pid_t pid = 0;
+    EXPECT_EQ(posix_spawn(&pid, COLLIDO_BINARY, &fa, nullptr, argv.data(), environ), 0);
+    posix_spawn_file_actions_destroy(&fa);
+    std::smatch m;
+    for (int i = 0; i < 200; ++i) {
+      const std::string text = read_file(out);
+      if (std::regex_search(text, m, std::regex("serving on (http://127.0.0.1:[0-9]+)")))
+        return std::make_pair(pid, m[1].str());
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    ADD_FAILURE() << "the server did not start: " << read_file(out);
+    return std::make_pair(pid, std::string());
+  };
+  auto [pid, base] = start("serve1.log");
+  ASSERT_FALSE(base.empty());
+  Client c(base);
+  c.sign_up("kill");
+  json job = c.call_json("POST", "/api/v1/jobs", tiny_job("wall1", 1500, 4), 202);
+  const std::string id = job["id"];
+  // Killed once the job has written a checkpoint (about a second of running).
+  const std::string checkpoint = dir + "/var/jobs/" + id + "/run/checkpoint.bin";
+  for (int i = 0; i < 1200 && !fs::exists(checkpoint); ++i) {
+    const json j = c.call_json("GET", "/api/v1/jobs/" + id);
+    ASSERT_NE(j["state"], "done") << "the job ended before the kill; make it longer";
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  ASSERT_TRUE(fs::exists(checkpoint));
+  ::kill(pid, SIGKILL);
+  ::waitpid(pid, nullptr, 0);
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // its job-exec child dies with it
+  auto [pid2, base2] = start("serve2.log");
+  ASSERT_FALSE(base2.empty());
+  Client c2(base2);
+  c2.token = c.token;  // sessions live in the database
+  json done = c2.wait_job(id, 240);
+  EXPECT_EQ(done["state"], "done") << done.dump();
+  EXPECT_EQ(done["attempts"], 2);
+  // Resumed, not restarted: the manifest says from which frame.
+  json manifest = c2.call_json("GET", "/api/v1/jobs/" + id + "/files/result.json");
+  EXPECT_GT(manifest["resumed_from_frame"].get<int>(), 0) << manifest.dump();
+  ::kill(pid2, SIGTERM);
+  ::waitpid(pid2, nullptr, 0);
+  // No half file behind a final name, and the database is sound.
+  for (const auto& e : fs::recursive_directory_iterator(dir + "/var/jobs/" + id)) {
+    EXPECT_FALSE(is_temp_name(e.path().filename().string())) << e.path();
+  }
+  for (const json& a : manifest["artifacts"]) {
+    const std::string path = a["path"];
+    if (path.back() == '/') continue;
+    EXPECT_EQ(fs::file_size(dir + "/var/jobs/" + id + "/run/" + path), a["bytes"].get<uint64_t>());
+  }
+  auto store = open_sqlite_store(dir + "/var/collidoscope.db");
+  ASSERT_TRUE(store);
+  EXPECT_EQ(*(*store)->integrity_check(), "ok");
+}
+
+}  // namespace
+}  // namespace collido::service
