@@ -18,6 +18,7 @@
 #include <sstream>
 
 #include "job/run_dir.h"
+#include "service/http_parse.h"
 
 namespace collido::service {
 
@@ -61,20 +62,6 @@ struct Response {
   }
 };
 
-// The web UI's file types (a run's own files take job::mime_type).
-std::string web_mime_type(const std::string& path) {
-  const std::string ext = fs::path(path).extension().string();
-  static const std::pair<const char*, const char*> kTypes[] = {
-      {".html", "text/html; charset=utf-8"}, {".js", "text/javascript; charset=utf-8"},
-      {".mjs", "text/javascript; charset=utf-8"}, {".css", "text/css; charset=utf-8"},
-      {".svg", "image/svg+xml"}, {".ico", "image/x-icon"}, {".png", "image/png"},
-      {".json", "application/json"}, {".map", "application/json"}, {".woff2", "font/woff2"},
-      {".txt", "text/plain; charset=utf-8"}};
-  for (const auto& [e, type] : kTypes)
-    if (ext == e) return type;
-  return "application/octet-stream";
-}
-
 Response json_response(const Reply& r) {
   Response out;
   out.status = r.status;
@@ -86,97 +73,7 @@ Response error_response(int status, const std::string& message) {
   return json_response(error_reply(status, message));
 }
 
-std::string percent_decode(const std::string& s, bool* ok) {
-  std::string out;
-  for (size_t i = 0; i < s.size(); ++i) {
-    if (s[i] == '%') {
-      if (i + 2 >= s.size() || !std::isxdigit((unsigned char)s[i + 1]) ||
-          !std::isxdigit((unsigned char)s[i + 2])) {
-        *ok = false;
-        return {};
-      }
-      out += char(std::stoi(s.substr(i + 1, 2), nullptr, 16));
-      i += 2;
-    } else {
-      out += s[i];
-    }
-  }
-  if (out.find('\0') != std::string::npos) *ok = false;
-  return out;
-}
-
-std::vector<std::string> split_path(const std::string& path) {
-  std::vector<std::string> out;
-  std::string part;
-  std::istringstream in(path);
-  while (std::getline(in, part, '/'))
-    if (!part.empty()) out.push_back(part);
-  return out;
-}
-
-std::string html_escape(const std::string& s) {
-  std::string out;
-  for (char c : s) {
-    switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      case '\'': out += "&#39;"; break;
-      default: out += c;
-    }
-  }
-  return out;
-}
-
 // ---- files, with Range ------------------------------------------------------
-
-// A byte range of a file of `size` bytes from a Range header: first and last
-// byte. nullopt = answer the whole file (no header, a syntax we ignore, or
-// several ranges, which RFC 9110 lets a server answer whole); *unsatisfiable
-// when the range starts beyond the end.
-std::optional<std::pair<uint64_t, uint64_t>> parse_range(const std::string& header, uint64_t size,
-                                                         bool* unsatisfiable) {
-  *unsatisfiable = false;
-  const std::string prefix = "bytes=";
-  if (header.compare(0, prefix.size(), prefix) != 0) return std::nullopt;
-  const std::string spec = header.substr(prefix.size());
-  if (spec.find(',') != std::string::npos) return std::nullopt;
-  const auto dash = spec.find('-');
-  if (dash == std::string::npos) return std::nullopt;
-  auto number = [](const std::string& t, uint64_t* v) {
-    if (t.empty() || t.size() > 19 ||
-        !std::all_of(t.begin(), t.end(), [](unsigned char c) { return std::isdigit(c); }))
-      return false;
-    *v = std::stoull(t);
-    return true;
-  };
-  const std::string a = spec.substr(0, dash), b = spec.substr(dash + 1);
-  uint64_t first = 0, last = 0;
-  if (a.empty()) {  // the last N bytes
-    uint64_t n = 0;
-    if (!number(b, &n)) return std::nullopt;
-    if (n == 0 || size == 0) {
-      *unsatisfiable = true;
-      return std::nullopt;
-    }
-    first = n >= size ? 0 : size - n;
-    last = size - 1;
-  } else {
-    if (!number(a, &first)) return std::nullopt;
-    if (b.empty()) {
-      last = size ? size - 1 : 0;
-    } else {
-      if (!number(b, &last) || last < first) return std::nullopt;
-      last = std::min(last, size ? size - 1 : 0);
-    }
-    if (first >= size) {
-      *unsatisfiable = true;
-      return std::nullopt;
-    }
-  }
-  return std::make_pair(first, last);
-}
 
 Response file_response(const std::string& path, const Http::Request& req) {
   std::error_code ec;
@@ -703,97 +600,20 @@ class Handler : public Http::Handler {
       const std::string head = g.head.substr(0, end);
       i += end + 4 - before;
       g.head.clear();
-      uint64_t length = 0;
-      std::string path;
-      bool chunked = false, bad = false;
-      parse_head(head, &path, &length, &chunked, &bad);
-      if (bad) return refuse(g, peer, 400, "Bad Request", "a malformed Content-Length");
-      if (chunked)
+      const RequestHead h = parse_request_head(head);
+      if (h.bad_length) return refuse(g, peer, 400, "Bad Request", "a malformed Content-Length");
+      if (h.chunked)
         return refuse(g, peer, 411, "Length Required", "send the body with a Content-Length");
-      const uint64_t limit = limit_for(path);
-      if (length > limit)
+      const uint64_t limit = limit_for(h.target);
+      if (h.content_length > limit)
         return refuse(g, peer, 413, "Payload Too Large",
-                      "the body is " + std::to_string(length) + " bytes; this route takes at most " +
-                          std::to_string(limit));
+                      "the body is " + std::to_string(h.content_length) +
+                          " bytes; this route takes at most " + std::to_string(limit));
       forward->append(without_unparsable_headers(head));
       forward->append("\r\n\r\n");
-      g.body_left = length;
+      g.body_left = h.content_length;
     }
     return true;
-  }
-
-  // Pistache parses the headers it knows (Content-Type, Accept, Host, ...)
-  // and answers 415 or 400 for the whole request when one fails: a
-  // `Content-Type: model/stl` upload (the registered type for STL) would be
-  // refused. None of those headers steers a route of ours, so a value that
-  // does not parse is dropped instead.
-  static std::string without_unparsable_headers(const std::string& head) {
-    std::string out;
-    size_t pos = 0;
-    bool first = true;
-    while (pos <= head.size()) {
-      size_t eol = head.find("\r\n", pos);
-      if (eol == std::string::npos) eol = head.size();
-      const std::string line = head.substr(pos, eol - pos);
-      pos = eol + 2;
-      bool keep = true;
-      const auto colon = line.find(':');
-      if (!first && colon != std::string::npos) {
-        const std::string name = line.substr(0, colon);
-        std::string value = line.substr(colon + 1);
-        value.erase(0, value.find_first_not_of(" \t"));
-        auto& registry = Http::Header::Registry::instance();
-        if (registry.isRegistered(name)) {
-          try {
-            registry.makeHeader(name)->parseRaw(value.data(), value.size());
-          } catch (...) {
-            keep = false;
-          }
-        }
-      }
-      if (keep) {
-        if (!first) out += "\r\n";
-        out += line;
-      }
-      first = false;
-    }
-    return out;
-  }
-
-  static void parse_head(const std::string& head, std::string* path, uint64_t* length,
-                         bool* chunked, bool* bad) {
-    std::istringstream in(head);
-    std::string line;
-    bool first = true, seen_length = false;
-    while (std::getline(in, line)) {
-      if (!line.empty() && line.back() == '\r') line.pop_back();
-      if (first) {
-        first = false;
-        const auto a = line.find(' ');
-        const auto b = a == std::string::npos ? a : line.find(' ', a + 1);
-        if (a != std::string::npos) *path = line.substr(a + 1, b == std::string::npos ? b : b - a - 1);
-        continue;
-      }
-      const auto colon = line.find(':');
-      if (colon == std::string::npos) continue;
-      std::string key = line.substr(0, colon), value = line.substr(colon + 1);
-      for (char& c : key) c = char(std::tolower((unsigned char)c));
-      value.erase(0, value.find_first_not_of(" \t"));
-      while (!value.empty() && (value.back() == ' ' || value.back() == '\t')) value.pop_back();
-      if (key == "content-length") {
-        if (value.empty() || value.size() > 19 ||
-            !std::all_of(value.begin(), value.end(), [](unsigned char c) { return std::isdigit(c); }) ||
-            (seen_length && std::stoull(value) != *length)) {
-          *bad = true;
-          return;
-        }
-        *length = std::stoull(value);
-        seen_length = true;
-      } else if (key == "transfer-encoding") {
-        for (char& c : value) c = char(std::tolower((unsigned char)c));
-        if (value.find("chunked") != std::string::npos) *chunked = true;
-      }
-    }
   }
 
   // The largest body a path may carry: an STL upload, else a JSON document.

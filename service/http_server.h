@@ -1,5 +1,5 @@
 // The HTTP side of the service: Pistache 0.0.5's endpoint with our own route
-// table (routes.h), request guard and file responses with Range. What 0.0.5
+// table (make_routes in http_server.cpp), request guard and file responses with Range. What 0.0.5
 // does and how each part is met (DESIGN.md, "Service and storage"):
 // - it buffers a request whole and reserves the declared Content-Length before
 //   checking its limit: a guard reads each request's headers as they arrive

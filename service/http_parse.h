@@ -1,0 +1,49 @@
+// The pieces of HTTP the server reads itself, before or beside Pistache's
+// parser: request heads (the guard's limits), Range headers, paths. Pure
+// functions of their text, so they are fuzzed (fuzz/fuzz_http.cpp) and tested
+// without a socket.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace collido::service {
+
+// What the guard needs of a request head (the bytes before the blank line).
+struct RequestHead {
+  std::string target;           // the request line's target: "/api/v1/jobs?x=1"
+  uint64_t content_length = 0;  // 0 when absent
+  bool chunked = false;         // Transfer-Encoding names chunked
+  // A Content-Length that is not a plain number, two that disagree, or a bare
+  // CR or LF inside the head (read differently by different parsers: refused).
+  bool bad_length = false;
+};
+RequestHead parse_request_head(const std::string& head);
+
+// The head without the header lines Pistache 0.0.5 would fail to parse.
+// Pistache parses the headers it knows (Content-Type, Accept, Host, ...) and
+// answers 415 or 400 for the whole request when one fails: a
+// `Content-Type: model/stl` upload (the registered type for STL) would be
+// refused. None of those headers steers a route of ours, so a line whose value
+// does not parse is dropped instead.
+std::string without_unparsable_headers(const std::string& head);
+
+// A byte range of a file of `size` bytes from a Range header: first and last
+// byte. nullopt = answer the whole file (no header, a syntax we ignore, or
+// several ranges, which RFC 9110 lets a server answer whole); *unsatisfiable
+// when the range starts beyond the end.
+std::optional<std::pair<uint64_t, uint64_t>> parse_range(const std::string& header, uint64_t size,
+                                                         bool* unsatisfiable);
+
+// %XX decoding of one path segment; *ok = false on a malformed escape or a NUL.
+std::string percent_decode(const std::string& s, bool* ok);
+// The non-empty segments of a path ("/a//b/" -> {"a", "b"}).
+std::vector<std::string> split_path(const std::string& path);
+std::string html_escape(const std::string& s);
+// The web UI's file types (a run's own files take job::mime_type).
+std::string web_mime_type(const std::string& path);
+
+}  // namespace collido::service

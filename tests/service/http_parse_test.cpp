@@ -1,0 +1,85 @@
+// The HTTP pieces the server reads itself: request heads for the guard,
+// header cleaning for Pistache, Range, paths.
+#include <gtest/gtest.h>
+
+#include "service/http_parse.h"
+
+namespace collido::service {
+namespace {
+
+TEST(HttpParse, RequestHeadsGiveTargetLengthAndChunked) {
+  RequestHead h = parse_request_head("PUT /api/v1/models/3/stl?x=1 HTTP/1.1\r\nHost: a\r\ncontent-length:  684 ");
+  EXPECT_EQ(h.target, "/api/v1/models/3/stl?x=1");
+  EXPECT_EQ(h.content_length, 684u);
+  EXPECT_FALSE(h.chunked);
+  EXPECT_FALSE(h.bad_length);
+  EXPECT_TRUE(parse_request_head("POST / HTTP/1.1\r\nTransfer-Encoding: gzip, Chunked").chunked);
+  // Lengths two parsers could read differently are refused.
+  for (const char* head : {"POST / HTTP/1.1\r\nContent-Length: 5\r\nContent-Length: 6",
+                           "POST / HTTP/1.1\r\nContent-Length: -1",
+                           "POST / HTTP/1.1\r\nContent-Length: 1e9",
+                           "POST / HTTP/1.1\r\nContent-Length: 99999999999999999999",
+                           "POST / HTTP/1.1\r\nContent-Length:",
+                           "POST / HTTP/1.1\nContent-Length: 5",
+                           "POST / HTTP/1.1\r\nX: a\rContent-Length: 5"})
+    EXPECT_TRUE(parse_request_head(head).bad_length) << head;
+  EXPECT_FALSE(parse_request_head("POST / HTTP/1.1\r\nContent-Length: 5\r\nContent-Length: 5").bad_length);
+}
+
+TEST(HttpParse, HeadersPistacheCannotParseAreDroppedAndTheRestKept) {
+  const std::string head =
+      "PUT /api/v1/models/1/stl HTTP/1.1\r\nHost: 127.0.0.1:8080\r\nContent-Type: model/stl\r\n"
+      "Content-Length: 84\r\nX-Anything: model/stl";
+  const std::string clean = without_unparsable_headers(head);
+  EXPECT_EQ(clean.find("Content-Type"), std::string::npos) << clean;
+  EXPECT_NE(clean.find("PUT /api/v1/models/1/stl HTTP/1.1\r\n"), std::string::npos);
+  EXPECT_NE(clean.find("Host: 127.0.0.1:8080"), std::string::npos);
+  EXPECT_NE(clean.find("Content-Length: 84"), std::string::npos);
+  EXPECT_NE(clean.find("X-Anything: model/stl"), std::string::npos);  // not Pistache's to parse
+  const std::string json_head = "POST / HTTP/1.1\r\nContent-Type: application/json";
+  EXPECT_EQ(without_unparsable_headers(json_head), json_head);
+}
+
+TEST(HttpParse, RangesWithinTheFileOrWhole) {
+  bool unsat = false;
+  using R = std::pair<uint64_t, uint64_t>;
+  EXPECT_EQ(parse_range("bytes=100-199", 1000, &unsat), R(100, 199));
+  EXPECT_EQ(parse_range("bytes=100-", 1000, &unsat), R(100, 999));
+  EXPECT_EQ(parse_range("bytes=900-5000", 1000, &unsat), R(900, 999));
+  EXPECT_EQ(parse_range("bytes=-10", 1000, &unsat), R(990, 999));
+  EXPECT_EQ(parse_range("bytes=-5000", 1000, &unsat), R(0, 999));
+  EXPECT_FALSE(unsat);
+  // Answered whole: absent, other units, several ranges, nonsense, reversed.
+  for (const char* h : {"", "items=0-1", "bytes=0-1,5-6", "bytes=a-b", "bytes=5-1", "bytes=--1", "bytes=1"}) {
+    EXPECT_FALSE(parse_range(h, 1000, &unsat)) << h;
+    EXPECT_FALSE(unsat) << h;
+  }
+  // Beyond the end, or an empty suffix: 416.
+  EXPECT_FALSE(parse_range("bytes=1000-", 1000, &unsat));
+  EXPECT_TRUE(unsat);
+  EXPECT_FALSE(parse_range("bytes=-0", 1000, &unsat));
+  EXPECT_TRUE(unsat);
+  EXPECT_FALSE(parse_range("bytes=0-", 0, &unsat));
+  EXPECT_TRUE(unsat);
+}
+
+TEST(HttpParse, PathsDecodeAndRefuseNul) {
+  bool ok = true;
+  EXPECT_EQ(percent_decode("%2e%2E", &ok), "..");
+  EXPECT_TRUE(ok);
+  percent_decode("%zz", &ok);
+  EXPECT_FALSE(ok);
+  ok = true;
+  percent_decode("a%00b", &ok);
+  EXPECT_FALSE(ok);
+  ok = true;
+  percent_decode("abc%4", &ok);
+  EXPECT_FALSE(ok);
+  EXPECT_EQ(split_path("//api/v1//jobs/"), (std::vector<std::string>{"api", "v1", "jobs"}));
+  EXPECT_EQ(html_escape("<a href=\"x\">'&'</a>"), "&lt;a href=&quot;x&quot;&gt;&#39;&amp;&#39;&lt;/a&gt;");
+  EXPECT_EQ(web_mime_type("js/app.js"), "text/javascript; charset=utf-8");
+  EXPECT_EQ(web_mime_type("noext"), "application/octet-stream");
+}
+
+}  // namespace
+}  // namespace collido::service
