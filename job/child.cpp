@@ -40,10 +40,11 @@ std::string status_line(const Status& s) {
 
 Expected<std::unique_ptr<ChildJob>> ChildJob::start(const std::string& executable,
                                                     const std::string& spec_path,
-                                                    const std::string& log_path) {
+                                                    const std::string& log_path,
+                                                    const std::vector<std::string>& env_overrides) {
   auto process = Subprocess::start(
       {executable, "job-exec", spec_path, "--progress-fd", std::to_string(kProgressFd)},
-      kProgressFd, log_path);
+      kProgressFd, log_path, env_overrides);
   if (!process) return process.status();
   return std::unique_ptr<ChildJob>(new ChildJob(std::move(*process)));
 }

@@ -36,10 +36,13 @@ struct ChildResult {
 class ChildJob {
  public:
   // Starts `executable job-exec spec_path --progress-fd 3`; its stdout and
-  // stderr go to log_path (appended) when given, else to the parent's.
+  // stderr go to log_path (appended) when given, else to the parent's;
+  // env_overrides ("NAME=value") change its environment (a worker's GPU:
+  // CUDA_VISIBLE_DEVICES).
   static Expected<std::unique_ptr<ChildJob>> start(const std::string& executable,
                                                    const std::string& spec_path,
-                                                   const std::string& log_path = "");
+                                                   const std::string& log_path = "",
+                                                   const std::vector<std::string>& env_overrides = {});
   ~ChildJob();  // a child still running is killed and reaped
 
   // Reads the child's reports until it exits, calling on_progress for each;

@@ -22,7 +22,8 @@ std::string describe(const ExitInfo& e) {
 
 Expected<std::unique_ptr<Subprocess>> Subprocess::start(const std::vector<std::string>& argv,
                                                         int report_fd,
-                                                        const std::string& log_path) {
+                                                        const std::string& log_path,
+                                                        const std::vector<std::string>& env_overrides) {
   if (argv.empty()) return invalid_argument("no program to start");
   int fds[2];
   if (pipe2(fds, O_CLOEXEC) != 0) return io_error(std::string("pipe: ") + std::strerror(errno));
@@ -55,8 +56,21 @@ Expected<std::unique_ptr<Subprocess>> Subprocess::start(const std::vector<std::s
   std::vector<char*> cargv;
   for (auto& a : args) cargv.push_back(a.data());
   cargv.push_back(nullptr);
+  // The environment: the parent's, with the overrides replacing their names.
+  std::vector<std::string> env_strings;
+  for (char** e = environ; *e; ++e) {
+    const std::string entry(*e);
+    const std::string name = entry.substr(0, entry.find('='));
+    bool overridden = false;
+    for (const std::string& o : env_overrides) overridden |= o.substr(0, o.find('=')) == name;
+    if (!overridden) env_strings.push_back(entry);
+  }
+  for (const std::string& o : env_overrides) env_strings.push_back(o);
+  std::vector<char*> cenv;
+  for (auto& e : env_strings) cenv.push_back(e.data());
+  cenv.push_back(nullptr);
   pid_t pid = -1;
-  const int rc = posix_spawn(&pid, args[0].c_str(), &actions, &attr, cargv.data(), environ);
+  const int rc = posix_spawn(&pid, args[0].c_str(), &actions, &attr, cargv.data(), cenv.data());
   posix_spawn_file_actions_destroy(&actions);
   posix_spawnattr_destroy(&attr);
   close(fds[1]);

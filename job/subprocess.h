@@ -38,10 +38,12 @@ class Subprocess {
  public:
   // Starts argv[0] (a path, not searched in PATH) with argv, the write end of
   // a pipe as report_fd and stdin from /dev/null; stdout and stderr go to
-  // log_path (appended) when given, else to the parent's.
+  // log_path (appended) when given, else to the parent's. The environment is
+  // the parent's with each "NAME=value" of env_overrides set.
   static Expected<std::unique_ptr<Subprocess>> start(const std::vector<std::string>& argv,
                                                      int report_fd = 3,
-                                                     const std::string& log_path = "");
+                                                     const std::string& log_path = "",
+                                                     const std::vector<std::string>& env_overrides = {});
   ~Subprocess();  // a child still running is killed (SIGKILL) and reaped
   Subprocess(const Subprocess&) = delete;
   Subprocess& operator=(const Subprocess&) = delete;

@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <cctype>
 #include <filesystem>
-#include <sstream>
 
 namespace collido::service {
 
@@ -152,10 +151,13 @@ std::string percent_decode(const std::string& s, bool* ok) {
 
 std::vector<std::string> split_path(const std::string& path) {
   std::vector<std::string> out;
-  std::string part;
-  std::istringstream in(path);
-  while (std::getline(in, part, '/'))
-    if (!part.empty()) out.push_back(part);
+  size_t start = 0;
+  while (start <= path.size()) {
+    size_t end = path.find('/', start);
+    if (end == std::string::npos) end = path.size();
+    if (end > start) out.emplace_back(path, start, end - start);
+    start = end + 1;
+  }
   return out;
 }
 

@@ -65,7 +65,7 @@ struct Response {
 Response json_response(const Reply& r) {
   Response out;
   out.status = r.status;
-  out.body = r.status == 204 ? std::string() : r.body.dump() + "\n";
+  out.body = r.text();
   out.headers = r.headers;
   return out;
 }

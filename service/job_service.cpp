@@ -119,6 +119,11 @@ Expected<std::string> spec_of_parts(const json& parts) {
 
 }  // namespace
 
+std::string Reply::text() const {
+  if (serialized) return *serialized;
+  return status == 204 ? std::string() : body.dump() + "\n";
+}
+
 Reply error_reply(int status, const std::string& message) {
   Reply r;
   r.status = status;
@@ -206,9 +211,12 @@ Status JobService::seed() {
 
 void JobService::start_workers() {
   if (workers_) return;
+  // One worker per visible GPU (a GPU is driven by one job at a time), else
+  // one on the CPU (a job takes every core); --workers sets the number.
+  const std::vector<std::string> gpus = visible_gpus();
   int n = config_.workers;
-  if (n < 0) n = 1;  // one GPU is driven by one job at a time; on the CPU a job takes every core
-  workers_ = std::make_unique<WorkerPool>(this, n);
+  if (n < 0) n = gpus.empty() ? 1 : int(gpus.size());
+  workers_ = std::make_unique<WorkerPool>(this, n, gpus);
 }
 
 void JobService::stop_workers() {
@@ -302,6 +310,10 @@ Reply JobService::create_session(const json& body, double now, std::string* toke
 }
 
 Reply JobService::delete_session(const std::string& token) {
+  {
+    std::lock_guard lock(session_mu_);
+    recent_sessions_.erase(token);
+  }
   if (Status st = store_->delete_session(sha256_hex(token)); !st) return status_reply(st);
   Reply r;
   r.status = 204;
@@ -309,9 +321,27 @@ Reply JobService::delete_session(const std::string& token) {
   return r;
 }
 
+// How long a session found in the store is believed without asking again. A
+// signed-out session ends at once (delete_session forgets it here); one that
+// expires may serve this much longer.
+constexpr double kSessionRecheckS = 2.0;
+constexpr size_t kMaxRecentSessions = 10000;
+
 Expected<User> JobService::authenticate(const std::string& token) {
   if (token.empty() || token.size() > 256) return not_found("no session");
-  return store_->session_user(sha256_hex(token), unix_now());
+  const double now = unix_now();
+  {
+    std::lock_guard lock(session_mu_);
+    auto it = recent_sessions_.find(token);
+    if (it != recent_sessions_.end() && now < it->second.until) return it->second.user;
+  }
+  auto user = store_->session_user(sha256_hex(token), now);
+  if (user) {
+    std::lock_guard lock(session_mu_);
+    if (recent_sessions_.size() >= kMaxRecentSessions) recent_sessions_.clear();
+    recent_sessions_[token] = {*user, now + kSessionRecheckS};
+  }
+  return user;
 }
 
 // ---- models -----------------------------------------------------------------
@@ -683,12 +713,37 @@ Expected<Job> JobService::own_job(const User& u, const std::string& id) {
   return j;
 }
 
+constexpr size_t kMaxJobViews = 20000;
+
+std::shared_ptr<const std::string> JobService::job_view(const Job& j) {
+  // Everything of the row that changes after submission.
+  char numbers[96];
+  std::snprintf(numbers, sizeof numbers, "%.17g|%d|%.17g|%.17g|%zu", j.progress, j.attempts,
+                j.started_at, j.finished_at, j.cost_json.size());
+  const std::string fingerprint = j.state + "|" + j.stage + "|" + numbers + "|" + j.error;
+  {
+    std::lock_guard lock(view_mu_);
+    auto it = job_views_.find(j.id);
+    if (it != job_views_.end() && it->second.fingerprint == fingerprint) return it->second.text;
+  }
+  auto text = std::make_shared<const std::string>(job_json(j).dump());
+  std::lock_guard lock(view_mu_);
+  if (job_views_.size() >= kMaxJobViews) job_views_.clear();
+  job_views_[j.id] = {fingerprint, text};
+  return text;
+}
+
 Reply JobService::list_jobs(const User& u) {
   auto jobs = store_->jobs_of(u.id, 200);
   if (!jobs) return status_reply(jobs.status());
+  std::string text = "[";
+  for (size_t i = 0; i < jobs->size(); ++i) {
+    if (i) text += ",";
+    text += *job_view((*jobs)[i]);
+  }
+  text += "]\n";
   Reply r;
-  r.body = json::array();
-  for (const Job& j : *jobs) r.body.push_back(job_json(j));
+  r.serialized = std::make_shared<const std::string>(std::move(text));
   return r;
 }
 
@@ -696,7 +751,7 @@ Reply JobService::get_job(const User& u, const std::string& id) {
   auto j = own_job(u, id);
   if (!j) return status_reply(j.status());
   Reply r;
-  r.body = job_json(*j);
+  r.serialized = std::make_shared<const std::string>(*job_view(*j) + "\n");
   return r;
 }
 
@@ -966,7 +1021,9 @@ void JobService::job_progress(const std::string& id, const std::string& stage, d
 void JobService::job_finished(const Job& j, const std::string& state, const std::string& error,
                               const json& manifest, uint64_t peak_host_bytes) {
   json cost = manifest.is_object() && manifest.contains("cost") ? manifest["cost"] : json::object();
-  if (peak_host_bytes > 0) cost["peak_host_bytes"] = peak_host_bytes;  // the child's, from wait4
+  // The job's own peak (VmHWM) as it reported it; wait4()'s figure, which
+  // carries the server's own peak into the child, only when it did not.
+  if (!cost.contains("peak_host_bytes") && peak_host_bytes > 0) cost["peak_host_bytes"] = peak_host_bytes;
   store_->finish_job(j.id, state, cost.dump(), error, unix_now());
   forget_cancel_flag(j.id);
   if (state != "done") return;

@@ -9,9 +9,11 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -44,6 +46,11 @@ struct Reply {
   int status = 200;
   json body = json::object();
   std::vector<std::pair<std::string, std::string>> headers;
+  // When set, the body as it is sent, made earlier (a cached job view);
+  // `body` is then left empty.
+  std::shared_ptr<const std::string> serialized;
+  // The body as sent: `serialized`, else body's JSON text.
+  std::string text() const;
 };
 Reply error_reply(int status, const std::string& message);
 // The HTTP status of a library error (400, 404, 409, 422, 500, ...).
@@ -149,6 +156,8 @@ class JobService {
   };
   Expected<PreparedJob> prepare(const User& u, const json& body);
   json job_json(const Job& j);
+  // job_json's text, rebuilt only when the job's row has changed since.
+  std::shared_ptr<const std::string> job_view(const Job& j);
   json links_of(const std::string& base, const Job& j);
   Expected<Job> own_job(const User& u, const std::string& id);
   Expected<std::string> file_in_run(const Job& j, const std::string& file);
@@ -159,6 +168,21 @@ class JobService {
   std::unique_ptr<WorkerPool> workers_;
   mutable std::mutex url_mu_;
   std::mutex cancel_mu_;
+  // What a job status poll needs without parsing and printing three JSON
+  // documents each time (the UI polls every job it lists), and the sessions
+  // checked against the store in the last seconds (every request checks one).
+  struct JobView {
+    std::string fingerprint;  // the row's changing fields when `text` was made
+    std::shared_ptr<const std::string> text;
+  };
+  std::mutex view_mu_;
+  std::unordered_map<std::string, JobView> job_views_;
+  struct RecentSession {
+    User user;
+    double until = 0;
+  };
+  std::mutex session_mu_;
+  std::unordered_map<std::string, RecentSession> recent_sessions_;
   std::map<std::string, std::shared_ptr<std::atomic<bool>>> cancel_flags_;
   std::atomic<uint64_t> finished_since_start_{0};
 };

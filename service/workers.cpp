@@ -3,6 +3,8 @@
 #include <signal.h>
 
 #include <algorithm>
+#include <cctype>
+#include <cstdlib>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -29,8 +31,31 @@ uint64_t available_memory_bytes() {
   return 0;
 }
 
-WorkerPool::WorkerPool(JobService* service, int workers) : service_(service) {
-  for (int i = 0; i < workers; ++i) threads_.emplace_back([this] { loop(); });
+std::vector<std::string> visible_gpus() {
+  std::vector<std::string> out;
+  if (const char* list = std::getenv("CUDA_VISIBLE_DEVICES")) {
+    std::stringstream in(list);
+    std::string item;
+    while (std::getline(in, item, ','))
+      if (!item.empty() && item != "-1") out.push_back(item);
+    return out;
+  }
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator("/dev", ec)) {
+    const std::string name = e.path().filename().string();
+    if (name.size() > 6 && name.compare(0, 6, "nvidia") == 0 &&
+        std::all_of(name.begin() + 6, name.end(), [](unsigned char c) { return std::isdigit(c); }))
+      out.push_back(name.substr(6));
+  }
+  std::sort(out.begin(), out.end(), [](const std::string& a, const std::string& b) {
+    return std::stoi(a) < std::stoi(b);
+  });
+  return out;
+}
+
+WorkerPool::WorkerPool(JobService* service, int workers, std::vector<std::string> gpus)
+    : service_(service), gpus_(std::move(gpus)) {
+  for (int i = 0; i < workers; ++i) threads_.emplace_back([this, i] { loop(i); });
 }
 
 WorkerPool::~WorkerPool() { stop(); }
@@ -64,7 +89,7 @@ uint64_t WorkerPool::free_bytes_for_jobs() {
   return avail ? std::min(left, avail) : left;
 }
 
-void WorkerPool::loop() {
+void WorkerPool::loop(int worker) {
   for (;;) {
     std::optional<Job> job;
     {
@@ -83,7 +108,7 @@ void WorkerPool::loop() {
         continue;
       }
     }
-    run_one(*job);
+    run_one(*job, worker);
     {
       std::lock_guard lock(mu_);
       running_bytes_ -= std::min(running_bytes_, job->predicted_host_bytes);
@@ -92,7 +117,7 @@ void WorkerPool::loop() {
   }
 }
 
-void WorkerPool::run_one(const Job& j) {
+void WorkerPool::run_one(const Job& j, int worker) {
   const std::string dir = service_->job_dir(j.id);
   // The spec as submitted; a job started before (the server stopped under it)
   // continues from its checkpoint.
@@ -111,8 +136,10 @@ void WorkerPool::run_one(const Job& j) {
     return;
   }
   service_->job_started(j);
+  std::vector<std::string> env;
+  if (size_t(worker) < gpus_.size()) env.push_back("CUDA_VISIBLE_DEVICES=" + gpus_[worker]);
   auto child = job::ChildJob::start(service_->config().job_executable, run_spec,
-                                    (fs::path(dir) / "job.log").string());
+                                    (fs::path(dir) / "job.log").string(), env);
   if (!child) {
     service_->job_finished(j, "failed", "could not start the job: " + child.status().message(), {},
                            0);

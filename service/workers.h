@@ -24,9 +24,16 @@ class JobService;
 // Memory free for new work now (MemAvailable), bytes; 0 when unknown.
 uint64_t available_memory_bytes();
 
+// The GPUs a job may be given, as CUDA_VISIBLE_DEVICES names them: that
+// variable's list when it is set, else the /dev/nvidiaN device nodes. Read
+// without loading CUDA into the server.
+std::vector<std::string> visible_gpus();
+
 class WorkerPool {
  public:
-  WorkerPool(JobService* service, int workers);
+  // `workers` threads; worker i runs its jobs on gpus[i] (CUDA_VISIBLE_DEVICES
+  // of its children) when there is one, else as the server's environment says.
+  WorkerPool(JobService* service, int workers, std::vector<std::string> gpus = {});
   ~WorkerPool();
   // A job was queued: wake a waiting worker.
   void notify();
@@ -37,11 +44,12 @@ class WorkerPool {
   int size() const { return int(threads_.size()); }
 
  private:
-  void loop();
-  void run_one(const Job& job);
+  void loop(int worker);
+  void run_one(const Job& job, int worker);
   uint64_t free_bytes_for_jobs();
 
   JobService* service_;
+  std::vector<std::string> gpus_;
   std::vector<std::thread> threads_;
   std::mutex mu_;
   std::condition_variable wake_;

@@ -268,15 +268,21 @@ TEST(Job, ASpawnedChildGetsTheReportPipeAndNothingElseOfTheParent) {
   const int leaked = ::fcntl(opened, F_DUPFD, 10);  // above the report pipe's 3
   ::close(opened);
   ASSERT_GE(leaked, 10);
+  ::setenv("COLLIDO_TEST_KEPT", "kept", 1);
+  ::setenv("COLLIDO_TEST_REPLACED", "old", 1);
   auto child = Subprocess::start(
-      {"/bin/sh", "-c", "ls /proc/self/fd | tr '\\n' ' ' >&3; echo >&3; grep SigIgn /proc/self/status >&3"});
+      {"/bin/sh", "-c",
+       "ls /proc/self/fd | tr '\\n' ' ' >&3; echo >&3; grep SigIgn /proc/self/status >&3; "
+       "echo \"$COLLIDO_TEST_KEPT $COLLIDO_TEST_REPLACED $COLLIDO_TEST_NEW\" >&3"},
+      3, "", {"COLLIDO_TEST_REPLACED=new", "COLLIDO_TEST_NEW=added"});
   ASSERT_TRUE(child) << child.status().message();
   std::vector<std::string> lines;
   const ExitInfo e = (*child)->wait([&](const std::string& l) { lines.push_back(l); });
   ::close(leaked);
   sigaction(SIGPIPE, &old, nullptr);
   EXPECT_EQ(e.exit_code, 0);
-  ASSERT_EQ(lines.size(), 2u);
+  ASSERT_EQ(lines.size(), 3u);
+  EXPECT_EQ(lines[2], "kept new added");  // the parent's environment, with the overrides
   std::istringstream fds(lines[0]);
   for (int fd; fds >> fd;) EXPECT_NE(fd, leaked) << lines[0];  // (ls's own directory may show)
   // SigIgn is a hex mask; SIGPIPE (13) is bit 12.

@@ -1,8 +1,9 @@
-// The HTTP pieces the server reads itself: request heads for the guard,
-// header cleaning for Pistache, Range, paths.
+// The service's pieces without a server: the HTTP parts the server reads
+// itself (request heads, header cleaning, Range, paths) and GPU discovery.
 #include <gtest/gtest.h>
 
 #include "service/http_parse.h"
+#include "service/workers.h"
 
 namespace collido::service {
 namespace {
@@ -79,6 +80,14 @@ TEST(HttpParse, PathsDecodeAndRefuseNul) {
   EXPECT_EQ(html_escape("<a href=\"x\">'&'</a>"), "&lt;a href=&quot;x&quot;&gt;&#39;&amp;&#39;&lt;/a&gt;");
   EXPECT_EQ(web_mime_type("js/app.js"), "text/javascript; charset=utf-8");
   EXPECT_EQ(web_mime_type("noext"), "application/octet-stream");
+}
+
+TEST(Workers, VisibleGpusFollowCudaVisibleDevices) {
+  ::setenv("CUDA_VISIBLE_DEVICES", "2,0", 1);
+  EXPECT_EQ(visible_gpus(), (std::vector<std::string>{"2", "0"}));
+  ::setenv("CUDA_VISIBLE_DEVICES", "", 1);  // none: the CPU
+  EXPECT_TRUE(visible_gpus().empty());
+  ::unsetenv("CUDA_VISIBLE_DEVICES");
 }
 
 }  // namespace
