@@ -9,23 +9,32 @@ set -eu
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root/web"
 
-# Nothing to do when the lock file is the one last installed and the copies are there.
+# npm ci only when the lock file is not the one last installed.
 stamp=node_modules/.collido-installed-lock
-if [ -f "$stamp" ] && cmp -s "$stamp" package-lock.json && [ -f static/vendor/three/three.module.js ]; then
+if [ -f "$stamp" ] && cmp -s "$stamp" package-lock.json && [ -d node_modules/three ]; then
   echo "install-web: web/node_modules matches web/package-lock.json"
-  exit 0
+else
+  # --ignore-scripts: none of these packages needs an install script, and none runs.
+  npm ci --ignore-scripts --no-audit --no-fund
+  cp package-lock.json "$stamp"
 fi
 
-# --ignore-scripts: none of these packages needs an install script, and none runs.
-npm ci --ignore-scripts --no-audit --no-fund
-
+# The copies are made every time (a dozen files): a change to this list takes
+# effect at the next run, whatever was installed before.
 vendor=static/vendor
 rm -rf "$vendor"
 mkdir -p "$vendor/three/addons/loaders" "$vendor/three/addons/controls" "$vendor/uplot"
 nm=node_modules
 cp "$nm/three/build/three.module.js" "$nm/three/build/three.core.js" "$nm/three/LICENSE" "$vendor/three/"
-cp "$nm/three/examples/jsm/loaders/STLLoader.js" "$vendor/three/addons/loaders/"
-cp "$nm/three/examples/jsm/controls/OrbitControls.js" "$vendor/three/addons/controls/"
+# three's add-ons import the bare name 'three', which a browser resolves only
+# through an import map (an inline script); pointed at the file instead, the
+# pages need no inline script at all.
+for f in loaders/STLLoader.js controls/OrbitControls.js; do
+  sed "s#from 'three';#from '../../three.module.js';#" "$nm/three/examples/jsm/$f" > "$vendor/three/addons/$f"
+  if grep -q "from 'three'" "$vendor/three/addons/$f"; then
+    echo "install-web: $f still imports 'three' by its bare name" >&2
+    exit 1
+  fi
+done
 cp "$nm/uplot/dist/uPlot.esm.js" "$nm/uplot/dist/uPlot.min.css" "$nm/uplot/LICENSE" "$vendor/uplot/"
 echo "install-web: $(cd "$vendor" && find . -type f | wc -l) files in web/$vendor"
-cp package-lock.json "$stamp"

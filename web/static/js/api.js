@@ -1,0 +1,52 @@
+// The REST API (service/openapi.json), same origin: the session is the
+// HttpOnly cookie POST /api/v1/sessions sets, so no token is kept in script.
+
+export class ApiError extends Error {
+  constructor(status, message) {
+    super(message);
+    this.status = status;
+  }
+}
+
+// Called with the ApiError of any 401 (the session ended): the app shows sign-in.
+let onUnauthorized = () => {};
+export function setUnauthorizedHandler(fn) { onUnauthorized = fn; }
+
+// One request. body: an object (sent as JSON), a Blob/File (sent raw, as
+// contentType) or undefined. Answers the parsed JSON, null for 204, or throws ApiError with
+// the server's {"error": "..."} message.
+export async function api(method, path, body, { signal, quiet401 = false, contentType } = {}) {
+  const init = { method, credentials: 'same-origin', signal, headers: {} };
+  if (body instanceof Blob) {
+    init.body = body;
+    init.headers['Content-Type'] = contentType || body.type || 'application/octet-stream';
+  } else if (body !== undefined) {
+    init.body = JSON.stringify(body);
+    init.headers['Content-Type'] = 'application/json';
+  }
+  let res;
+  try {
+    res = await fetch(path, init);
+  } catch (e) {
+    if (e.name === 'AbortError') throw e;
+    throw new ApiError(0, 'The server cannot be reached: ' + e.message);
+  }
+  if (res.status === 204) return null;
+  const text = await res.text();
+  let data = null;
+  try { data = text ? JSON.parse(text) : null; } catch { /* not JSON: said below */ }
+  if (!res.ok) {
+    const message = (data && typeof data.error === 'string') ? data.error
+      : `${res.status} ${res.statusText || 'error'}`;
+    const err = new ApiError(res.status, message);
+    if (res.status === 401 && !quiet401) onUnauthorized(err);
+    throw err;
+  }
+  if (data === null && text) throw new ApiError(res.status, 'The server answered something that is not JSON.');
+  return data;
+}
+
+export const get = (path, opts) => api('GET', path, undefined, opts);
+export const post = (path, body, opts) => api('POST', path, body, opts);
+export const put = (path, body, opts) => api('PUT', path, body, opts);
+export const del = (path, opts) => api('DELETE', path, undefined, opts);

@@ -1,0 +1,82 @@
+// Your jobs, newest first, with progress; polled while any is queued or running.
+import { get, post, del } from '../api.js';
+import { h, tableBox, errorBox, showError, fmtDate, wallLabel } from '../dom.js';
+
+export const POLL_MS = 1500;
+export const isActive = (j) => j.state === 'queued' || j.state === 'running';
+
+// A progress bar with its label, for a job in any state.
+export function progressCell(j) {
+  const pct = Math.round((j.progress || 0) * 100);
+  if (!isActive(j)) return h('span', {}, j.state === 'done' ? '100 %' : '—');
+  return h('span', {},
+    h('progress', { max: '100', value: String(pct), 'aria-label': `Job ${j.id} progress` }),
+    ` ${pct} %`, j.stage ? ` · ${j.stage}` : '');
+}
+
+export function stateText(j) {
+  return h('span', { class: `state state-${j.state}` }, j.state, j.reused_from ? ' (reused)' : '');
+}
+
+export async function render(main) {
+  const error = errorBox();
+  const tbody = h('tbody');
+  const empty = h('p', { hidden: true }, 'No jobs yet. ', h('a', { href: '#/new' }, 'Start one'), '.');
+  const live = h('p', { class: 'visually-hidden', 'aria-live': 'polite' });
+  let modelsById = new Map();
+  let timer = null;
+  let stopped = false;
+  let lastStates = new Map();
+
+  async function refresh() {
+    let jobs;
+    try { jobs = await get('/api/v1/jobs'); } catch (e) { showError(error, e); schedule(true); return; }
+    if (stopped) return;
+    showError(error, null);
+    empty.hidden = jobs.length > 0;
+    // Screen readers hear when a job ends, not every tick of its progress.
+    for (const j of jobs) {
+      const before = lastStates.get(j.id);
+      if (before && before !== j.state && !isActive(j)) live.textContent = `Job ${j.id} ${j.state}.`;
+    }
+    lastStates = new Map(jobs.map((j) => [j.id, j.state]));
+    tbody.replaceChildren(...jobs.map((j) => {
+      const s = j.scene || {};
+      return h('tr', {},
+        h('th', { scope: 'row' }, h('a', { href: `#/jobs/${j.id}` }, j.id)),
+        h('td', {}, fmtDate(j.created_at)),
+        h('td', {}, wallLabel(s.wall, modelsById)),
+        h('td', { class: 'num' }, s.particles?.count?.toLocaleString() ?? '—'),
+        h('td', {}, stateText(j)),
+        h('td', {}, progressCell(j)),
+        h('td', {}, h('div', { class: 'actions' },
+          isActive(j) ? h('button', { type: 'button', class: 'secondary small', 'aria-label': `Cancel job ${j.id}`,
+            onclick: async () => {
+              try { await post(`/api/v1/jobs/${j.id}/cancel`); refresh(); } catch (e) { showError(error, e); }
+            } }, 'Cancel') : null,
+          j.state !== 'running' ? h('button', { type: 'button', class: 'danger small', 'aria-label': `Delete job ${j.id}`,
+            onclick: async () => {
+              if (!confirm(`Delete job ${j.id} and its files?`)) return;
+              try { await del(`/api/v1/jobs/${j.id}`); refresh(); } catch (e) { showError(error, e); }
+            } }, 'Delete') : null)));
+    }));
+    schedule(jobs.some(isActive));
+  }
+  function schedule(again) {
+    clearTimeout(timer);
+    if (again && !stopped) timer = setTimeout(refresh, POLL_MS);
+  }
+
+  main.append(
+    h('h1', {}, 'Jobs'),
+    h('div', { class: 'actions' }, h('a', { class: 'button', href: '#/new' }, 'New job')),
+    error, empty, live,
+    tableBox('Your jobs', h('table', {},
+      h('caption', { class: 'visually-hidden' }, 'Your jobs, newest first'),
+      h('thead', {}, h('tr', {}, ['Job', 'Submitted', 'Wall', 'Particles', 'State', 'Progress', 'Actions']
+        .map((t) => h('th', { scope: 'col', class: t === 'Particles' ? 'num' : undefined }, t)))),
+      tbody)));
+  try { modelsById = new Map((await get('/api/v1/models')).map((m) => [m.id, m])); } catch { /* ids are shown instead */ }
+  await refresh();
+  return () => { stopped = true; clearTimeout(timer); };
+}

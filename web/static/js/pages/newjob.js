@@ -1,0 +1,255 @@
+// A new job: the scene in a form, its cost predicted as it changes
+// (POST /api/v1/predict, debounced), then submitted (POST /api/v1/jobs).
+import { get, post } from '../api.js';
+import { h, field, errorBox, showError, fmtBytes, fmtSeconds } from '../dom.js';
+
+const SIZES = [[160, 96], [320, 180], [640, 360], [1280, 720], [1920, 1080]];
+const DEBOUNCE_MS = 400;
+
+function num(attrs) { return h('input', { type: 'number', required: true, ...attrs }); }
+function select(options, value) {
+  return h('select', {}, options.map(([v, text]) => h('option', { value: v, selected: v === value }, text)));
+}
+
+// An estimate as the API gives it: a number, or {value, low/high | range: [lo, hi]}.
+export function estimateText(est, fmt) {
+  if (est === null || est === undefined) return null;
+  if (typeof est === 'number') return fmt(est);
+  if (typeof est !== 'object' || !Number.isFinite(est.value)) return null;
+  const lo = est.low ?? est.min ?? est.lower ?? (Array.isArray(est.range) ? est.range[0] : undefined);
+  const hi = est.high ?? est.max ?? est.upper ?? (Array.isArray(est.range) ? est.range[1] : undefined);
+  const main = fmt(est.value);
+  return Number.isFinite(lo) && Number.isFinite(hi) ? `${main} (likely ${fmt(lo)} to ${fmt(hi)})` : main;
+}
+
+// How busy the job workers are, from the public /metrics and /api/v1/health.
+async function serverLoad(signal) {
+  const [metrics, health] = await Promise.all([
+    fetch('/metrics', { signal }).then((r) => (r.ok ? r.text() : '')),
+    get('/api/v1/health', { signal })]);
+  const gauge = (re) => { const m = metrics.match(re); return m ? Number(m[1]) : null; };
+  return {
+    running: gauge(/^collidoscope_jobs\{state="running"\} (\d+)/m),
+    queued: gauge(/^collidoscope_queue_length (\d+)/m),
+    workers: health?.workers ?? null,
+  };
+}
+
+// What the prediction warns of, in plain words: [{level: 'error'|'note', text}].
+function warningsOf(p, load) {
+  const out = [];
+  // Fields a trained cost model may add (the analytic one has none of them).
+  const outside = p.outside_training ?? (p.in_training_range === false ? true : undefined);
+  if (outside) {
+    const what = Array.isArray(outside) ? `: ${outside.join(', ')}` : typeof outside === 'string' ? `: ${outside}` : '';
+    out.push({ level: 'note', text: `This job lies outside what the predictor was trained on${what}. Treat the figures as rough.` });
+  }
+  for (const w of Array.isArray(p.warnings) ? p.warnings : []) out.push({ level: 'note', text: String(w.message ?? w) });
+  if (p.would_wait || Number.isFinite(p.wait_s)) {
+    out.push({ level: 'note', text: `This job would wait before it starts${Number.isFinite(p.wait_s) ? ` (about ${fmtSeconds(p.wait_s)})` : ''}.` });
+  } else if (load && load.workers && load.running !== null && load.running + (load.queued || 0) >= load.workers) {
+    const queued = load.queued ? ` and ${load.queued} waiting` : '';
+    out.push({ level: 'note', text: `The server is busy (${load.running} job${load.running === 1 ? '' : 's'} running${queued}, `
+      + `${load.workers} at a time): this one would wait its turn.` });
+  }
+  return out;
+}
+
+export async function render(main, ctx, modelParam) {
+  const error = errorBox();
+  main.append(h('h1', {}, 'New job'), error);
+  const [models, algorithms] = await Promise.all([get('/api/v1/models'), get('/api/v1/algorithms')]);
+  const usable = models.filter((m) => m.kind !== 'stl' || m.uploaded);
+  const wanted = modelParam ? Number(modelParam) : usable[0]?.id;
+
+  const option = (m) => h('option', { value: String(m.id), selected: m.id === wanted },
+    `${m.name} (${m.triangles.toLocaleString()} triangles)`);
+  const mine = usable.filter((m) => !m.preset);
+  const model = h('select', {},
+    h('optgroup', { label: 'Presets' }, usable.filter((m) => m.preset).map(option)),
+    mine.length ? h('optgroup', { label: 'Your models' }, mine.map(option)) : null);
+  const count = num({ min: '1', step: '1', value: '500' });
+  const radius = num({ min: '0.000001', step: 'any', value: '0.5' });
+  const placement = ['pour', 'fill'].map((k) => h('input', { type: 'radio', name: 'placement', value: k, checked: k === 'pour' }));
+  const restitution = num({ min: '0.000001', max: '1', step: 'any', value: '0.4' });
+  const friction = num({ min: '0', max: '10', step: 'any', value: '0.3' });
+  const contacts = h('input', { type: 'checkbox' });
+  const duration = num({ min: '0.001', step: 'any', value: '2' });
+  const fps = num({ min: '0.001', step: 'any', value: '24' });
+  // "reference" is the engine's test oracle: scenes may not name it.
+  const methods = (algorithms.methods || []).filter((m) => m.name !== 'reference');
+  const method = select(methods.map((m) => [m.name, m.name]), 'bin');
+  const methodHint = h('p', { class: 'hint', id: 'method-hint', 'aria-live': 'polite' });
+  method.setAttribute('aria-describedby', 'method-hint');
+  const backend = select([['auto', 'automatic'], ['cpu', 'CPU'], ['cuda', 'GPU (CUDA)']], 'auto');
+  const vtp = h('input', { type: 'checkbox' });
+  const size = select(SIZES.map(([w, ht]) => [`${w}x${ht}`, `${w} × ${ht}`]), '640x360');
+  const camera = select([['iso', 'isometric'], ['front', 'front'], ['top', 'top'], ['orbit', 'orbit']], 'iso');
+  const color = select([['speed', 'speed'], ['contact', 'contact']], 'speed');
+  const wallLook = select([['glass', 'glass'], ['cutaway', 'cut away'], ['hidden', 'hidden']], 'glass');
+  const fresh = h('input', { type: 'checkbox' });
+  const submitButton = h('button', { type: 'submit' }, 'Submit job');
+  const submitStatus = h('p', { class: 'status', role: 'status' });
+
+  const showMethod = () => {
+    methodHint.textContent = methods.find((m) => m.name === method.value)?.description || '';
+  };
+  showMethod();
+
+  // The submission body from the form; throws with a message naming the field.
+  function body() {
+    const n = (input, label) => {
+      const v = input.valueAsNumber;
+      if (!Number.isFinite(v) || !input.validity.valid) throw new Error(`${label}: ${input.validationMessage || 'a number is needed'}`);
+      return v;
+    };
+    if (!model.value) throw new Error('Model: make or upload one first (Models page).');
+    const [width, height] = size.value.split('x').map(Number);
+    const scene = {
+      wall: { model: Number(model.value) },
+      particles: { count: n(count, 'Particle count'), radius: n(radius, 'Particle radius') },
+      placement: { kind: placement.find((r) => r.checked).value },
+      material: { restitution: n(restitution, 'Restitution'), friction: n(friction, 'Friction') },
+      particle_contacts: contacts.checked,
+      duration: n(duration, 'Duration'),
+      fps: n(fps, 'Frames per second'),
+      method: method.value,
+      backend: backend.value,
+    };
+    if (vtp.checked) scene.output = { vtp: true };
+    return { scene, render: { width, height, camera: camera.value, color: color.value, wall: wallLook.value } };
+  }
+
+  // ---- the live prediction ----
+  const predStatus = h('p', { class: 'status' });
+  const predTime = h('dd', { class: 'big' });
+  const predMemory = h('dd', { class: 'big' });
+  const predFacts = h('dl', { class: 'facts' });
+  const predWarnings = h('div');
+  const predNote = h('p', { class: 'hint' });
+  const headline = h('dl', { class: 'figures' },
+    h('div', {}, h('dt', {}, 'Time'), predTime), h('div', {}, h('dt', {}, 'Peak memory'), predMemory));
+  const aside = h('aside', { 'aria-labelledby': 'pred-h', class: 'sticky' });
+  // On a phone the prediction is below the form: a line at the foot of the screen follows it.
+  const predMini = h('button', { type: 'button', class: 'pred-mini', 'aria-hidden': 'true', tabindex: '-1',
+    onclick: () => aside.scrollIntoView({ behavior: 'smooth' }) });
+  const mini = (text) => { predMini.textContent = text; };
+  let timer = null;
+  let inflight = null;
+  function schedule() {
+    clearTimeout(timer);
+    predStatus.textContent = 'Updating…';
+    timer = setTimeout(predict, DEBOUNCE_MS);
+  }
+  function showWarnings(list) {
+    predWarnings.replaceChildren(...list.map((w) => h('p', { class: `alert ${w.level}` }, w.text)));
+  }
+  function clearFigures() {
+    predTime.textContent = '—';
+    predMemory.textContent = '—';
+    predFacts.replaceChildren();
+    predNote.textContent = '';
+  }
+  async function predict() {
+    inflight?.abort();
+    const me = new AbortController();
+    inflight = me;
+    let b;
+    try { b = body(); } catch (e) {
+      predStatus.textContent = 'Not predicted: the form needs a change.';
+      clearFigures();
+      showWarnings([{ level: 'error', text: e.message }]);
+      mini('No prediction: the form needs a change. Show why ↑');
+      return;
+    }
+    const load = serverLoad(me.signal).catch(() => null);
+    try {
+      const p = await post('/api/v1/predict', b, { signal: me.signal });
+      const l = await load;
+      if (inflight !== me) return;
+      const i = p.inputs || {};
+      const fact = (k, v) => [h('dt', {}, k), h('dd', {}, v ?? '—')];
+      const time = estimateText(p.total_time_s, fmtSeconds);
+      predTime.textContent = time ?? 'not predicted yet';
+      predTime.classList.toggle('words', !time);
+      predMemory.textContent = estimateText(p.peak_host_bytes, fmtBytes) ?? '—';
+      const memoryText = predMemory.textContent;
+      predFacts.replaceChildren(
+        // With the initial frame, as the result page counts them.
+        ...fact('Frames', i.frames == null ? null : (i.frames + 1).toLocaleString()),
+        ...fact('Particles', i.particles?.toLocaleString()),
+        ...fact('Wall triangles', i.triangles?.toLocaleString()),
+        ...fact('Pieces after division', i.pieces?.toLocaleString()),
+        ...fact('Method', i.method),
+        ...fact('Estimated by', p.basis === 'analytic' ? 'formula (no trained model yet)' : p.basis));
+      predNote.textContent = p.note ? `${p.note[0].toUpperCase()}${p.note.slice(1)}.` : '';
+      showWarnings(warningsOf(p, l));
+      mini(`Prediction: ${time ?? 'time not predicted yet'}, ${memoryText} of memory`
+        + `${predWarnings.childElementCount ? ' — see the warnings' : ''}. Show ↑`);
+      predStatus.textContent = 'Up to date.';
+    } catch (e) {
+      if (e.name === 'AbortError' || inflight !== me) return;
+      clearFigures();
+      // 409: the server would refuse the job as it stands (too much memory).
+      const text = e.status === 409 ? `This job would be refused: ${e.message}.`
+        : e.status === 400 ? `Check the form: ${e.message}.` : `No prediction: ${e.message}`;
+      showWarnings([{ level: 'error', text }]);
+      predStatus.textContent = e.status === 409 ? 'Would be refused.' : 'Not predicted.';
+      mini(`${e.status === 409 ? 'This job would be refused' : 'No prediction'}. Show why ↑`);
+    }
+  }
+
+  const form = h('form', { class: 'card', novalidate: true, 'aria-labelledby': 'scene-h' },
+    field('Wall (a model)', model, 'Build or upload one on the Models page.'),
+    h('fieldset', {}, h('legend', {}, 'Particles'),
+      h('div', { class: 'row' }, field('Count', count), field('Radius', radius, 'In the wall’s units.'))),
+    h('fieldset', {}, h('legend', {}, 'Placement'),
+      h('label', { class: 'check' }, placement[0], 'Pour: particles fall in from above the vessel'),
+      h('label', { class: 'check' }, placement[1], 'Fill: particles start spread through the vessel')),
+    h('fieldset', {}, h('legend', {}, 'Material'),
+      h('div', { class: 'row' }, field('Restitution', restitution, 'Bounce, 0 to 1.'), field('Friction', friction, '0 to 10.')),
+      h('label', { class: 'check' }, contacts, 'Particles also collide with each other')),
+    h('fieldset', {}, h('legend', {}, 'Time'),
+      h('div', { class: 'row' }, field('Duration (simulated seconds)', duration), field('Frames per second', fps))),
+    h('fieldset', {}, h('legend', {}, 'Computation'),
+      h('div', { class: 'row' }, field('Detection method', method), field('Backend', backend, 'Automatic: the GPU when the server has one.')),
+      methodHint),
+    h('fieldset', {}, h('legend', {}, 'Video and files'),
+      h('div', { class: 'row' }, field('Size', size), field('Camera', camera), field('Colour by', color), field('Wall', wallLook)),
+      h('label', { class: 'check' }, vtp, 'Also write ParaView files (one .vtp per frame)')),
+    h('label', { class: 'check' }, fresh, 'Run again even if an identical result exists'),
+    h('div', { class: 'actions' }, submitButton), submitStatus);
+
+  form.addEventListener('input', schedule);
+  form.addEventListener('change', (e) => { if (e.target === method) showMethod(); schedule(); });
+  form.addEventListener('submit', async (e) => {
+    e.preventDefault();
+    showError(error, null);
+    let b;
+    try { b = body(); } catch (err) { showError(error, err); error.scrollIntoView({ block: 'nearest' }); return; }
+    if (fresh.checked) b.fresh = true;
+    submitButton.disabled = true;
+    submitStatus.textContent = 'Submitting…';
+    try {
+      const job = await post('/api/v1/jobs', b);
+      ctx.go(`#/jobs/${job.id}`);
+    } catch (err) {
+      showError(error, new Error(`The job was not accepted: ${err.message}`));
+      error.scrollIntoView({ block: 'nearest' });
+      submitStatus.textContent = '';
+      submitButton.disabled = false;
+    }
+  });
+
+  main.append(h('div', { class: 'split wide-left' },
+    h('section', {}, h('h2', { id: 'scene-h' }, 'Scene'), form),
+    aside), predMini);
+  aside.append(h('h2', { id: 'pred-h' }, 'Prediction'),
+    h('div', { class: 'card', id: 'prediction' },
+      h('div', { 'aria-live': 'polite' }, predStatus, headline, predWarnings),
+      predNote, predFacts),
+    h('p', { class: 'hint' }, 'What this job will cost, estimated by the server before it runs. It follows the form as you change it.'));
+  clearFigures();
+  predict();
+  return () => { clearTimeout(timer); inflight?.abort(); };
+}
