@@ -2,6 +2,7 @@
 // job/calibrate.h, which runs every configuration in a `collidoscope calibrate-exec`
 // child of its own and writes one run-log row per configuration (gvm/run_log.h).
 // `calibrate-exec` is that child: one request of a sweep, its answer as a JSON line.
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -17,6 +18,7 @@
 
 #ifdef COLLIDO_HAVE_RUN  // the sweep lives in the job library
 #include "job/calibrate.h"
+#include "job/calibrate_jobs.h"
 #endif
 
 namespace collido::app {
@@ -44,6 +46,13 @@ const std::vector<FlagSpec>& calibrate_flags() {
       {"budget", true,
        "seconds; start no run after this, keep the rows measured by then (default 0 = none on "
        "cpu, 330 on cuda)"},
+      {"jobs", false,
+       "sweep real jobs (job-exec children) into a job log instead of detection frames"},
+      {"job-threads", true, "with --jobs: CPU threads of every job (default 1)"},
+      {"meshes", true,
+       "with --jobs: folder of the sweep's STL walls (default tests/data/meshes, if there)"},
+      {"work", true, "with --jobs: folder for the jobs' run directories (default OUT.work)"},
+      {"no-render", false, "with --jobs: no rendered jobs (a build without a renderer)"},
       {"help", false, "show this help"},
   };
   return specs;
@@ -103,6 +112,68 @@ void write_all(int fd, const std::string& s) {
   }
 }
 
+// Prints one line per finished run or job.
+void print_progress(const job::CalibrateProgress& p) {
+  if (!p.finished) return;  // one line per run, once it has ended
+  std::fprintf(stderr, "[%d/%d %3zu/%zu] %s: ", p.pass, p.passes, p.index, p.count,
+               p.running.c_str());
+  if (!p.error.empty()) {
+    std::fprintf(stderr, "FAILED: %s\n", p.error.c_str());
+    return;
+  }
+  std::fprintf(stderr, "%lld triangles, %.3f ms/frame, total %.3f s, host %s",
+               static_cast<long long>(p.triangles), 1e3 * p.frame_s, p.total_s,
+               human_bytes(p.peak_host_bytes).c_str());
+  if (p.backend == "cuda") std::fprintf(stderr, ", device %s", human_bytes(p.device_bytes).c_str());
+  std::fprintf(stderr, "\n");
+}
+
+bool is_dir(const std::string& p) {
+  struct stat st;
+  return ::stat(p.c_str(), &st) == 0 && S_ISDIR(st.st_mode);
+}
+
+// `calibrate --jobs`: the job sweep of job/calibrate_jobs.h.
+int calibrate_jobs(const ParsedArgs& parsed) {
+  const char* cmd = "calibrate --jobs";
+  std::string error;
+  job::JobSweepSpec spec;
+  spec.backend = parsed.get("backend", "cpu");
+  if (spec.backend == "auto") spec.backend = "cpu";
+  const bool cuda = spec.backend == "cuda";
+  spec.quick = parsed.has("quick");
+  spec.configs = parsed.get_int("configs", spec.quick ? 4 : cuda ? 150 : 300, &error);
+  spec.seed = static_cast<uint64_t>(parsed.get_int("seed", 1, &error));
+  spec.threads = static_cast<int>(parsed.get_int("job-threads", 1, &error));
+  spec.repeats = static_cast<int>(parsed.get_int("repeats", cuda ? 2 : 3, &error));
+  spec.budget_s = static_cast<double>(parsed.get_int("budget", cuda && !spec.quick ? 480 : 0, &error));
+  if (!error.empty()) return usage_error(cmd, error);
+  spec.render = !parsed.has("no-render");
+  spec.out_path = parsed.get("out");
+  spec.work_dir = parsed.get("work", spec.out_path + ".work");
+  spec.mesh_dir = parsed.get("meshes", is_dir("tests/data/meshes") ? "tests/data/meshes" : "");
+  if (!collidoscope_executable(&spec.executable, &error)) {
+    std::fprintf(stderr, "collidoscope %s: %s\n", cmd, error.c_str());
+    return kExitFailure;
+  }
+  if (Status s = job::validate(spec); !s) return usage_error(cmd, s.message());
+  // The renderer's rasterizer threads follow LP_NUM_THREADS, which each job-exec child
+  // inherits: a one-thread job renders on one thread too (a sweep then keeps to one core).
+  if (spec.threads > 0) setenv("LP_NUM_THREADS", std::to_string(spec.threads).c_str(), 1);
+  job::CalibrateHooks hooks;
+  hooks.note = [](const std::string& line) { std::fprintf(stderr, "calibrate: %s\n", line.c_str()); };
+  hooks.progress = print_progress;
+  const auto summary = job::calibrate_jobs(spec, hooks);
+  if (!summary) {
+    std::fprintf(stderr, "collidoscope %s: %s\n", cmd, summary.status().message().c_str());
+    return exit_code(summary.status());
+  }
+  std::printf("%zu jobs (%zu failed) x %d repeats in %.1f s on %s: %s\n", summary->measured,
+              summary->failed, summary->repeats, summary->took_s, summary->device.c_str(),
+              spec.out_path.c_str());
+  return kExitOk;
+}
+
 }  // namespace
 
 int cmd_calibrate(const Args& args) {
@@ -114,7 +185,10 @@ int cmd_calibrate(const Args& args) {
     print_help(
         "usage: collidoscope calibrate --out RUNS.csv [--backend cpu|cuda|auto] [--configs N]\n"
         "                              [--seed S] [--quick] [--threads T] [--repeats R]\n"
-        "                              [--budget SECONDS] [--radius P|LO:HI]\n\n"
+        "                              [--budget SECONDS] [--radius P|LO:HI]\n"
+        "       collidoscope calibrate --jobs --out JOBS.csv [--backend cpu|cuda] [--configs N]\n"
+        "                              [--seed S] [--job-threads T] [--repeats R] [--budget S]\n"
+        "                              [--meshes DIR] [--work DIR] [--no-render] [--quick]\n\n"
         "Runs a seeded sweep of real configurations (walls, particle counts, methods,\n"
         "traversals, frames) on this machine, each in a process of its own, and writes one\n"
         "run-log row per configuration: time per frame (the steady cost: median of the\n"
@@ -123,7 +197,13 @@ int cmd_calibrate(const Args& args) {
         "Repeats are whole passes over the sweep; with --budget, no run starts after that\n"
         "many seconds and the log keeps the configurations measured by then. Measure on an\n"
         "otherwise idle machine: other work slows runs unevenly (docs/gvm.md).\n"
-        "`collidoscope gvm train --logs RUNS.csv` trains on the log.\n"
+        "`collidoscope gvm train --logs RUNS.csv` trains on the log.\n\n"
+        "With --jobs: a seeded sweep of real jobs instead (walls, particle counts and radii,\n"
+        "pour, jet and fill placements, particle contacts, friction, duration and frames,\n"
+        "render sizes and formats), each through `collidoscope job-exec` as the service\n"
+        "runs them, one job-log row each: the job's inputs and its cost (total and per-stage\n"
+        "time, time per frame, peak host and device memory, GPU load, output bytes). Defaults:\n"
+        "300 jobs x 3 repeats on cpu, 150 x 2 and a 480 s budget on cuda, one thread a job.\n"
         "Exit codes: 0 every configuration ran, 1 a run or the output failed, 2 bad arguments.",
         calibrate_flags());
     return kExitOk;
@@ -131,6 +211,7 @@ int cmd_calibrate(const Args& args) {
   if (!parsed->positional().empty())
     return usage_error(cmd, "unexpected argument '" + parsed->positional()[0] + "'");
   if (!parsed->has("out")) return usage_error(cmd, "--out RUNS.csv is required");
+  if (parsed->has("jobs")) return calibrate_jobs(*parsed);
   const std::string want = parsed->get("backend", "auto");
   job::CalibrateSpec spec = job::calibrate_defaults(want, parsed->has("quick"));
   const int64_t configs = parsed->get_int("configs", spec.configs, &error);
@@ -165,20 +246,7 @@ int cmd_calibrate(const Args& args) {
 
   job::CalibrateHooks hooks;
   hooks.note = [](const std::string& line) { std::fprintf(stderr, "calibrate: %s\n", line.c_str()); };
-  hooks.progress = [](const job::CalibrateProgress& p) {
-    if (!p.finished) return;  // one line per run, once it has ended
-    std::fprintf(stderr, "[%d/%d %3zu/%zu] %s: ", p.pass, p.passes, p.index, p.count,
-                 p.running.c_str());
-    if (!p.error.empty()) {
-      std::fprintf(stderr, "FAILED: %s\n", p.error.c_str());
-      return;
-    }
-    std::fprintf(stderr, "%lld triangles, %.3f ms/frame, total %.3f s, host %s",
-                 static_cast<long long>(p.triangles), 1e3 * p.frame_s, p.total_s,
-                 human_bytes(p.peak_host_bytes).c_str());
-    if (p.backend == "cuda") std::fprintf(stderr, ", device %s", human_bytes(p.device_bytes).c_str());
-    std::fprintf(stderr, "\n");
-  };
+  hooks.progress = print_progress;
   const auto summary = job::calibrate(spec, hooks);
   if (!summary) {
     std::fprintf(stderr, "collidoscope %s: %s\n", cmd, summary.status().message().c_str());

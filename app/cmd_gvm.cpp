@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -11,6 +12,9 @@
 #include "app/cli.h"
 #include "app/commands.h"
 #include "gvm/gvm.h"
+#ifdef COLLIDO_HAVE_JOB_COST
+#include "job/job_log.h"
+#endif
 
 namespace collido::app {
 
@@ -62,11 +66,21 @@ double time_per_call_us(F&& f) {
 // Keeps the optimiser from dropping benchmarked calls.
 volatile double g_sink = 0.0;
 
+#ifdef COLLIDO_HAVE_JOB_COST
+// Whether a CSV file is a job log (its header says so); false when it cannot be read,
+// which the detection reader then reports.
+bool is_job_log(const std::string& path) {
+  std::ifstream in(path);
+  std::string header;
+  return std::getline(in, header) && job::log_kind(header + "\n") == job::LogKind::kJob;
+}
+#endif
+
 // ---- gvm train -------------------------------------------------------------------------
 
 const std::vector<FlagSpec>& train_flags() {
   static const std::vector<FlagSpec> specs = {
-      {"logs", true, "run log CSV to train on (required; see docs/gvm.md)"},
+      {"logs", true, "run log or job log CSV to train on (required; see docs/gvm.md)"},
       {"out", true, "where to write the model JSON (required)"},
       {"hidden", true, "hidden neurons (default 16)"},
       {"epochs", true, "epochs; one epoch = one proposal per parameter (default 2000)"},
@@ -77,6 +91,11 @@ const std::vector<FlagSpec>& train_flags() {
       {"ensemble", true, "machines per output, from different seeds, averaged (default 3)"},
       {"activation", true, "softsign, tanh or sigmoid (default softsign)"},
       {"split-seed", true, "seed of the 70/30 train/validation split (default 1)"},
+      {"folds", true, "job log: machines per cost, one per fold held out (default 5)"},
+      {"coverage", true, "job log: share of held-out runs the interval holds (default 0.8)"},
+      {"splits", true, "job log: 70/30 splits scored, seeds split-seed.. (default 1)"},
+      {"resample", true, "job log: train the written model on this many rows drawn with "
+                         "replacement (timing runs)"},
       {"curve", true, "write every epoch's train/validation loss to this CSV"},
       {"predictions", true, "write the validation rows with every model's predictions to this CSV"},
       {"mlp-epochs", true, "epochs of the back-propagation baseline (default 10000)"},
@@ -96,7 +115,8 @@ int gvm_train(const Args& args) {
         "Trains the general vector machines (an ensemble per output) on 70% of the logged\n"
         "runs, scores them and three baselines (the paper's linear fit in triangles, least\n"
         "squares on log features, a back-propagation MLP) on the other 30%, and writes the\n"
-        "model.",
+        "model. A job log (`calibrate --jobs`) trains the job cost model instead: per cost\n"
+        "one GVM per fold, the folds' held-out residuals setting the 10-90 % interval.",
         train_flags());
     return kExitOk;
   }
@@ -134,6 +154,13 @@ int gvm_train(const Args& args) {
   if (opt.mlp.epochs < 0) return usage_error(cmd, "--mlp-epochs must be >= 0");
 
   const std::string log_path = parsed->get("logs");
+#ifdef COLLIDO_HAVE_JOB_COST
+  if (is_job_log(log_path)) return gvm_train_jobs(*parsed, log_path);
+#endif
+  for (const char* job_only : {"folds", "coverage", "splits", "resample"})
+    if (parsed->has(job_only))
+      return usage_error(cmd, std::string("--") + job_only + " is for job logs; " + log_path +
+                                  " is a run log of detection frames");
   auto rows = g::read_run_log(log_path);
   if (!rows) {
     std::fprintf(stderr, "collidoscope %s: %s\n", cmd, rows.status().message().c_str());
@@ -334,6 +361,16 @@ int gvm_merge(const Args& args) {
   }
   if (parsed->positional().empty()) return usage_error(cmd, "expects one or more RUNS.csv");
   if (!parsed->has("out")) return usage_error(cmd, "--out MERGED.csv is required");
+#ifdef COLLIDO_HAVE_JOB_COST
+  {
+    size_t jobs = 0;
+    for (const std::string& path : parsed->positional()) jobs += is_job_log(path);
+    if (jobs == parsed->positional().size())
+      return gvm_merge_jobs(parsed->positional(), parsed->get("out"));
+    if (jobs > 0)
+      return usage_error(cmd, "job logs and detection run logs cannot be merged into one");
+  }
+#endif
   std::vector<g::RunRecord> all;
   for (const std::string& path : parsed->positional()) {
     auto rows = g::read_run_log(path);
@@ -365,9 +402,18 @@ void print_gvm_usage() {
 
 const std::vector<FlagSpec>& predict_flags() {
   static const std::vector<FlagSpec> specs = {
-      {"model", true, "model JSON written by `gvm train` (required)"},
+      {"model", true,
+       "model JSON written by `gvm train` (required for a detection configuration; a scene "
+       "defaults to bench/data/job_model_BACKEND.json)"},
       {"json", false, "print the prediction as JSON"},
       {"bench", false, "also time one prediction (mean over many)"},
+      {"backend", true, "scene: auto, cpu or cuda (default: the scene's)"},
+      {"threads", true, "scene: CPU threads of the job (default: the model's usual)"},
+      {"duration", true, "scene: simulated seconds instead of the scene's"},
+      {"video", false, "scene: price rendering too (as `run --video`)"},
+      {"formats", true, "scene with --video: mp4,webm,gif or none (default all three)"},
+      {"width", true, "scene with --video: frame width in pixels"},
+      {"height", true, "scene with --video: frame height in pixels"},
       {"help", false, "show this help"},
   };
   return specs;
@@ -399,35 +445,50 @@ int cmd_predict(const Args& args) {
   if (!parsed) return usage_error(cmd, error);
   if (parsed->has("help")) {
     print_help(
-        "usage: collidoscope predict CONFIG.json --model MODEL.json [--json] [--bench]\n\n"
-        "CONFIG.json: {\"particles\": 1e6, \"triangles\": 99612, \"method\": \"circumcircle\",\n"
+        "usage: collidoscope predict SCENE.json [--model JOB_MODEL.json] [--backend B] [--video]\n"
+        "       collidoscope predict CONFIG.json --model MODEL.json [--json] [--bench]\n\n"
+        "SCENE.json: a scene of `collidoscope run` (or a job spec of `job-exec`), priced by\n"
+        "  the job cost model: total time, time per frame, peak host and device memory, GPU\n"
+        "  load and output bytes, each with its 10-90 % interval, and a line for every input\n"
+        "  outside the jobs the model was trained on.\n"
+        "CONFIG.json: detection frames, priced by the detection predictor:\n"
+        "  {\"particles\": 1e6, \"triangles\": 99612, \"method\": \"circumcircle\",\n"
         "  \"traversal\": \"particle\", \"frames\": 100, \"backend\": \"cuda\", \"radius\": 1,\n"
         "  \"wall_area\": 9.4e4, \"wall_box_volume\": 1.1e6} (largest particle radius, wall\n"
         "  area, wall bounding box grown by the radius; world units); optional\n"
         "  \"triangles_original\", \"device\", \"threads\" (default: the model's usual host).\n"
-        "Prints predicted time per frame, total time, peak memory and GPU load, and a\n"
-        "warning for every input outside the range the model was trained on. The model\n"
-        "costs detection frames; a scene file of `collidoscope run` is refused (runs are\n"
-        "not calibrated yet, docs/gvm.md).\n"
+        "Each model file says which kind it is and refuses the other kind of input.\n"
         "Exit codes: 0 predicted (even with warnings), 1 a file could not be read,\n"
         "2 bad arguments or configuration values.",
         predict_flags());
     return kExitOk;
   }
   if (parsed->positional().size() != 1)
-    return usage_error(cmd, "expects exactly one CONFIG.json (see --help)");
-  if (!parsed->has("model")) return usage_error(cmd, "--model MODEL.json is required");
-
-  auto model = g::ResourcePredictor::load(parsed->get("model"));
-  if (!model) {
-    std::fprintf(stderr, "collidoscope %s: %s\n", cmd, model.status().message().c_str());
-    return kExitFailure;
-  }
+    return usage_error(cmd, "expects exactly one SCENE.json or CONFIG.json (see --help)");
   const std::string config_path = parsed->positional()[0];
   std::string text;
   if (!read_text(config_path, &text)) {
     std::fprintf(stderr, "collidoscope %s: cannot open %s\n", cmd, config_path.c_str());
     return kExitFailure;
+  }
+#ifdef COLLIDO_HAVE_JOB_COST
+  {
+    // A scene (it has a wall or a placement) or a job spec is a job.
+    const nlohmann::json doc = nlohmann::json::parse(text, nullptr, false);
+    if (doc.is_object() && (doc.contains("wall") || doc.contains("placement") || doc.contains("scene")))
+      return predict_scene(*parsed, config_path, text);
+  }
+#endif
+  for (const char* scene_only : {"backend", "threads", "duration", "video", "formats", "width", "height"})
+    if (parsed->has(scene_only))
+      return usage_error(cmd, std::string("--") + scene_only + " is for scene files; " +
+                                  config_path + " is a detection configuration");
+  if (!parsed->has("model")) return usage_error(cmd, "--model MODEL.json is required");
+
+  auto model = g::ResourcePredictor::load(parsed->get("model"));
+  if (!model) {
+    std::fprintf(stderr, "collidoscope %s: %s\n", cmd, model.status().message().c_str());
+    return exit_code(model.status()) == kExitUsage ? kExitUsage : kExitFailure;
   }
   auto config = g::run_config_from_json(text, &*model);
   if (!config) return usage_error(cmd, config_path + ": " + config.status().message());

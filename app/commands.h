@@ -42,6 +42,14 @@ int cmd_gvm(const Args& args);           // app/cmd_gvm.cpp: `gvm train`
 int cmd_predict(const Args& args);       // app/cmd_gvm.cpp
 #endif
 
+#ifdef COLLIDO_HAVE_JOB_COST
+class ParsedArgs;
+// app/cmd_cost.cpp: cmd_gvm.cpp sends job logs and scene files here.
+int gvm_train_jobs(const ParsedArgs& parsed, const std::string& log_path);
+int gvm_merge_jobs(const std::vector<std::string>& paths, const std::string& out);
+int predict_scene(const ParsedArgs& parsed, const std::string& path, const std::string& text);
+#endif
+
 #ifdef COLLIDO_HAVE_CALIBRATE
 int cmd_calibrate(const Args& args);     // app/cmd_calibrate.cpp
 int cmd_calibrate_exec(const Args& args);  // app/cmd_calibrate.cpp: one run of a sweep (a child)

@@ -147,19 +147,17 @@ RunMeasure PaperLinearFit::predict(const RunConfig& c) const {
 
 // ---- least squares -----------------------------------------------------------------
 
-Expected<LeastSquaresFit> LeastSquaresFit::fit(const std::vector<RunRecord>& rows,
-                                               const FeatureSpace& features) {
-  if (rows.empty()) return invalid_argument("least squares needs at least one row");
-  Matrix x, y;
-  encode_rows(rows, features, &x, &y);
-  LeastSquaresFit out;
-  out.features_ = features;
+Expected<LinearRegression> LinearRegression::fit(const Matrix& x, const Matrix& y) {
+  if (x.rows() == 0) return invalid_argument("least squares needs at least one row");
+  if (y.rows() != x.rows()) return invalid_argument("least squares: x and y differ in rows");
+  LinearRegression out;
   min_max(x, &out.lo_, &out.hi_);
-  const size_t p = x.cols() + 1;
-  out.coef_ = Matrix(p, kOutputCount);
+  const size_t p = x.cols() + 1, K = y.cols();
+  out.coef_ = Matrix(p, K);
+  out.trained_.assign(K, false);
   std::vector<double> a(p);
   // One normal-equation system per output, over the rows where that output has a value.
-  for (size_t k = 0; k < kOutputCount; ++k) {
+  for (size_t k = 0; k < K; ++k) {
     std::vector<double> ata(p * p, 0.0), aty(p, 0.0);
     size_t used = 0;
     for (size_t r = 0; r < x.rows(); ++r) {
@@ -172,44 +170,67 @@ Expected<LeastSquaresFit> LeastSquaresFit::fit(const std::vector<RunRecord>& row
         aty[i] += a[i] * y(r, k);
       }
     }
-    if (used == 0) continue;  // never predicted: decode_outputs gives 0 where it is missing
+    if (used == 0) continue;  // never predicted
     // Constant columns are all zero after scaling, and one-hot blocks sum to the
     // intercept; a small ridge term makes both solvable without changing the fit.
     const double ridge = 1e-9 * static_cast<double>(used);
     for (size_t i = 0; i + 1 < p; ++i) ata[i * p + i] += ridge + (out.hi_[i] > out.lo_[i] ? 0 : 1);
     if (!cholesky_solve(ata, p, &aty)) return invalid_argument("least squares system is singular");
     for (size_t i = 0; i < p; ++i) out.coef_(i, k) = aty[i];
+    out.trained_[k] = true;
   }
+  return out;
+}
+
+void LinearRegression::predict(const double* x, double* y) const {
+  const size_t p = lo_.size() + 1;
+  for (size_t k = 0; k < coef_.cols(); ++k) {
+    if (!trained_[k]) {
+      y[k] = std::numeric_limits<double>::quiet_NaN();
+      continue;
+    }
+    double s = coef_(p - 1, k);
+    for (size_t i = 0; i + 1 < p; ++i) s += coef_(i, k) * scale01(x[i], lo_[i], hi_[i]);
+    y[k] = s;
+  }
+}
+
+Expected<LeastSquaresFit> LeastSquaresFit::fit(const std::vector<RunRecord>& rows,
+                                               const FeatureSpace& features) {
+  if (rows.empty()) return invalid_argument("least squares needs at least one row");
+  Matrix x, y;
+  encode_rows(rows, features, &x, &y);
+  auto f = LinearRegression::fit(x, y);
+  if (!f) return f.status();
+  LeastSquaresFit out;
+  out.features_ = features;
+  out.fit_ = std::move(*f);
   return out;
 }
 
 RunMeasure LeastSquaresFit::predict(const RunConfig& c) const {
   std::vector<double> x = features_.encode_inputs(c);
   double y[kOutputCount];
-  const size_t p = x.size() + 1;
-  for (size_t k = 0; k < kOutputCount; ++k) {
-    double s = coef_(p - 1, k);
-    for (size_t i = 0; i + 1 < p; ++i) s += coef_(i, k) * scale01(x[i], lo_[i], hi_[i]);
-    y[k] = s;
-  }
+  fit_.predict(x.data(), y);
+  // An output never trained decodes to 0 (decode_outputs gives 0 where it is missing).
+  for (double& v : y)
+    if (std::isnan(v)) v = 0.0;
   return decode_outputs(y, c.backend);
 }
 
 // ---- back-propagation MLP ------------------------------------------------------------
 
-Expected<MlpFit> MlpFit::fit(const std::vector<RunRecord>& rows, const FeatureSpace& features,
-                             const MlpOptions& opt) {
-  if (rows.empty()) return invalid_argument("MLP needs at least one row");
+Expected<MlpRegression> MlpRegression::fit(const Matrix& x, const Matrix& y,
+                                           const MlpOptions& opt) {
+  if (x.rows() == 0) return invalid_argument("MLP needs at least one row");
+  if (y.rows() != x.rows()) return invalid_argument("MLP: x and y differ in rows");
   if (opt.hidden < 1 || opt.epochs < 0 || !(opt.learning_rate > 0.0))
     return invalid_argument("MLP options out of range");
-  Matrix x, y;
-  encode_rows(rows, features, &x, &y);
-  MlpFit m;
-  m.features_ = features;
+  MlpRegression m;
   m.hidden_ = static_cast<size_t>(opt.hidden);
   min_max(x, &m.in_lo_, &m.in_hi_);
   min_max(y, &m.out_lo_, &m.out_hi_);
-  const size_t N = x.rows(), I = x.cols(), H = m.hidden_, K = kOutputCount;
+  const size_t N = x.rows(), I = x.cols(), H = m.hidden_, K = y.cols();
   Matrix xs(N, I), ys(N, K);
   for (size_t n = 0; n < N; ++n) {
     for (size_t i = 0; i < I; ++i) xs(n, i) = scale01(x(n, i), m.in_lo_[i], m.in_hi_[i]);
@@ -297,21 +318,44 @@ Expected<MlpFit> MlpFit::fit(const std::vector<RunRecord>& rows, const FeatureSp
   return m;
 }
 
-RunMeasure MlpFit::predict(const RunConfig& c) const {
-  std::vector<double> x = features_.encode_inputs(c);
-  const size_t I = x.size(), H = hidden_, K = kOutputCount;
-  std::vector<double> h(H);
+void MlpRegression::predict(const double* x, double* y) const {
+  const size_t I = in_lo_.size(), H = hidden_, K = out_lo_.size();
+  double hbuf[64];
+  std::vector<double> big;
+  double* h = hbuf;
+  if (H > 64) {
+    big.resize(H);
+    h = big.data();
+  }
   for (size_t j = 0; j < H; ++j) {
     double z = b1_[j];
     for (size_t i = 0; i < I; ++i) z += w1_[j * I + i] * scale01(x[i], in_lo_[i], in_hi_[i]);
     h[j] = std::tanh(z);
   }
-  double y[kOutputCount];
   for (size_t k = 0; k < K; ++k) {
     double o = b2_[k];
     for (size_t j = 0; j < H; ++j) o += w2_[k * H + j] * h[j];
     y[k] = out_lo_[k] + o * (out_hi_[k] - out_lo_[k]);
   }
+}
+
+Expected<MlpFit> MlpFit::fit(const std::vector<RunRecord>& rows, const FeatureSpace& features,
+                             const MlpOptions& opt) {
+  if (rows.empty()) return invalid_argument("MLP needs at least one row");
+  Matrix x, y;
+  encode_rows(rows, features, &x, &y);
+  auto f = MlpRegression::fit(x, y, opt);
+  if (!f) return f.status();
+  MlpFit m;
+  m.features_ = features;
+  m.fit_ = std::move(*f);
+  return m;
+}
+
+RunMeasure MlpFit::predict(const RunConfig& c) const {
+  std::vector<double> x = features_.encode_inputs(c);
+  double y[kOutputCount];
+  fit_.predict(x.data(), y);
   return decode_outputs(y, c.backend);
 }
 

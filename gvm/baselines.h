@@ -34,6 +34,46 @@ class PaperLinearFit {
   std::vector<Group> groups_;
 };
 
+// Matrix-level fits, for predictors with features of their own (the job cost model
+// in job/cost_model.h): inputs x and targets y in raw units (a NaN target is missing
+// and left out of that output's fit); inputs are scaled to [0,1] inside.
+
+// Ordinary least squares of each target column on the scaled inputs and an intercept,
+// with a tiny ridge for one-hot collinearity and constant columns.
+class LinearRegression {
+ public:
+  LinearRegression() = default;
+  static Expected<LinearRegression> fit(const Matrix& x, const Matrix& y);
+  // y[outputs] for x[inputs]; an output with no value in training predicts NaN.
+  void predict(const double* x, double* y) const;
+  size_t inputs() const { return lo_.size(); }
+  size_t outputs() const { return coef_.cols(); }
+
+ private:
+  std::vector<double> lo_, hi_;  // input scaling
+  Matrix coef_;                  // (inputs + 1) x outputs, intercept last
+  std::vector<bool> trained_;    // per output
+};
+
+struct MlpOptions;
+
+// A one-hidden-layer tanh perceptron with linear outputs, trained by full-batch
+// back-propagation (Adam, cosine-decayed rate, best training loss kept); inputs and
+// targets scaled to [0,1] inside.
+class MlpRegression {
+ public:
+  MlpRegression() = default;
+  static Expected<MlpRegression> fit(const Matrix& x, const Matrix& y, const MlpOptions& options);
+  void predict(const double* x, double* y) const;
+  size_t inputs() const { return in_lo_.size(); }
+  size_t outputs() const { return out_lo_.size(); }
+
+ private:
+  std::vector<double> in_lo_, in_hi_, out_lo_, out_hi_;
+  size_t hidden_ = 0;
+  std::vector<double> w1_, b1_, w2_, b2_;  // hidden x inputs, hidden, outputs x hidden, outputs
+};
+
 // Ordinary least squares from the GVM's input features (log10 counts, one-hot
 // categories, scaled to [0,1], plus an intercept) to its transformed targets, i.e. a
 // power law in every count. A tiny ridge term keeps one-hot collinearity solvable.
@@ -46,8 +86,7 @@ class LeastSquaresFit {
 
  private:
   FeatureSpace features_;
-  std::vector<double> lo_, hi_;  // input scaling
-  Matrix coef_;                  // (inputs + 1) x kOutputCount, intercept last
+  LinearRegression fit_;
 };
 
 struct MlpOptions {
@@ -68,9 +107,7 @@ class MlpFit {
 
  private:
   FeatureSpace features_;
-  std::vector<double> in_lo_, in_hi_, out_lo_, out_hi_;
-  size_t hidden_ = 0;
-  std::vector<double> w1_, b1_, w2_, b2_;  // hidden x inputs, hidden, outputs x hidden, outputs
+  MlpRegression fit_;
 };
 
 }  // namespace collido::gvm

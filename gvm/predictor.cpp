@@ -271,6 +271,13 @@ Expected<ResourcePredictor> ResourcePredictor::from_json(const std::string& text
   if (j.is_discarded()) return parse_error("model file is not valid JSON");
   ResourcePredictor p;
   try {
+    // The job cost model (job/cost_model.h) writes model files too: say which is which.
+    if (j.is_object() && j.value("kind", "") == "collidoscope-job-cost-model")
+      return invalid_argument(
+          "this model file prices jobs (kind collidoscope-job-cost-model, trained on a job "
+          "log), not detection frames: give it a scene file (`collidoscope predict SCENE.json "
+          "--model MODEL.json`), or train a detection model on a calibration log of detection "
+          "frames");
     if (!j.is_object() || j.value("kind", "") != "collidoscope-resource-predictor")
       return parse_error("not a collidoscope resource-predictor model");
     // Version 1 held one machine for all outputs, version 2 fed the frame count to every
@@ -374,14 +381,15 @@ Expected<RunConfig> run_config_from_json(const std::string& text, const Resource
   nlohmann::json j = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
   if (j.is_discarded()) return parse_error("configuration is not valid JSON");
   if (!j.is_object()) return parse_error("configuration must be a JSON object");
-  // A scene file of `collidoscope run` describes a simulation; the predictor is
-  // calibrated on detection frames (docs/gvm.md), so it must not pretend to cost one.
+  // A scene file of `collidoscope run` is a job: the job cost model prices it
+  // (job/cost_model.h); this predictor is calibrated on detection frames and must not
+  // pretend to cost one.
   if (j.contains("wall") || j.contains("placement"))
     return invalid_argument(
-        "this is a scene file of `collidoscope run`; the predictor is calibrated on "
-        "detection frames, not on simulation runs, so it reads a detection configuration "
-        "(particles, triangles, method, traversal, frames, backend, radius, wall_area, "
-        "wall_box_volume; see `collidoscope predict --help`)");
+        "this is a scene file of `collidoscope run`, a job: the job cost model prices it "
+        "(`collidoscope predict SCENE.json` with a job model); this detection-frame predictor "
+        "reads a detection configuration (particles, triangles, method, traversal, frames, "
+        "backend, radius, wall_area, wall_box_volume; see `collidoscope predict --help`)");
   RunConfig c;
   auto count = [&](const char* key, int64_t* out, bool required) -> Status {
     if (!j.contains(key))

@@ -67,6 +67,14 @@ Expected<JobAssessment> assess_job(const JobSpec& spec) {
   const sim::Vec3d extent = sim::mesh_bounds(*wall).extent();
   a.box[0] = extent.x, a.box[1] = extent.y, a.box[2] = extent.z;
   a.frames = s.frames();
+  auto release = sim::plan_release(sim::mesh_bounds(*wall), s.particles, s.placement,
+                                   s.dynamics.gravity);
+  if (!release) return release.status();
+  a.release = *release;
+  a.steps = sim::plan_steps(s.dynamics, s.particles.r_min, s.particles.r_max,
+                            0.5 * (s.particles.r_min + s.particles.r_max), a.release.speed,
+                            extent, s.duration / double(std::max<uint64_t>(a.frames, 1)),
+                            a.frames);
   a.work = estimate_work(*wall, s.dynamics, s.particles.count, s.particles.r_max);
   if (Status st = check_budget(a.work, spec.budget); !st) return st;
   if (spec.render) {

@@ -13,7 +13,9 @@
 #include "job/budget.h"
 #include "job/job.h"
 #include "scene/scene.h"
+#include "sim/dynamics.h"
 #include "sim/mesh.h"
+#include "sim/placement.h"
 
 namespace collido::job {
 
@@ -40,6 +42,10 @@ struct JobAssessment {
   WorkEstimate work;            // engine work and peak host memory, estimated
   uint64_t render_pixels = 0;   // width x height of a rendered frame; 0 = no render
   std::vector<std::string> formats;  // videos asked for: mp4, webm, gif
+  // When the particles take part and the steps the run will take, planned from
+  // the scene (sim::plan_release, sim::plan_steps) as the engine will size them.
+  sim::ReleasePlan release;
+  sim::StepPlan steps;
 };
 
 // Resolves, loads and checks the job without running it. The same errors as

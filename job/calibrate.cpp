@@ -362,21 +362,6 @@ Expected<json> run_child(const std::string& executable, const json& request,
   return answer;
 }
 
-std::string cpu_model_name() {
-  std::ifstream in("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(in, line))
-    if (line.rfind("model name", 0) == 0) {
-      const auto colon = line.find(':');
-      if (colon != std::string::npos) {
-        std::string name = line.substr(colon + 1);
-        name.erase(0, name.find_first_not_of(" \t"));
-        if (!name.empty()) return name;
-      }
-    }
-  return "cpu";
-}
-
 // Sweep ranges per backend: particle counts are log-uniform in [lo, hi] per method,
 // frames log-uniform in [1, max_frames]; divisions above max_pieces are skipped, and
 // the brute-force reference runs only where particles x triangles stays small.
@@ -692,6 +677,27 @@ Expected<CalibrateSummary> run_sweep(const CalibrateSpec& spec, const CalibrateH
 }
 
 }  // namespace
+
+std::string cpu_model_name() {
+  std::ifstream in("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("model name", 0) == 0) {
+      const auto colon = line.find(':');
+      if (colon != std::string::npos) {
+        std::string name = line.substr(colon + 1);
+        name.erase(0, name.find_first_not_of(" \t"));
+        if (!name.empty()) return name;
+      }
+    }
+  return "cpu";
+}
+
+Expected<std::string> probe_gpu(const std::string& executable, const std::atomic<bool>* cancel) {
+  auto probe = run_child(executable, {{"task", "probe"}}, cancel, nullptr);
+  if (!probe) return probe.status();
+  return probe->value("device", std::string("cuda"));
+}
 
 CalibrateSpec calibrate_defaults(const std::string& backend, bool quick) {
   CalibrateSpec s;

@@ -85,6 +85,14 @@ struct CalibrateSummary {
 // no configuration was measured, or the sweep was cancelled (kCancelled).
 Expected<CalibrateSummary> calibrate(const CalibrateSpec& spec, const CalibrateHooks& hooks);
 
+// This machine's CPU model name (/proc/cpuinfo), "cpu" where it cannot be read.
+std::string cpu_model_name();
+
+// The name of the GPU a `collidoscope calibrate-exec` child finds, asked in that
+// child so the caller never holds a CUDA context; kBackend when none is usable.
+Expected<std::string> probe_gpu(const std::string& executable,
+                                const std::atomic<bool>* cancel = nullptr);
+
 // What `collidoscope calibrate-exec REQUEST --result-fd N` runs in the child: one
 // request of a sweep (the GPU probe, the wall survey or one configuration), given as
 // the JSON calibrate() writes. *result_line is always set: one JSON line (newline

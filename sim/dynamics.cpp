@@ -77,51 +77,31 @@ Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const Particl
   return Status::ok();
 }
 
-// The contact spring and the steps it allows (see DESIGN.md "Dynamics").
+// The contact spring and the steps it allows for a particle set (see DESIGN.md "Dynamics").
 TimeStepInfo time_step_physics(const DynamicsConfig& c, const ParticleSet& p,
                                const Bounds3d& wall_box) {
-  TimeStepInfo ts;
-  ts.r_min = *std::min_element(p.r.begin(), p.r.end());
-  ts.r_max = *std::max_element(p.r.begin(), p.r.end());
+  const double r_min = *std::min_element(p.r.begin(), p.r.end());
+  const double r_max = *std::max_element(p.r.begin(), p.r.end());
   double r_sum = 0, v_max = 0;
   for (size_t i = 0; i < p.size(); ++i) {
     r_sum += p.r[i];
     v_max = std::max(v_max, std::sqrt(p.vx[i] * p.vx[i] + p.vy[i] * p.vy[i] + p.vz[i] * p.vz[i]));
   }
-  auto mass = [&](double r) { return c.material.density * 4.0 / 3.0 * M_PI * r * r * r; };
-  ts.m_min = mass(ts.r_min);
-  const Material& m = c.material;
-  if (m.stiffness > 0) {
-    ts.stiffness = m.stiffness;
-  } else if (m.youngs_modulus > 0) {
-    // Linearised elastic contact: a sphere of radius r pressed into a flat of modulus E.
-    ts.stiffness = m.youngs_modulus * r_sum / p.size();
-  } else {
-    // Automatic: stiff enough that the fastest expected impact overlaps at
-    // most 2 % of the radius (the largest particle has the most mass per radius^2).
-    // The longest fall inside the wall's box, along gravity.
-    const double g = length(c.gravity);
-    const Vec3d e = wall_box.extent();
-    const double drop = g > 0 ? (std::fabs(e.x * c.gravity.x) + std::fabs(e.y * c.gravity.y) +
-                                 std::fabs(e.z * c.gravity.z)) /
-                                    g
-                              : 0.0;
-    const double fall = std::sqrt(2 * g * drop);
-    const double v = c.impact_speed > 0 ? c.impact_speed : std::max({v_max + fall, 1e-3});
-    const double delta = 0.02 * ts.r_max;
-    ts.stiffness = mass(ts.r_max) * (v / delta) * (v / delta);
-  }
-  ts.damping_ratio = damping_ratio(m.restitution);
-  // Lightest contact: a small particle on the wall, or two of them.
-  const double m_eff = c.particle_contacts ? ts.m_min / 2 : ts.m_min;
-  const double omega = std::sqrt(ts.stiffness / m_eff);
-  const double z = ts.damping_ratio;
-  // Explicit integration of a damped oscillator is stable for omega dt < 2 (sqrt(1 + z^2) - z).
-  ts.critical_step = 2.0 / omega * (std::sqrt(1 + z * z) - z);
-  ts.spring_step = c.step_fraction * ts.critical_step;
-  ts.explicit_step = c.time_step;
-  ts.beyond_stable = c.time_step > ts.critical_step;
-  return ts;
+  return contact_time_step(c, r_min, r_max, r_sum / double(p.size()), v_max, wall_box.extent());
+}
+
+// The fall across the wall's box along gravity (m/s) and the speed the automatic
+// stiffness is sized for: the fastest expected impact.
+double fall_speed(const DynamicsConfig& c, Vec3d e) {
+  const double g = length(c.gravity);
+  const double drop = g > 0 ? (std::fabs(e.x * c.gravity.x) + std::fabs(e.y * c.gravity.y) +
+                               std::fabs(e.z * c.gravity.z)) /
+                                  g
+                            : 0.0;
+  return std::sqrt(2 * g * drop);
+}
+double impact_speed(const DynamicsConfig& c, double v_max, Vec3d e) {
+  return c.impact_speed > 0 ? c.impact_speed : std::max({v_max + fall_speed(c, e), 1e-3});
 }
 
 }  // namespace
@@ -148,6 +128,61 @@ Expected<std::unique_ptr<Simulation>> Simulation::create(const TriangleMesh& wal
   }
   return DynamicsPipeline<CpuBackend>::make(wall, config, particles, ts, box.lo - pad,
                                             box.hi + pad);
+}
+
+TimeStepInfo contact_time_step(const DynamicsConfig& c, double r_min, double r_max, double r_mean,
+                               double v_max, Vec3d wall_extent) {
+  TimeStepInfo ts;
+  ts.r_min = r_min;
+  ts.r_max = r_max;
+  auto mass = [&](double r) { return c.material.density * 4.0 / 3.0 * M_PI * r * r * r; };
+  ts.m_min = mass(ts.r_min);
+  const Material& m = c.material;
+  if (m.stiffness > 0) {
+    ts.stiffness = m.stiffness;
+  } else if (m.youngs_modulus > 0) {
+    // Linearised elastic contact: a sphere of radius r pressed into a flat of modulus E.
+    ts.stiffness = m.youngs_modulus * r_mean;
+  } else {
+    // Automatic: stiff enough that the fastest expected impact (the initial speed
+    // and the longest fall inside the wall's box, along gravity) overlaps at most
+    // 2 % of the radius (the largest particle has the most mass per radius^2).
+    const double v = impact_speed(c, v_max, wall_extent);
+    const double delta = 0.02 * ts.r_max;
+    ts.stiffness = mass(ts.r_max) * (v / delta) * (v / delta);
+  }
+  ts.damping_ratio = damping_ratio(m.restitution);
+  // Lightest contact: a small particle on the wall, or two of them.
+  const double m_eff = c.particle_contacts ? ts.m_min / 2 : ts.m_min;
+  const double omega = std::sqrt(ts.stiffness / m_eff);
+  const double z = ts.damping_ratio;
+  // Explicit integration of a damped oscillator is stable for omega dt < 2 (sqrt(1 + z^2) - z).
+  ts.critical_step = 2.0 / omega * (std::sqrt(1 + z * z) - z);
+  ts.spring_step = c.step_fraction * ts.critical_step;
+  ts.explicit_step = c.time_step;
+  ts.beyond_stable = c.time_step > ts.critical_step;
+  return ts;
+}
+
+StepPlan plan_steps(const DynamicsConfig& c, double r_min, double r_max, double r_mean,
+                    double v_max, Vec3d wall_extent, double frame_duration, uint64_t frames) {
+  StepPlan plan;
+  plan.contact = contact_time_step(c, r_min, r_max, r_mean, v_max, wall_extent);
+  plan.expected_speed = impact_speed(c, v_max, wall_extent);
+  if (c.time_step > 0) {
+    plan.step = c.time_step;
+  } else {
+    plan.step = automatic_step_size(plan.contact.spring_step, c.motion_fraction, r_min,
+                                    plan.expected_speed, length(c.gravity));
+    plan.motion_limited = plan.step < plan.contact.spring_step;
+  }
+  // As advance() lands on each frame's end: what remains split into equal steps.
+  if (frame_duration > 0 && plan.step > 0) {
+    const double per = std::ceil(frame_duration / plan.step * (1 - 1e-12));
+    plan.steps_per_frame = uint64_t(std::min(std::max(per, 1.0), 1e18));
+  }
+  plan.steps = plan.steps_per_frame * frames;
+  return plan;
 }
 
 }  // namespace collido::sim

@@ -9,6 +9,7 @@
 // Units are SI throughout (m, kg, s); wall and particle coordinates are world units = metres.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -163,5 +164,52 @@ class Simulation {
 
 // Linear spring-dashpot damping ratio for a restitution e in (0, 1].
 double damping_ratio(double restitution);
+
+// ---- The time-step plan, known before a run ------------------------------------
+// Simulation::create() sizes the contact spring and its step from these same
+// functions; exposing them lets a job's steps be counted (and priced) from the
+// scene alone, before any particle is placed.
+
+// Steps between re-evaluations of the motion bound (the fastest speed).
+inline constexpr int kSpeedCheckInterval = 8;
+
+// The contact spring and the critical step it allows, from the material, the
+// particle radii (m; r_mean sizes a stiffness from youngs_modulus), the fastest
+// initial speed v_max (m/s) and the wall's bounding-box sides (m; the longest
+// fall along gravity sizes the automatic stiffness).
+TimeStepInfo contact_time_step(const DynamicsConfig& config, double r_min, double r_max,
+                               double r_mean, double v_max, Vec3d wall_extent);
+
+// The automatic step (s) at the fastest current speed v_max (m/s): the spring
+// step, or less where a particle would travel more than motion_fraction of the
+// smallest radius before the next speed check (speed may grow by g over those
+// steps), never below a thousandth of the spring step. g is |gravity|, m/s^2.
+inline double automatic_step_size(double spring_step, double motion_fraction, double r_min,
+                                  double v_max, double g) {
+  const double vb = v_max + g * spring_step * kSpeedCheckInterval;
+  double dt = spring_step;
+  if (vb > 0) dt = std::min(dt, motion_fraction * r_min / vb);
+  return std::max(dt, spring_step * 1e-3);
+}
+
+// The steps a run will take, planned from the scene before it runs.
+struct StepPlan {
+  TimeStepInfo contact;        // as Simulation::create() will size it
+  double expected_speed = 0;   // m/s: the fastest speed the motion bound is sized for
+  double step = 0;             // s: the step expected (fixed, or automatic at expected_speed)
+  bool motion_limited = false; // the motion bound, not the spring, sets the step
+  uint64_t steps_per_frame = 0;
+  uint64_t steps = 0;          // over every frame
+};
+
+// The plan for `frames` frames of frame_duration seconds each. The automatic
+// step is evaluated at the fastest speed the scene expects: the initial speed
+// plus a fall across the wall's box (the speed the automatic stiffness is sized
+// for), or impact_speed when the scene gives it. Where the spring sets the step
+// (the automatic stiffness always makes it so: its step is about 0.004 r_max / v
+// against the motion bound's 0.1 r_min / v) the count is exact; where the
+// motion bound does, it is an upper estimate (particles are slower most of the run).
+StepPlan plan_steps(const DynamicsConfig& config, double r_min, double r_max, double r_mean,
+                    double v_max, Vec3d wall_extent, double frame_duration, uint64_t frames);
 
 }  // namespace collido::sim

@@ -27,8 +27,6 @@ inline constexpr int kMaxWallContacts = 4;
 // kPairSlots neighbours (a settled pile has about six; more are counted as overflow).
 inline constexpr int kWallSlots = kMaxWallContacts;
 inline constexpr int kPairSlots = 8;
-// Steps between re-evaluations of the motion bound (the fastest speed).
-inline constexpr int kSpeedCheckInterval = 8;
 
 // Per-particle statistics columns filled by a measuring pass, reduced per frame.
 enum StatColumn : size_t {
@@ -364,13 +362,10 @@ class DynamicsPipeline final : public Simulation {
 
   double automatic_step() {
     const double vmax = backend_.reduce_max(speed_.data(), n_);
-    // Speed may grow under gravity before the next check; bound it.
-    const double g = length(cfg_.gravity);
-    const double vb = vmax + g * ts_.spring_step * kSpeedCheckInterval;
-    double dt = ts_.spring_step;
-    if (vb > 0) dt = std::min(dt, cfg_.motion_fraction * ts_.r_min / vb);
-    // A runaway speed must not stall the run: never below a thousandth of the spring step.
-    return std::max(dt, ts_.spring_step * 1e-3);
+    // Speed may grow under gravity before the next check (bounded inside); a
+    // runaway speed must not stall the run (never below a thousandth of the spring step).
+    return automatic_step_size(ts_.spring_step, cfg_.motion_fraction, ts_.r_min, vmax,
+                               length(cfg_.gravity));
   }
 
   void release(double t) {

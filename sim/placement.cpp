@@ -87,12 +87,15 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
 
 // A disc lattice of slots across the inlet. Each slot releases a particle every tau,
 // the time a particle takes to move 1.2 lattice spacings on, so two particles of one
-// slot never overlap; different slots are a lattice spacing apart. Each slot starts at
-// its own random phase within tau: the particles leave as a stream, not as flat layers
-// one after another (which the videos showed as falling slabs).
-Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl,
-             Vec3d gravity, SplitMix64& rng, ParticleSet* out) {
-  const Bounds3d box = mesh_bounds(wall);
+// slot never overlap; different slots are a lattice spacing apart.
+struct InletLayout {
+  Vec3d v, centre;
+  std::vector<Vec3d> disc;  // slot offsets from the centre
+  double tau = 0;           // s between two releases of one slot
+};
+
+Status inlet_layout(const Bounds3d& box, const ParticleSpec& ps, const PlacementSpec& pl,
+                    Vec3d gravity, InletLayout* out) {
   const double r = ps.r_max, s = 2.2 * r;
   Vec3d v = pl.velocity;
   const double g = length(gravity);
@@ -121,7 +124,8 @@ Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSp
     return invalid_argument("placement.inlet_radius: " + number_text(radius) + " m is more than " +
                             number_text(kMaxInletSlots) + " particle spacings (" +
                             number_text(s) + " m) across");
-  std::vector<Vec3d> disc;
+  std::vector<Vec3d>& disc = out->disc;
+  disc.clear();
   const int n = int(across);
   for (int i = -n; i <= n; ++i)
     for (int j = -n; j <= n; ++j) {
@@ -142,18 +146,33 @@ Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSp
     tau = (std::sqrt(disc2) - v0) / a;
   }
   if (pl.rate > 0) tau = std::max(tau, double(disc.size()) / pl.rate);
+  out->v = v;
+  out->centre = centre;
+  out->tau = tau;
+  return Status::ok();
+}
+
+// Each slot starts at its own random phase within tau: the particles leave as a
+// stream, not as flat layers one after another (which the videos showed as falling slabs).
+Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl,
+             Vec3d gravity, SplitMix64& rng, ParticleSet* out) {
+  InletLayout lay;
+  if (Status st = inlet_layout(mesh_bounds(wall), ps, pl, gravity, &lay); !st) return st;
+  const double r = ps.r_max;
+  const std::vector<Vec3d>& disc = lay.disc;
+  const Vec3d v = lay.v;
   out->resize(ps.count);
   std::vector<double> phase(disc.size());
   for (double& f : phase) f = rng.uniform(0.0, 1.0);
   const double jitter = 0.02 * r;
   for (uint64_t i = 0; i < ps.count; ++i) {
     const size_t slot = i % disc.size();
-    const Vec3d p = centre + disc[slot];
+    const Vec3d p = lay.centre + disc[slot];
     out->x[i] = p.x + rng.uniform(-jitter, jitter);
     out->y[i] = p.y + rng.uniform(-jitter, jitter);
     out->z[i] = p.z + rng.uniform(-jitter, jitter);
     out->vx[i] = v.x, out->vy[i] = v.y, out->vz[i] = v.z;
-    out->release[i] = (double(i / disc.size()) + phase[slot]) * tau;
+    out->release[i] = (double(i / disc.size()) + phase[slot]) * lay.tau;
   }
   return Status::ok();
 }
@@ -182,6 +201,32 @@ Expected<ParticleSet> place_particles(const TriangleMesh& wall, const ParticleSp
   for (size_t i = 0; i < out.size(); ++i)
     out.r[i] = ps.r_min == ps.r_max ? ps.r_max : rng.uniform(ps.r_min, ps.r_max);
   return out;
+}
+
+Expected<ReleasePlan> plan_release(const Bounds3d& wall_box, const ParticleSpec& ps,
+                                   const PlacementSpec& pl, Vec3d gravity) {
+  ReleasePlan plan;
+  if (pl.kind == PlacementKind::kFill) {
+    plan.speed = length(pl.velocity);
+    return plan;
+  }
+  InletLayout lay;
+  if (Status st = inlet_layout(wall_box, ps, pl, gravity, &lay); !st) return st;
+  plan.slots = lay.disc.size();
+  plan.period = lay.tau;
+  plan.speed = length(lay.v);
+  // Particle i leaves at (i / slots + phase) tau, the phase uniform in [0, 1).
+  const uint64_t layers = ps.count ? (ps.count - 1) / plan.slots : 0;
+  plan.last_release = (double(layers) + 1.0) * lay.tau;
+  return plan;
+}
+
+double ReleasePlan::mean_active(double duration) const {
+  if (!(last_release > 0) || !(duration > 0)) return 1.0;
+  // Released at a steady rate from 0 to last_release: the share out at time t is
+  // min(1, t / last_release); its mean over [0, duration]:
+  if (last_release <= duration) return 1.0 - last_release / (2.0 * duration);
+  return duration / (2.0 * last_release);
 }
 
 }  // namespace collido::sim

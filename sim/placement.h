@@ -45,4 +45,20 @@ struct PlacementSpec {
 Expected<ParticleSet> place_particles(const TriangleMesh& wall, const ParticleSpec& particles,
                                       const PlacementSpec& placement, Vec3d gravity, uint64_t seed);
 
+// When a placement's particles take part, known before placing them: a fill
+// places all at once; an inlet (pour, jet) releases `slots` particles every
+// `period` seconds, each slot at its own phase, until the last at about last_release.
+struct ReleasePlan {
+  uint64_t slots = 0;       // inlet slots (0 for a fill)
+  double period = 0;        // s between two releases of one slot
+  double last_release = 0;  // s: when the last particle leaves (0 for a fill)
+  double speed = 0;         // m/s: the initial speed of every particle
+  // Mean share of the particles released over a run of `duration` seconds (1 for a fill).
+  double mean_active(double duration) const;
+};
+// The plan of a placement against a wall whose bounding box is wall_box (m);
+// the same errors as place_particles gives for the inlet.
+Expected<ReleasePlan> plan_release(const Bounds3d& wall_box, const ParticleSpec& particles,
+                                   const PlacementSpec& placement, Vec3d gravity);
+
 }  // namespace collido::sim

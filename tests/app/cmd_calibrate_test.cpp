@@ -11,6 +11,9 @@
 #include "app/cli.h"
 #include "app/commands.h"
 #include "gvm/run_log.h"
+#include "job/job_log.h"
+#include <fstream>
+#include <sstream>
 
 namespace collido::app {
 namespace {
@@ -133,6 +136,59 @@ TEST(CmdCalibrate, SameSeedSameConfigurations) {
     EXPECT_EQ(a[i].config.wall_area, b[i].config.wall_area);
     EXPECT_EQ(a[i].config.wall_box_volume, b[i].config.wall_box_volume);
   }
+}
+
+// The job path of the commands: a quick job sweep (real jobs through job-exec) writes a
+// job log; gvm train makes a job cost model of the committed CPU log; predict prices a
+// scene file with it, as text and JSON, and says when the scene lies outside.
+TEST(CmdCalibrate, JobSweepTrainAndPredictAScene) {
+  const std::string log = tmp("jobs.csv"), model = tmp("job_model.json"), scene = tmp("scene.json");
+  ASSERT_EQ(cmd_calibrate({"--jobs", "--quick", "--configs", "2", "--repeats", "1", "--no-render",
+                           "--out", log}),
+            kExitOk);
+  auto rows = job::read_job_log(log);
+  ASSERT_TRUE(rows) << rows.status().message();
+  EXPECT_GE(rows->size(), 1u);
+
+  testing::internal::CaptureStdout();
+  const int trained = cmd_gvm({"train", "--logs", std::string(COLLIDO_SOURCE_DIR) +
+                               "/bench/data/jobs_cpu.csv", "--out", model, "--epochs", "30",
+                               "--hidden", "6", "--folds", "3", "--mlp-epochs", "50"});
+  const std::string train_out = testing::internal::GetCapturedStdout();
+  ASSERT_EQ(trained, kExitOk) << train_out;
+  for (const char* s : {"job log", "validation MAPE", "paper-linear", "least-squares",
+                        "mlp-backprop", "interval", "prediction time"})
+    EXPECT_NE(train_out.find(s), std::string::npos) << s << "\n" << train_out;
+  // Options of the other kind of log are refused.
+  EXPECT_EQ(cmd_gvm({"train", "--logs", std::string(COLLIDO_SOURCE_DIR) + "/bench/data/jobs_cpu.csv",
+                     "--out", model, "--ensemble", "3"}),
+            kExitUsage);
+
+  std::ofstream(scene) << R"({"wall": "wall1", "particles": {"count": 500, "radius": 1},
+                              "placement": {"kind": "pour", "rate": 500}, "duration": 1,
+                              "fps": 10, "backend": "cpu"})";
+  testing::internal::CaptureStdout();
+  ASSERT_EQ(cmd_predict({scene, "--model", model}), kExitOk);
+  const std::string text = testing::internal::GetCapturedStdout();
+  for (const char* s : {"total", "per frame", "host", "p10", "p90"})
+    EXPECT_NE(text.find(s), std::string::npos) << s << "\n" << text;
+
+  testing::internal::CaptureStdout();
+  ASSERT_EQ(cmd_predict({scene, "--model", model, "--json", "--particles-out-of-range-check"}),
+            kExitUsage);  // unknown flag
+  testing::internal::GetCapturedStdout();
+
+  std::ofstream(scene) << R"({"wall": "wall1", "particles": {"count": 300000, "radius": 0.5},
+                              "duration": 1, "fps": 10, "backend": "cpu"})";
+  testing::internal::CaptureStdout();
+  ASSERT_EQ(cmd_predict({scene, "--model", model, "--json"}), kExitOk);
+  const std::string js = testing::internal::GetCapturedStdout();
+  EXPECT_NE(js.find("\"outside_training\": true"), std::string::npos) << js;
+  EXPECT_NE(js.find("\"p90\""), std::string::npos) << js;
+
+  // A job model refuses a detection config, and a missing model says how to make one.
+  std::ofstream(scene) << R"({"particles": 1000, "triangles": 156, "method": "bin"})";
+  EXPECT_EQ(cmd_predict({scene, "--model", model}), kExitUsage);
 }
 
 }  // namespace

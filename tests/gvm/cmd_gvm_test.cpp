@@ -46,7 +46,12 @@ TEST(CmdGvm, BadArgumentsExitTwo) {
   EXPECT_EQ(cmd_gvm({"train", "--logs", "x", "--out", "y", "--bogus"}), kExitUsage);
   EXPECT_EQ(cmd_gvm({"synth", "--rows", "10"}), kExitUsage);
   EXPECT_EQ(cmd_predict({}), kExitUsage);
-  EXPECT_EQ(cmd_predict({"config.json"}), kExitUsage);  // no --model
+  // A detection-frame config names its model: without --model it is a usage error.
+  const std::string config = tmp("usage_config.json");
+  std::ofstream(config) << R"({"particles": 1000, "triangles": 156, "method": "bin"})";
+  EXPECT_EQ(cmd_predict({config}), kExitUsage);
+  // Job-only flags make no sense for a detection config.
+  EXPECT_EQ(cmd_predict({config, "--model", "m.json", "--duration", "2"}), kExitUsage);
   EXPECT_EQ(run([] { return cmd_gvm({"train", "--help"}); }).first, kExitOk);
   EXPECT_EQ(run([] { return cmd_predict({"--help"}); }).first, kExitOk);
 }
@@ -54,6 +59,7 @@ TEST(CmdGvm, BadArgumentsExitTwo) {
 TEST(CmdGvm, UnreadableFilesExitOne) {
   EXPECT_EQ(cmd_gvm({"train", "--logs", tmp("absent.csv"), "--out", tmp("m.json")}), kExitFailure);
   EXPECT_EQ(cmd_predict({tmp("absent.json"), "--model", tmp("absent-model.json")}), kExitFailure);
+  EXPECT_EQ(cmd_predict({tmp("absent.json")}), kExitFailure);  // what it is cannot be read
 }
 
 TEST(CmdGvm, SynthTrainPredict) {

@@ -1,0 +1,948 @@
+// The job cost model (job/cost_model.h): features, cross-fitted GVM ensembles,
+// split-conformal intervals, the range check, the model file, and the comparison
+// with the baselines.
+#include "job/cost_model.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <functional>
+#include <limits>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <thread>
+
+#include "common/atomic_file.h"
+#include "gvm/baselines.h"
+#include "gvm/rng.h"
+#include "job/assess.h"
+
+namespace collido::job {
+
+namespace g = collido::gvm;
+using json = nlohmann::json;
+
+namespace {
+
+constexpr const char* kKind = "collidoscope-job-cost-model";
+constexpr const char* kDetectionKind = "collidoscope-resource-predictor";
+constexpr int kVersion = 1;
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+// Feature indices of the fixed block.
+enum Feature : size_t {
+  kParticles,
+  kTriangles,
+  kPieces,
+  kWallCells,
+  kFrames,
+  kStepsPerFrame,
+  kSteps,
+  kParticleSteps,
+  kPairSteps,
+  kNearWall,
+  kAreaPerR2,
+  kBoxPerR3,
+  kPacking,
+  kContacts,
+  kFriction,
+  kInlet,
+  kGravity,
+  kMethodBin,
+  kMethodGravity,
+  kMethodCircumcircle,
+  kMethodMidpoint4,
+  kRender,
+  kPixelFrames,
+  kMp4,
+  kWebm,
+  kGif,
+  kSnapshotBytes,
+  kThreads,
+  kCuda,
+};
+static_assert(kCuda + 1 == kJobFixedFeatures, "the fixed block's size");
+
+enum Output : size_t { kTotal, kPerFrame, kHost, kDevice, kGpuLoad, kOutputBytes };
+
+// How a log feature reads back for people: the name, and whether log10(1 + v).
+struct LogFeature {
+  size_t index;
+  const char* what;
+  bool plus_one;
+};
+constexpr LogFeature kLogFeatures[] = {
+    {kParticles, "particles", false},
+    {kTriangles, "wall triangles", false},
+    {kPieces, "triangles after division", false},
+    {kWallCells, "bin (triangle, cell) pairs", true},
+    {kFrames, "frames written", false},
+    {kStepsPerFrame, "steps per frame", false},
+    {kSteps, "steps", false},
+    {kParticleSteps, "particle-steps", false},
+    {kPairSteps, "pair contact-steps", true},
+    {kNearWall, "particles near the wall", false},
+    {kAreaPerR2, "wall area / r_max^2", false},
+    {kBoxPerR3, "box volume / r_max^3", false},
+    {kPacking, "packing fraction", false},
+    {kPixelFrames, "rendered pixels x frames", true},
+    {kSnapshotBytes, "snapshot bytes", true},
+    {kThreads, "threads", false},
+};
+
+struct FlagFeature {
+  size_t index;
+  const char* yes;  // what the flag being 1 means
+  const char* no;
+};
+constexpr FlagFeature kFlagFeatures[] = {
+    {kContacts, "particle contacts on", "particle contacts off"},
+    {kFriction, "friction", "no friction"},
+    {kInlet, "an inlet placement (pour or jet)", "a fill placement"},
+    {kGravity, "gravity", "no gravity"},
+    {kMethodBin, "method bin", "a method other than bin"},
+    {kMethodGravity, "method gravity", "a method other than gravity"},
+    {kMethodCircumcircle, "method circumcircle", "a method other than circumcircle"},
+    {kMethodMidpoint4, "method midpoint4", "a method other than midpoint4"},
+    {kRender, "rendering", "no rendering"},
+    {kMp4, "an MP4 video", "no MP4 video"},
+    {kWebm, "a WebM video", "no WebM video"},
+    {kGif, "a GIF loop", "no GIF loop"},
+    {kCuda, "the cuda backend", "the cpu backend"},
+};
+
+double lg(double v) { return std::log10(std::max(v, 1e-300)); }
+
+std::string figure(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.4g", v);
+  return buf;
+}
+
+// Seed of member m of output k: distinct for every (seed, k, m).
+uint64_t member_seed(uint64_t seed, size_t k, int m) {
+  uint64_t z = seed + 0x9E3779B97F4A7C15ull * (1 + k * 1024 + static_cast<uint64_t>(m));
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+
+bool is_cuda(const JobInputs& in) { return in.backend == "cuda"; }
+
+std::vector<std::string> feature_names_with(const std::vector<std::string>& devices) {
+  std::vector<std::string> n = job_feature_names();
+  for (const std::string& d : devices) n.push_back("device " + d);
+  return n;
+}
+
+// The q-quantile of sorted values with the split-conformal finite-sample rank:
+// the ceil((n + 1) q)-th smallest, clamped to the sample.
+double conformal_quantile(const std::vector<double>& sorted, double q) {
+  if (sorted.empty()) return 0.0;
+  const double n = double(sorted.size());
+  long rank = long(std::ceil((n + 1) * q)) - 1;
+  rank = std::clamp<long>(rank, 0, long(sorted.size()) - 1);
+  return sorted[size_t(rank)];
+}
+
+}  // namespace
+
+// ---- Features ---------------------------------------------------------------------
+
+const std::vector<std::string>& job_feature_names() {
+  static const std::vector<std::string> names = {
+      "log10 particles",
+      "log10 wall triangles",
+      "log10 triangles after division",
+      "log10 (1 + bin cells)",
+      "log10 frames written",
+      "log10 steps per frame",
+      "log10 steps",
+      "log10 particle-steps",
+      "log10 (1 + pair contact-steps)",
+      "log10 particles near the wall",
+      "log10 wall area / r^2",
+      "log10 box volume / r^3",
+      "log10 packing fraction",
+      "particle contacts",
+      "friction",
+      "inlet placement",
+      "gravity",
+      "method bin",
+      "method gravity",
+      "method circumcircle",
+      "method midpoint4",
+      "render",
+      "log10 (1 + pixels x frames)",
+      "mp4",
+      "webm",
+      "gif",
+      "log10 (1 + snapshot bytes)",
+      "log10 threads",
+      "backend cuda",
+  };
+  return names;
+}
+
+CostDrivers cost_drivers(const JobInputs& in) {
+  CostDrivers d;
+  const double r = in.r_max, r_mean = 0.5 * (in.r_min + in.r_max);
+  const double volume = (in.box[0] + 2 * r) * (in.box[1] + 2 * r) * (in.box[2] + 2 * r);
+  // An inlet releases at a steady rate until release_s: the mean share out over the run.
+  if (in.release_s > 0 && in.duration > 0)
+    d.mean_active = in.release_s <= in.duration ? 1 - in.release_s / (2 * in.duration)
+                                                : in.duration / (2 * in.release_s);
+  const double active = double(in.particles) * d.mean_active;
+  d.particle_steps = active * double(in.steps);
+  d.packing = double(in.particles) * 4.0 / 3.0 * M_PI * r_mean * r_mean * r_mean / volume;
+  // A pile under gravity settles at about six neighbours a particle (three pairs); a
+  // gas without gravity meets in proportion to its packing (0.55: a loose random pack).
+  if (in.particle_contacts)
+    d.pair_contacts = active * 3 * (in.gravity > 0 ? 1.0 : std::min(1.0, d.packing / 0.55));
+  d.near_wall = std::max(1.0, active * std::min(1.0, 2 * r * in.wall_area / volume));
+  if (in.renders())
+    d.pixel_frames = double(in.render_width) * double(in.render_height) * double(in.frames + 1);
+  d.snapshot_bytes = double(in.frames + 1) * active * 29;
+  return d;
+}
+
+void job_features(const JobInputs& in, const std::vector<std::string>& devices, double* x) {
+  const CostDrivers d = cost_drivers(in);
+  const double r = in.r_max;
+  const double volume = (in.box[0] + 2 * r) * (in.box[1] + 2 * r) * (in.box[2] + 2 * r);
+  x[kParticles] = lg(double(in.particles));
+  x[kTriangles] = lg(double(in.triangles));
+  x[kPieces] = lg(in.pieces);
+  x[kWallCells] = std::log10(1 + in.wall_cells);
+  x[kFrames] = lg(double(in.frames + 1));
+  x[kStepsPerFrame] = lg(double(in.steps_per_frame));
+  x[kSteps] = lg(double(in.steps));
+  x[kParticleSteps] = lg(std::max(d.particle_steps, 1.0));
+  x[kPairSteps] = std::log10(1 + d.pair_contacts * double(in.steps));
+  x[kNearWall] = lg(d.near_wall);
+  x[kAreaPerR2] = lg(in.wall_area / (r * r));
+  x[kBoxPerR3] = lg(volume / (r * r * r));
+  x[kPacking] = lg(std::max(d.packing, 1e-12));
+  x[kContacts] = in.particle_contacts ? 1 : 0;
+  x[kFriction] = in.friction > 0 ? 1 : 0;
+  x[kInlet] = in.placement == "fill" ? 0 : 1;
+  x[kGravity] = in.gravity > 0 ? 1 : 0;
+  x[kMethodBin] = in.method == "bin";
+  x[kMethodGravity] = in.method == "gravity";
+  x[kMethodCircumcircle] = in.method == "circumcircle";
+  x[kMethodMidpoint4] = in.method == "midpoint4";
+  x[kRender] = in.renders() ? 1 : 0;
+  x[kPixelFrames] = std::log10(1 + d.pixel_frames);
+  x[kMp4] = in.has_format("mp4");
+  x[kWebm] = in.has_format("webm");
+  x[kGif] = in.has_format("gif");
+  x[kSnapshotBytes] = std::log10(1 + d.snapshot_bytes);
+  x[kThreads] = lg(double(std::max(in.threads, 1)));
+  x[kCuda] = is_cuda(in) ? 1 : 0;
+  for (size_t i = 0; i < devices.size(); ++i)
+    x[kJobFixedFeatures + i] = in.device == devices[i] ? 1 : 0;
+}
+
+// ---- Outputs ----------------------------------------------------------------------
+
+const std::vector<std::string>& job_output_names() {
+  static const std::vector<std::string> n = {"total_s",           "per_frame_s",
+                                             "peak_host_bytes",   "peak_device_bytes",
+                                             "gpu_load",          "output_bytes"};
+  return n;
+}
+
+void job_measure_to_array(const JobMeasure& m, double* out) {
+  out[kTotal] = m.total_s;
+  out[kPerFrame] = m.per_frame_s;
+  out[kHost] = m.peak_host_bytes;
+  out[kDevice] = m.peak_device_bytes;
+  out[kGpuLoad] = m.gpu_load;
+  out[kOutputBytes] = m.output_bytes;
+}
+
+double encode_cost(size_t k, double v, bool cuda) {
+  switch (k) {
+    case kDevice: return cuda ? std::log10(1 + v) : kNaN;
+    case kGpuLoad: return cuda ? v : kNaN;
+    case kOutputBytes: return std::log10(1 + v);
+    default: return lg(v);
+  }
+}
+
+double decode_cost(size_t k, double y, bool cuda) {
+  switch (k) {
+    case kDevice: return cuda ? std::max(0.0, std::pow(10.0, y) - 1) : 0.0;
+    case kGpuLoad: return cuda ? std::clamp(y, 0.0, 1.0) : 0.0;
+    case kOutputBytes: return std::max(0.0, std::pow(10.0, y) - 1);
+    default: return std::pow(10.0, y);
+  }
+}
+
+bool job_output_uses_feature(size_t k, size_t i) {
+  if (k == kHost || k == kDevice)
+    return i != kStepsPerFrame && i != kSteps && i != kParticleSteps && i != kPairSteps;
+  return true;
+}
+
+// ---- Prediction JSON ----------------------------------------------------------------
+
+json to_json(const JobCostPrediction& p) {
+  auto iv = [](const CostInterval& c) { return json{{"p10", c.p10}, {"p50", c.p50}, {"p90", c.p90}}; };
+  json j;
+  j["backend"] = p.backend;
+  j["device"] = p.device;
+  j["threads"] = p.threads;
+  j["total_s"] = iv(p.total_s);
+  j["per_frame_s"] = iv(p.per_frame_s);
+  j["peak_host_bytes"] = iv(p.peak_host_bytes);
+  j["peak_device_bytes"] = iv(p.peak_device_bytes);
+  j["gpu_load"] = iv(p.gpu_load);
+  j["output_bytes"] = iv(p.output_bytes);
+  j["outside_training"] = p.outside_training;
+  j["outside_reason"] = p.outside_reason;
+  j["outside_reasons"] = p.outside_reasons;
+  j["drivers"] = {{"steps", p.steps},
+                  {"steps_per_frame", p.steps_per_frame},
+                  {"particle_steps", p.particle_steps},
+                  {"pair_contacts", p.pair_contacts},
+                  {"pixel_frames", p.pixel_frames}};
+  return j;
+}
+
+// ---- Training -----------------------------------------------------------------------
+
+Expected<JobCostModel> JobCostModel::train(const std::vector<JobRecord>& rows,
+                                           const JobCostOptions& opt, JobTrainReport* report) {
+  if (opt.folds < 2 || opt.folds > 20) return invalid_argument("folds must be in 2..20");
+  if (!(opt.coverage > 0 && opt.coverage < 1)) return invalid_argument("coverage must be in (0, 1)");
+  if (rows.size() < size_t(2 * opt.folds))
+    return invalid_argument("training needs at least " + std::to_string(2 * opt.folds) +
+                            " rows, got " + std::to_string(rows.size()));
+  for (size_t r = 0; r < rows.size(); ++r) {
+    Status s = validate(rows[r].inputs);
+    if (s) s = validate(rows[r].measure);
+    if (!s) return invalid_argument("row " + std::to_string(r + 1) + ": " + s.message());
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  JobCostModel model;
+  model.options_ = opt;
+  model.coverage_ = opt.coverage;
+  model.rows_ = rows.size();
+  // Vocabularies: devices (one-hot), and what the range check names.
+  std::map<std::string, std::map<std::string, std::map<int, int>>> usual;  // backend, device, threads
+  for (const JobRecord& r : rows) {
+    const JobInputs& in = r.inputs;
+    if (std::find(model.devices_.begin(), model.devices_.end(), in.device) == model.devices_.end())
+      model.devices_.push_back(in.device);
+    if (std::find(model.backends_.begin(), model.backends_.end(), in.backend) ==
+        model.backends_.end())
+      model.backends_.push_back(in.backend);
+    ++usual[in.backend][in.device][in.threads];
+  }
+  std::sort(model.devices_.begin(), model.devices_.end());
+  std::sort(model.backends_.begin(), model.backends_.end());
+  for (const auto& [backend, devices] : usual) {
+    // The device with the most rows, and its most common thread count.
+    const std::string* dev = nullptr;
+    int dev_rows = -1, threads = 1;
+    for (const auto& [device, counts] : devices) {
+      int n = 0, best = -1;
+      int th = 1;
+      for (const auto& [t, c] : counts) {
+        n += c;
+        if (c > best) best = c, th = t;
+      }
+      if (n > dev_rows) dev_rows = n, dev = &device, threads = th;
+    }
+    model.usual_.push_back({backend, *dev, threads});
+  }
+  const size_t F = kJobFixedFeatures + model.devices_.size();
+  const size_t N = rows.size();
+  g::Matrix x(N, F), y(N, kJobOutputs);
+  for (size_t r = 0; r < N; ++r) {
+    job_features(rows[r].inputs, model.devices_, x.row(r));
+    double m[kJobOutputs];
+    job_measure_to_array(rows[r].measure, m);
+    for (size_t k = 0; k < kJobOutputs; ++k) y(r, k) = encode_cost(k, m[k], is_cuda(rows[r].inputs));
+  }
+  model.x_min_.assign(F, std::numeric_limits<double>::infinity());
+  model.x_max_.assign(F, -std::numeric_limits<double>::infinity());
+  for (size_t r = 0; r < N; ++r)
+    for (size_t i = 0; i < F; ++i) {
+      model.x_min_[i] = std::min(model.x_min_[i], x(r, i));
+      model.x_max_[i] = std::max(model.x_max_[i], x(r, i));
+    }
+
+  // Folds: a seeded shuffle dealt round-robin, so every fold holds N / folds rows.
+  std::vector<size_t> order(N);
+  for (size_t i = 0; i < N; ++i) order[i] = i;
+  g::Rng rng(opt.gvm.seed ^ 0x5DEECE66Dull);
+  rng.shuffle(order);
+  std::vector<int> fold(N);
+  for (size_t i = 0; i < N; ++i) fold[order[i]] = int(i % size_t(opt.folds));
+
+  const std::vector<std::string> names = feature_names_with(model.devices_);
+  struct Task {
+    size_t output;
+    int member;
+    g::Matrix x, y, vx, vy;
+    Expected<g::Machine> machine = invalid_argument("not trained");
+    g::TrainReport report;
+  };
+  std::vector<Task> tasks;
+  model.members_.assign(kJobOutputs, {});
+  for (size_t k = 0; k < kJobOutputs; ++k) {
+    size_t present = 0;
+    for (size_t r = 0; r < N; ++r) present += !std::isnan(y(r, k));
+    if (present < size_t(2 * opt.folds)) continue;  // a cost no (or almost no) row has
+    for (int m = 0; m < opt.folds; ++m) {
+      Task t;
+      t.output = k;
+      t.member = m;
+      t.x = t.vx = g::Matrix(0, F);
+      t.y = t.vy = g::Matrix(0, 1);
+      for (size_t r = 0; r < N; ++r) {
+        if (std::isnan(y(r, k))) continue;
+        std::vector<double> row(x.row(r), x.row(r) + F);
+        for (size_t i = 0; i < F; ++i)
+          if (!job_output_uses_feature(k, i)) row[i] = 0;
+        (fold[r] == m ? t.vx : t.x).push_row(row);
+        (fold[r] == m ? t.vy : t.y).push_row({y(r, k)});
+      }
+      tasks.push_back(std::move(t));
+    }
+  }
+  std::atomic<size_t> next{0};
+  auto work = [&] {
+    for (size_t i; (i = next.fetch_add(1)) < tasks.size();) {
+      Task& t = tasks[i];
+      g::GvmOptions o = opt.gvm;
+      o.seed = member_seed(opt.gvm.seed, t.output, t.member);
+      t.machine = g::Machine::train(t.x, t.y, t.vx, t.vy, o, &t.report, names,
+                                    {job_output_names()[t.output]});
+    }
+  };
+  const unsigned threads = std::max(1u, std::min<unsigned>(std::thread::hardware_concurrency(),
+                                                           unsigned(tasks.size())));
+  std::vector<std::thread> pool;
+  for (unsigned i = 1; i < threads; ++i) pool.emplace_back(work);
+  work();
+  for (auto& th : pool) th.join();
+  for (Task& t : tasks) {
+    if (!t.machine) return t.machine.status();
+    model.members_[t.output].push_back(std::move(*t.machine));
+  }
+
+  // Out-of-fold residuals: each row through the member that never saw it.
+  for (size_t k = 0; k < kJobOutputs; ++k) {
+    if (model.members_[k].empty()) continue;
+    std::vector<double> res;
+    for (size_t r = 0; r < N; ++r) {
+      if (std::isnan(y(r, k))) continue;
+      double p;
+      model.members_[k][size_t(fold[r])].predict(x.row(r), &p);
+      res.push_back(y(r, k) - p);
+    }
+    std::sort(res.begin(), res.end());
+    model.q_lo_[k] = conformal_quantile(res, (1 - opt.coverage) / 2);
+    model.q_hi_[k] = conformal_quantile(res, (1 + opt.coverage) / 2);
+  }
+  if (report) {
+    report->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    report->curve.clear();
+    report->proposals = report->accepted = 0;
+    for (const Task& t : tasks) {
+      report->proposals += t.report.proposals;
+      report->accepted += t.report.accepted;
+      if (report->curve.size() < t.report.curve.size())
+        report->curve.resize(t.report.curve.size(), g::EpochLoss{0, 0, 0, 0});
+      for (size_t e = 0; e < t.report.curve.size(); ++e) {
+        g::EpochLoss& c = report->curve[e];
+        c.epoch = int(e + 1);
+        c.train_loss += t.report.curve[e].train_loss / double(tasks.size());
+        c.validation_loss += t.report.curve[e].validation_loss / double(tasks.size());
+        c.acceptance += t.report.curve[e].acceptance / double(tasks.size());
+      }
+    }
+  }
+  return model;
+}
+
+// ---- Prediction -----------------------------------------------------------------------
+
+bool JobCostModel::trained_for(const std::string& backend) const {
+  return std::find(backends_.begin(), backends_.end(), backend) != backends_.end();
+}
+
+void JobCostModel::point(const double* x, double* y, bool cuda) const {
+  for (size_t k = 0; k < kJobOutputs; ++k) {
+    y[k] = kNaN;
+    if (members_[k].empty() || (!cuda && (k == kDevice || k == kGpuLoad))) continue;
+    double s = 0;
+    for (const g::Machine& m : members_[k]) {
+      double v;
+      m.predict(x, &v);
+      s += v;
+    }
+    y[k] = s / double(members_[k].size());
+  }
+}
+
+void JobCostModel::predict_point(const JobInputs& in, double* out) const {
+  double x[96];
+  std::vector<double> big;
+  double* xp = x;
+  const size_t F = kJobFixedFeatures + devices_.size();
+  if (F > 96) {
+    big.resize(F);
+    xp = big.data();
+  }
+  job_features(in, devices_, xp);
+  double y[kJobOutputs];
+  point(xp, y, is_cuda(in));
+  for (size_t k = 0; k < kJobOutputs; ++k)
+    out[k] = std::isnan(y[k]) ? 0.0 : decode_cost(k, y[k], is_cuda(in));
+}
+
+std::vector<std::string> JobCostModel::check_range(const JobInputs& in, const double* x) const {
+  std::vector<std::string> out;
+  auto outside = [&](size_t i) {
+    const double span = std::max(1e-9, 1e-9 * std::fabs(x_max_[i]));
+    return x[i] < x_min_[i] - span || x[i] > x_max_[i] + span;
+  };
+  for (const LogFeature& f : kLogFeatures) {
+    const size_t i = f.index;
+    if (!outside(i)) continue;
+    auto raw = [&](double v) { return f.plus_one ? std::pow(10.0, v) - 1 : std::pow(10.0, v); };
+    out.push_back(std::string(f.what) + " = " + figure(raw(x[i])) + " is " +
+                  (x[i] < x_min_[i] ? "below" : "above") + " the trained range [" +
+                  figure(raw(x_min_[i])) + ", " + figure(raw(x_max_[i])) + "]");
+  }
+  for (const FlagFeature& f : kFlagFeatures) {
+    const size_t i = f.index;
+    if (!outside(i)) continue;
+    out.push_back(std::string(x[i] > 0.5 ? f.yes : f.no) + ": no training job had it (every one had " +
+                  (x[i] > 0.5 ? f.no : f.yes) + ")");
+  }
+  if (std::find(devices_.begin(), devices_.end(), in.device) == devices_.end()) {
+    std::string known;
+    for (const auto& d : devices_) known += (known.empty() ? "'" : ", '") + d + "'";
+    out.push_back("device '" + in.device + "' is not in the training data (trained on " + known +
+                  ")");
+  }
+  return out;
+}
+
+Expected<JobCostPrediction> JobCostModel::predict(const JobInputs& in) const {
+  if (Status s = validate(in); !s) return s;
+  if (members_.size() != kJobOutputs || members_[kTotal].empty())
+    return invalid_argument("the job cost model has not been trained");
+  if (!trained_for(in.backend)) {
+    std::string known;
+    for (const auto& b : backends_) known += (known.empty() ? "" : ", ") + b;
+    return invalid_argument("this model prices " + known + " jobs only (trained on a " + known +
+                            " job log); it has no figures for the " + in.backend +
+                            " backend: use a model trained on " + in.backend + " jobs");
+  }
+  double x[96];
+  std::vector<double> big;
+  double* xp = x;
+  const size_t F = kJobFixedFeatures + devices_.size();
+  if (F > 96) {
+    big.resize(F);
+    xp = big.data();
+  }
+  job_features(in, devices_, xp);
+  const bool cuda = is_cuda(in);
+  double y[kJobOutputs];
+  point(xp, y, cuda);
+  JobCostPrediction p;
+  CostInterval* iv[kJobOutputs] = {&p.total_s,           &p.per_frame_s, &p.peak_host_bytes,
+                                   &p.peak_device_bytes, &p.gpu_load,    &p.output_bytes};
+  for (size_t k = 0; k < kJobOutputs; ++k) {
+    if (std::isnan(y[k])) continue;  // 0: a CPU job's device, or a cost never trained
+    const double lo = decode_cost(k, y[k] + std::min(q_lo_[k], 0.0), cuda);
+    const double mid = decode_cost(k, y[k], cuda);
+    const double hi = decode_cost(k, y[k] + std::max(q_hi_[k], 0.0), cuda);
+    *iv[k] = {lo, mid, hi};
+  }
+  p.outside_reasons = check_range(in, xp);
+  p.outside_training = !p.outside_reasons.empty();
+  for (const std::string& r : p.outside_reasons)
+    p.outside_reason += (p.outside_reason.empty() ? "" : "; ") + r;
+  p.backend = in.backend;
+  p.device = in.device;
+  p.threads = in.threads;
+  const CostDrivers d = cost_drivers(in);
+  p.steps = in.steps;
+  p.steps_per_frame = in.steps_per_frame;
+  p.particle_steps = d.particle_steps;
+  p.pair_contacts = d.pair_contacts;
+  p.pixel_frames = d.pixel_frames;
+  return p;
+}
+
+Expected<JobCostPrediction> JobCostModel::predict(const JobAssessment& a,
+                                                  const std::string& backend, int threads) const {
+  const Usual* u = nullptr;
+  for (const Usual& x : usual_)
+    if (x.backend == backend) u = &x;
+  if (!u) {
+    std::string known;
+    for (const auto& b : backends_) known += (known.empty() ? "" : ", ") + b;
+    return invalid_argument("this model prices " + known + " jobs only (trained on a " + known +
+                            " job log); it has no figures for the " + backend +
+                            " backend: use a model trained on " + backend + " jobs");
+  }
+  return predict(job_inputs(a, backend, u->device, threads > 0 ? threads : u->threads));
+}
+
+// ---- The model file --------------------------------------------------------------------
+
+std::string JobCostModel::to_json() const {
+  json j;
+  j["kind"] = kKind;
+  j["version"] = kVersion;
+  j["log"] = "job";
+  j["backends"] = backends_;
+  j["devices"] = devices_;
+  j["usual"] = json::array();
+  for (const Usual& u : usual_)
+    j["usual"].push_back({{"backend", u.backend}, {"device", u.device}, {"threads", u.threads}});
+  j["features"] = feature_names_with(devices_);
+  j["feature_min"] = x_min_;
+  j["feature_max"] = x_max_;
+  j["training"] = {{"rows", rows_},
+                   {"folds", options_.folds},
+                   {"coverage", coverage_},
+                   {"hidden", options_.gvm.hidden},
+                   {"epochs", options_.gvm.epochs},
+                   {"seed", options_.gvm.seed},
+                   {"delta", options_.gvm.delta},
+                   {"activation", g::activation_name(options_.gvm.activation)},
+                   {"beta_max", options_.gvm.beta_max}};
+  j["outputs"] = json::array();
+  for (size_t k = 0; k < kJobOutputs; ++k) {
+    json o = {{"name", job_output_names()[k]},
+              {"residual_lo", q_lo_[k]},
+              {"residual_hi", q_hi_[k]},
+              {"members", json::array()}};
+    for (const g::Machine& m : members_[k]) o["members"].push_back(json::parse(m.to_json()));
+    j["outputs"].push_back(o);
+  }
+  return j.dump(1, ' ', false, json::error_handler_t::replace);
+}
+
+Expected<JobCostModel> JobCostModel::from_json(const std::string& text) {
+  const json j = json::parse(text, nullptr, false);
+  if (j.is_discarded()) return parse_error("model file is not valid JSON");
+  if (!j.is_object()) return parse_error("model file is not a JSON object");
+  const std::string kind = j.value("kind", std::string());
+  if (kind == kDetectionKind)
+    return invalid_argument(
+        "this model file prices detection frames (kind " + std::string(kDetectionKind) +
+        ", trained on a calibration log of detection frames), not jobs: a scene is priced by "
+        "a job cost model, trained with `collidoscope gvm train --logs JOBS.csv` on a job log "
+        "(`collidoscope calibrate --jobs`)");
+  if (kind != kKind) return parse_error("not a collidoscope job cost model (kind '" + kind + "')");
+  JobCostModel m;
+  try {
+    if (j.at("version").get<int>() != kVersion)
+      return parse_error("unsupported job cost model version " + j.at("version").dump());
+    m.backends_ = j.at("backends").get<std::vector<std::string>>();
+    m.devices_ = j.at("devices").get<std::vector<std::string>>();
+    for (const json& u : j.at("usual"))
+      m.usual_.push_back({u.at("backend").get<std::string>(), u.at("device").get<std::string>(),
+                          u.at("threads").get<int>()});
+    if (j.at("features").get<std::vector<std::string>>() != feature_names_with(m.devices_))
+      return parse_error("the model's features differ from this build's (retrain it)");
+    m.x_min_ = j.at("feature_min").get<std::vector<double>>();
+    m.x_max_ = j.at("feature_max").get<std::vector<double>>();
+    const size_t F = kJobFixedFeatures + m.devices_.size();
+    if (m.x_min_.size() != F || m.x_max_.size() != F)
+      return parse_error("feature ranges do not match the feature list");
+    const json& t = j.at("training");
+    m.rows_ = t.at("rows").get<size_t>();
+    m.options_.folds = t.at("folds").get<int>();
+    m.coverage_ = t.at("coverage").get<double>();
+    m.options_.coverage = m.coverage_;
+    m.options_.gvm.hidden = t.at("hidden").get<int>();
+    m.options_.gvm.epochs = t.at("epochs").get<int>();
+    m.options_.gvm.seed = t.at("seed").get<uint64_t>();
+    m.options_.gvm.delta = t.at("delta").get<double>();
+    m.options_.gvm.beta_max = t.at("beta_max").get<double>();
+    if (auto a = g::parse_activation(t.at("activation").get<std::string>())) m.options_.gvm.activation = *a;
+    const json& outs = j.at("outputs");
+    if (!outs.is_array() || outs.size() != kJobOutputs)
+      return parse_error("model file needs 'outputs', one per cost");
+    m.members_.assign(kJobOutputs, {});
+    for (size_t k = 0; k < kJobOutputs; ++k) {
+      const json& o = outs[k];
+      if (o.at("name").get<std::string>() != job_output_names()[k])
+        return parse_error("outputs[" + std::to_string(k) + "] is not " + job_output_names()[k]);
+      m.q_lo_[k] = o.at("residual_lo").get<double>();
+      m.q_hi_[k] = o.at("residual_hi").get<double>();
+      for (const json& mj : o.at("members")) {
+        auto machine = g::Machine::from_json(mj.dump());
+        if (!machine) return machine.status();
+        if (machine->inputs() != F || machine->outputs() != 1)
+          return parse_error("a member of " + job_output_names()[k] + " does not match the features");
+        m.members_[k].push_back(std::move(*machine));
+      }
+    }
+  } catch (const std::exception& e) {
+    return parse_error(std::string("job cost model JSON: ") + e.what());
+  }
+  if (m.members_[kTotal].empty()) return parse_error("the model has no machine for the total time");
+  return m;
+}
+
+Status JobCostModel::save(const std::string& path) const {
+  return write_file_atomic(path, to_json() + "\n");
+}
+
+Expected<JobCostModel> JobCostModel::load(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return io_error("cannot open model '" + path + "'");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  auto m = from_json(ss.str());
+  if (!m) return Status(m.status().code(), path + ": " + m.status().message());
+  return m;
+}
+
+// ---- Comparison with the baselines ----------------------------------------------------
+
+namespace {
+
+// The paper's model (Yong et al. 2018, Eqs. 9-10): for a fixed particle count (and a
+// fixed machine and method) every cost is linear in the divided triangle count; a
+// job's total time is its frames times the time per frame. One fit per group of equal
+// (particles, method, backend, device, threads, rendering); an untrained count takes
+// the group of the same kind with the nearest log10 count.
+class PaperLinearJobs {
+ public:
+  explicit PaperLinearJobs(const std::vector<JobRecord>& rows) {
+    std::vector<std::vector<const JobRecord*>> members;
+    for (const JobRecord& r : rows) {
+      size_t gi = 0;
+      while (gi < groups_.size() && !(groups_[gi].key.particles == r.inputs.particles &&
+                                      same_kind(groups_[gi].key, r.inputs)))
+        ++gi;
+      if (gi == groups_.size()) {
+        groups_.push_back({r.inputs, {}, {}});
+        members.emplace_back();
+      }
+      members[gi].push_back(&r);
+    }
+    for (size_t gi = 0; gi < groups_.size(); ++gi) {
+      const auto& rs = members[gi];
+      const double n = double(rs.size());
+      double mx = 0, sxx = 0;
+      for (auto* r : rs) mx += r->inputs.pieces / n;
+      for (auto* r : rs) sxx += (r->inputs.pieces - mx) * (r->inputs.pieces - mx);
+      for (size_t k = 0; k < kJobOutputs; ++k) {
+        if (k == kTotal) continue;  // frames x time per frame
+        double v[kJobOutputs], my = 0, sxy = 0;
+        for (auto* r : rs) {
+          job_measure_to_array(r->measure, v);
+          my += v[k] / n;
+        }
+        for (auto* r : rs) {
+          job_measure_to_array(r->measure, v);
+          sxy += (r->inputs.pieces - mx) * (v[k] - my);
+        }
+        const double a = sxx > 0 ? sxy / sxx : 0.0;
+        groups_[gi].a[k] = a;
+        groups_[gi].b[k] = my - a * mx;
+      }
+    }
+  }
+  void predict(const JobInputs& in, double* out) const {
+    const Group* best = nullptr;
+    double best_d = std::numeric_limits<double>::infinity();
+    for (int pass = 0; pass < 2 && !best; ++pass)
+      for (const Group& gr : groups_) {
+        if (pass == 0 && !same_kind(gr.key, in)) continue;
+        const double d = std::fabs(lg(double(gr.key.particles)) - lg(double(in.particles)));
+        if (d < best_d) best_d = d, best = &gr;
+      }
+    for (size_t k = 0; k < kJobOutputs; ++k) out[k] = 0;
+    if (!best) return;
+    for (size_t k = 0; k < kJobOutputs; ++k) out[k] = best->a[k] * in.pieces + best->b[k];
+    out[kPerFrame] = std::max(out[kPerFrame], 1e-9);
+    out[kTotal] = out[kPerFrame] * double(in.frames + 1);
+    for (size_t k = 0; k < kJobOutputs; ++k) out[k] = std::max(out[k], 0.0);
+    out[kGpuLoad] = std::min(out[kGpuLoad], 1.0);
+    if (!is_cuda(in)) out[kDevice] = out[kGpuLoad] = 0;
+  }
+
+ private:
+  static bool same_kind(const JobInputs& a, const JobInputs& b) {
+    return a.method == b.method && a.backend == b.backend && a.device == b.device &&
+           a.threads == b.threads && a.renders() == b.renders();
+  }
+  struct Group {
+    JobInputs key;
+    double a[kJobOutputs], b[kJobOutputs];
+  };
+  std::vector<Group> groups_;
+};
+
+void encode_table(const std::vector<JobRecord>& rows, const std::vector<std::string>& devices,
+                  g::Matrix* x, g::Matrix* y) {
+  const size_t F = kJobFixedFeatures + devices.size();
+  *x = g::Matrix(rows.size(), F);
+  *y = g::Matrix(rows.size(), kJobOutputs);
+  for (size_t r = 0; r < rows.size(); ++r) {
+    job_features(rows[r].inputs, devices, x->row(r));
+    double m[kJobOutputs];
+    job_measure_to_array(rows[r].measure, m);
+    for (size_t k = 0; k < kJobOutputs; ++k)
+      (*y)(r, k) = encode_cost(k, m[k], is_cuda(rows[r].inputs));
+  }
+}
+
+// Scores predictions (and, when given, intervals) against the rows.
+JobErrors score(const std::vector<JobRecord>& rows,
+                const std::function<void(const JobInputs&, double*)>& predict,
+                const std::function<void(const JobInputs&, CostInterval*)>& interval = nullptr) {
+  JobErrors e;
+  double sum[kJobOutputs] = {}, inside[kJobOutputs] = {};
+  size_t host_under = 0, host_rows = 0, dev_under = 0, dev_rows = 0, iv_rows[kJobOutputs] = {};
+  for (const JobRecord& r : rows) {
+    double truth[kJobOutputs], pred[kJobOutputs];
+    job_measure_to_array(r.measure, truth);
+    predict(r.inputs, pred);
+    CostInterval iv[kJobOutputs];
+    if (interval) interval(r.inputs, iv);
+    for (size_t k = 0; k < kJobOutputs; ++k) {
+      if (truth[k] == 0) continue;
+      if ((k == kDevice || k == kGpuLoad) && !is_cuda(r.inputs)) continue;
+      sum[k] += std::fabs(pred[k] - truth[k]) / std::fabs(truth[k]);
+      ++e.rows[k];
+      if (interval) {
+        ++iv_rows[k];
+        inside[k] += truth[k] >= iv[k].p10 && truth[k] <= iv[k].p90;
+      }
+    }
+    ++host_rows;
+    host_under += pred[kHost] < 0.95 * truth[kHost];
+    if (is_cuda(r.inputs) && truth[kDevice] > 0) {
+      ++dev_rows;
+      dev_under += pred[kDevice] < 0.95 * truth[kDevice];
+    }
+  }
+  for (size_t k = 0; k < kJobOutputs; ++k) {
+    e.mape[k] = e.rows[k] ? 100.0 * sum[k] / double(e.rows[k]) : kNaN;
+    e.coverage[k] = interval && iv_rows[k] ? inside[k] / double(iv_rows[k]) : kNaN;
+  }
+  e.host_under5 = host_rows ? double(host_under) / double(host_rows) : kNaN;
+  e.device_under5 = dev_rows ? double(dev_under) / double(dev_rows) : kNaN;
+  return e;
+}
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+}  // namespace
+
+Expected<JobComparison> compare_job_models(const std::vector<JobRecord>& rows,
+                                           const JobCostOptions& options, uint64_t split_seed,
+                                           int mlp_epochs) {
+  if (rows.size() < 8) return invalid_argument("need at least 8 rows to compare models");
+  JobComparison c;
+  std::vector<size_t> idx(rows.size());
+  for (size_t i = 0; i < idx.size(); ++i) idx[i] = i;
+  g::Rng rng(split_seed);
+  rng.shuffle(idx);
+  const size_t n_train = size_t(std::llround(0.7 * double(rows.size())));
+  for (size_t i = 0; i < idx.size(); ++i)
+    (i < n_train ? c.train : c.validation).push_back(rows[idx[i]]);
+
+  auto t0 = std::chrono::steady_clock::now();
+  auto model = JobCostModel::train(c.train, options, &c.report);
+  if (!model) return model.status();
+  c.model = std::move(*model);
+  {
+    JobModelScore s;
+    s.name = "gvm";
+    s.fit_seconds = seconds_since(t0);
+    auto pt = [&](const JobInputs& in, double* out) { c.model.predict_point(in, out); };
+    auto iv = [&](const JobInputs& in, CostInterval* out) {
+      auto p = c.model.predict(in);
+      if (!p) return;
+      out[kTotal] = p->total_s, out[kPerFrame] = p->per_frame_s;
+      out[kHost] = p->peak_host_bytes, out[kDevice] = p->peak_device_bytes;
+      out[kGpuLoad] = p->gpu_load, out[kOutputBytes] = p->output_bytes;
+    };
+    s.validation = score(c.validation, pt, iv);
+    s.train = score(c.train, pt, iv);
+    c.scores.push_back(s);
+  }
+  {
+    t0 = std::chrono::steady_clock::now();
+    PaperLinearJobs fit(c.train);
+    JobModelScore s;
+    s.name = "paper-linear";
+    s.fit_seconds = seconds_since(t0);
+    auto pt = [&](const JobInputs& in, double* out) { fit.predict(in, out); };
+    s.validation = score(c.validation, pt);
+    s.train = score(c.train, pt);
+    c.scores.push_back(s);
+  }
+  const std::vector<std::string>& devices = c.model.devices();
+  g::Matrix x, y;
+  encode_table(c.train, devices, &x, &y);
+  auto decode_all = [&](const double* yy, const JobInputs& in, double* out) {
+    for (size_t k = 0; k < kJobOutputs; ++k)
+      out[k] = std::isnan(yy[k]) ? 0.0 : decode_cost(k, yy[k], is_cuda(in));
+  };
+  {
+    t0 = std::chrono::steady_clock::now();
+    auto fit = g::LinearRegression::fit(x, y);
+    if (!fit) return fit.status();
+    JobModelScore s;
+    s.name = "least-squares";
+    s.fit_seconds = seconds_since(t0);
+    auto pt = [&](const JobInputs& in, double* out) {
+      std::vector<double> f(kJobFixedFeatures + devices.size());
+      job_features(in, devices, f.data());
+      double yy[kJobOutputs];
+      fit->predict(f.data(), yy);
+      decode_all(yy, in, out);
+    };
+    s.validation = score(c.validation, pt);
+    s.train = score(c.train, pt);
+    c.scores.push_back(s);
+  }
+  {
+    t0 = std::chrono::steady_clock::now();
+    g::MlpOptions mo;
+    mo.epochs = mlp_epochs;
+    auto fit = g::MlpRegression::fit(x, y, mo);
+    if (!fit) return fit.status();
+    JobModelScore s;
+    s.name = "mlp-backprop";
+    s.fit_seconds = seconds_since(t0);
+    auto pt = [&](const JobInputs& in, double* out) {
+      std::vector<double> f(kJobFixedFeatures + devices.size());
+      job_features(in, devices, f.data());
+      double yy[kJobOutputs];
+      fit->predict(f.data(), yy);
+      decode_all(yy, in, out);
+    };
+    s.validation = score(c.validation, pt);
+    s.train = score(c.train, pt);
+    c.scores.push_back(s);
+  }
+  return c;
+}
+
+}  // namespace collido::job

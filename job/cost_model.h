@@ -1,0 +1,197 @@
+// The job cost model: what a job the user submits will cost before it runs (total
+// time, time per frame, peak host and device memory, GPU load, output bytes), each
+// with a 10-90 % interval, and whether the job lies outside what the model was
+// trained on. The service prices every submission with it (admission control trusts
+// the memory figure); `collidoscope predict SCENE.json` prints it.
+//
+// The model is the paper's general vector machine (gvm/machine.h, Monte Carlo
+// trained): for each cost an ensemble of GVMs over a job's features (job_features),
+// each member trained with one fold of the training rows held out. The held-out
+// fold's errors calibrate the interval (split-conformal quantiles of the out-of-fold
+// residuals), so the interval is measured on runs the member never saw; docs/gvm.md
+// ("Job cost model") gives the choices and their figures.
+#pragma once
+
+#include <cstdint>
+#include <nlohmann/json_fwd.hpp>
+#include <string>
+#include <vector>
+
+#include "common/status.h"
+#include "gvm/machine.h"
+#include "job/job_log.h"
+
+namespace collido::job {
+
+struct JobAssessment;
+
+// A predicted cost: p50 the point prediction, [p10, p90] the interval that held
+// 80 % of the held-out fold's runs in training.
+struct CostInterval {
+  double p10 = 0, p50 = 0, p90 = 0;
+};
+
+struct JobCostPrediction {
+  CostInterval total_s;            // s, the whole job
+  CostInterval per_frame_s;        // s per frame written (simulation and rendering)
+  CostInterval peak_host_bytes;    // the job process's peak resident set
+  CostInterval peak_device_bytes;  // 0 on the CPU
+  CostInterval gpu_load;           // share of the job's wall time in the GPU engine; 0 on the CPU
+  CostInterval output_bytes;       // every file the job leaves
+  bool outside_training = false;
+  // "" when inside; else why, for people ("particles = 200000 is above the trained
+  // range [40, 20000]; method 'midpoint4' is not in the training data").
+  std::string outside_reason;
+  std::vector<std::string> outside_reasons;  // the same, one per line
+  std::string backend;                       // "cpu" or "cuda": the backend priced
+  std::string device;                        // the device the model was trained on
+  int threads = 0;                           // CPU threads priced
+  // What drives the cost, from the time-step plan and the scene.
+  uint64_t steps = 0, steps_per_frame = 0;
+  double particle_steps = 0;  // released particles x steps
+  double pair_contacts = 0;   // expected from the packing (0 without particle contacts)
+  double pixel_frames = 0;    // rendered pixels x frames (0 without rendering)
+};
+
+// {"backend", "device", "threads", "total_s": {"p10", "p50", "p90"}, ... each cost,
+//  "outside_training", "outside_reason", "outside_reasons", "drivers": {...}}
+nlohmann::json to_json(const JobCostPrediction& p);
+
+// ---- Features ------------------------------------------------------------------
+
+// The model's inputs: logs of counts (costs grow as powers of them) and flags. See
+// job_feature_names() for the order; devices one-hot after the fixed block.
+inline constexpr size_t kJobFixedFeatures = 29;
+const std::vector<std::string>& job_feature_names();  // the fixed block
+// Writes kJobFixedFeatures + devices.size() values into x.
+void job_features(const JobInputs& in, const std::vector<std::string>& devices, double* x);
+
+// What drives a job's cost, estimated from its inputs (also features, in log form).
+struct CostDrivers {
+  double mean_active = 1;     // share of the particles released, averaged over the run
+  double particle_steps = 0;  // particles x mean_active x steps
+  double pair_contacts = 0;   // expected pair contacts at a time (particle contacts on)
+  double near_wall = 0;       // particles within a radius of the wall, if spread evenly
+  double packing = 0;         // particles' volume over the wall's box volume
+  double pixel_frames = 0;    // rendered pixels x frames written
+  double snapshot_bytes = 0;  // the frames' snapshots, about 29 bytes a released particle
+};
+CostDrivers cost_drivers(const JobInputs& in);
+
+// ---- Outputs -------------------------------------------------------------------
+
+inline constexpr size_t kJobOutputs = 6;
+// "total_s", "per_frame_s", "peak_host_bytes", "peak_device_bytes", "gpu_load", "output_bytes"
+const std::vector<std::string>& job_output_names();
+// The measure's six costs in that order.
+void job_measure_to_array(const JobMeasure& m, double* out);
+// Model space: log10 of times and bytes (device bytes log10(1 + b)), GPU load as is;
+// a CPU job's device bytes and GPU load are missing (NaN), predicted as exactly 0.
+double encode_cost(size_t output, double value, bool cuda);
+double decode_cost(size_t output, double y, bool cuda);
+// Whether output k reads feature i: the memory peaks do not depend on how many steps
+// a job takes, so their machines never see the step counts.
+bool job_output_uses_feature(size_t output, size_t feature);
+
+// ---- The model -------------------------------------------------------------------
+
+struct JobCostOptions {
+  gvm::GvmOptions gvm;  // per machine (ensemble is ignored: folds set the members)
+  int folds = 5;        // members per cost, each trained with one fold held out (2..20)
+  double coverage = 0.8;  // of the [p10, p90] interval: its quantiles are (1 -+ coverage) / 2
+  JobCostOptions() {
+    gvm.hidden = 12;
+    gvm.epochs = 1500;
+  }
+};
+
+struct JobTrainReport {
+  double seconds = 0;
+  std::vector<gvm::EpochLoss> curve;  // mean over every machine, per epoch
+  int64_t proposals = 0, accepted = 0;
+};
+
+class JobCostModel {
+ public:
+  JobCostModel() = default;
+
+  // Trains on a job log's rows (any mix of backends and devices). Errors: fewer rows
+  // than folds x 2, invalid rows, bad options.
+  static Expected<JobCostModel> train(const std::vector<JobRecord>& rows,
+                                      const JobCostOptions& options, JobTrainReport* report);
+
+  // The model file: JSON with kind "collidoscope-job-cost-model". A detection-frame
+  // model (kind "collidoscope-resource-predictor") is refused with a message that says so.
+  static Expected<JobCostModel> load(const std::string& path);
+  static Expected<JobCostModel> from_json(const std::string& text);
+  std::string to_json() const;
+  Status save(const std::string& path) const;
+
+  // The cost of an assessed job run on `backend` ("cpu" or "cuda") with `threads` CPU
+  // threads (0 = what the training jobs of that backend used), on the device the model
+  // was trained on. kInvalidArgument when the model has no jobs of that backend.
+  Expected<JobCostPrediction> predict(const JobAssessment& a, const std::string& backend,
+                                      int threads = 0) const;
+  // The same for a job log row's inputs (their device and threads as given).
+  Expected<JobCostPrediction> predict(const JobInputs& in) const;
+  // Point predictions only, no checks (evaluation and benchmarks): out[kJobOutputs].
+  void predict_point(const JobInputs& in, double* out) const;
+
+  const std::vector<std::string>& backends() const { return backends_; }
+  const std::vector<std::string>& devices() const { return devices_; }
+  bool trained_for(const std::string& backend) const;
+  size_t training_rows() const { return rows_; }
+  // Output k's interval quantiles of the out-of-fold residuals (model space).
+  double residual_lo(size_t k) const { return q_lo_[k]; }
+  double residual_hi(size_t k) const { return q_hi_[k]; }
+
+ private:
+  struct Usual {
+    std::string backend, device;
+    int threads;
+  };
+  void point(const double* x, double* y, bool cuda) const;  // model space
+  std::vector<std::string> check_range(const JobInputs& in, const double* x) const;
+
+  std::vector<std::string> backends_, devices_;
+  std::vector<Usual> usual_;
+  std::vector<double> x_min_, x_max_;                 // per feature, training rows
+  std::vector<std::vector<gvm::Machine>> members_;   // per output
+  double q_lo_[kJobOutputs] = {}, q_hi_[kJobOutputs] = {};
+  double coverage_ = 0.8;
+  size_t rows_ = 0;
+  JobCostOptions options_;
+  std::vector<std::string> formats_seen_, methods_seen_, placements_seen_;
+};
+
+// ---- Evaluation against the baselines ----------------------------------------------
+
+struct JobErrors {
+  double mape[kJobOutputs] = {};   // % over rows whose true value is not 0 (NaN when none)
+  size_t rows[kJobOutputs] = {};
+  double host_under5 = 0;          // share of rows whose host peak is under-predicted by > 5 %
+  double device_under5 = 0;        // the same for device memory (cuda rows)
+  double coverage[kJobOutputs] = {};  // share of rows inside [p10, p90] (GVM only; NaN else)
+};
+
+struct JobModelScore {
+  std::string name;  // gvm, paper-linear, least-squares, mlp-backprop
+  JobErrors validation, train;
+  double fit_seconds = 0;
+};
+
+struct JobComparison {
+  std::vector<JobRecord> train, validation;
+  JobCostModel model;
+  JobTrainReport report;
+  std::vector<JobModelScore> scores;
+};
+
+// The 70/30 split of split_seed, the GVM model and the three baselines (the paper's
+// per-particle-count linear fit in triangles, least squares and a back-propagation
+// MLP on the same features and targets) trained on the same rows, all scored.
+Expected<JobComparison> compare_job_models(const std::vector<JobRecord>& rows,
+                                           const JobCostOptions& options, uint64_t split_seed,
+                                           int mlp_epochs = 10000);
+
+}  // namespace collido::job

@@ -1,0 +1,396 @@
+#include "job/job_log.h"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "common/atomic_file.h"
+#include "gvm/csv.h"
+#include "job/assess.h"
+#include "sim/parallel.h"
+
+namespace collido::job {
+
+namespace g = collido::gvm;
+
+namespace {
+
+bool known(const std::string& v, std::initializer_list<const char*> names) {
+  for (const char* n : names)
+    if (v == n) return true;
+  return false;
+}
+
+}  // namespace
+
+bool JobInputs::has_format(const std::string& f) const {
+  if (formats == "none") return false;
+  std::stringstream ss(formats);
+  std::string part;
+  while (std::getline(ss, part, '+'))
+    if (part == f) return true;
+  return false;
+}
+
+JobInputs job_inputs(const JobAssessment& a, const std::string& backend, const std::string& device,
+                     int threads) {
+  const scene::Scene& s = a.resolved.scene;
+  JobInputs in;
+  in.wall = s.wall;
+  if (s.wall_is_file) in.wall = s.wall.substr(s.wall.rfind('/') + 1);
+  in.particles = a.particles;
+  in.triangles = a.triangles;
+  in.pieces = a.work.pieces;
+  in.wall_cells = a.work.wall_cells;
+  in.wall_area = a.wall_area;
+  for (int i = 0; i < 3; ++i) in.box[i] = a.box[i];
+  in.r_min = a.r_min;
+  in.r_max = a.r_max;
+  in.method = sim::to_string(s.dynamics.method);
+  in.placement = sim::to_string(s.placement.kind);
+  in.release_s = a.release.last_release;
+  in.particle_contacts = s.dynamics.particle_contacts;
+  in.friction = s.dynamics.material.friction;
+  in.gravity = sim::length(s.dynamics.gravity);
+  in.duration = s.duration;
+  in.fps = s.fps;
+  in.frames = a.frames;
+  in.step_s = a.steps.step;
+  in.steps_per_frame = a.steps.steps_per_frame;
+  in.steps = a.steps.steps;
+  if (a.render_pixels > 0) {
+    in.render_width = a.resolved.render.width;
+    in.render_height = a.resolved.render.height;
+    in.formats.clear();
+    for (const std::string& f : a.formats) in.formats += (in.formats.empty() ? "" : "+") + f;
+    if (in.formats.empty()) in.formats = "none";
+  }
+  in.backend = backend;
+  in.device = device;
+  in.threads = threads > 0 ? threads : int(sim::usable_cpus());
+  return in;
+}
+
+const std::vector<std::string>& job_log_columns() {
+  static const std::vector<std::string> cols = {
+      "wall",          "particles",      "triangles",       "pieces",
+      "wall_cells",    "wall_area",      "box_x",           "box_y",
+      "box_z",         "r_min",          "r_max",           "method",
+      "placement",     "release_s",      "particle_contacts", "friction",
+      "gravity",       "duration",       "fps",             "frames",
+      "step_s",        "steps_per_frame", "steps",          "render_width",
+      "render_height", "formats",        "backend",         "device",
+      "threads",       "total_s",        "prepare_s",       "simulate_s",
+      "render_s",      "per_frame_s",    "peak_host_bytes", "peak_device_bytes",
+      "gpu_load",      "output_bytes",   "steps_taken",     "load_avg"};
+  return cols;
+}
+
+Status validate(const JobInputs& in) {
+  if (in.particles < 1) return invalid_argument("particles must be >= 1");
+  if (in.triangles < 1) return invalid_argument("triangles must be >= 1");
+  if (in.frames < 1) return invalid_argument("frames must be >= 1");
+  if (in.steps_per_frame < 1 || in.steps < 1) return invalid_argument("steps must be >= 1");
+  const std::pair<const char*, double> positive[] = {
+      {"pieces", in.pieces},     {"wall_area", in.wall_area}, {"r_min", in.r_min},
+      {"r_max", in.r_max},       {"duration", in.duration},   {"fps", in.fps},
+      {"step_s", in.step_s}};
+  for (const auto& [name, v] : positive)
+    if (!std::isfinite(v) || v <= 0) return invalid_argument(std::string(name) + " must be > 0");
+  const std::pair<const char*, double> nonneg[] = {{"wall_cells", in.wall_cells},
+                                                   {"box_x", in.box[0]},
+                                                   {"box_y", in.box[1]},
+                                                   {"box_z", in.box[2]},
+                                                   {"release_s", in.release_s},
+                                                   {"friction", in.friction},
+                                                   {"gravity", in.gravity}};
+  for (const auto& [name, v] : nonneg)
+    if (!std::isfinite(v) || v < 0) return invalid_argument(std::string(name) + " must be >= 0");
+  if (in.r_min > in.r_max) return invalid_argument("r_min must be <= r_max");
+  if (!known(in.method, {"bin", "gravity", "circumcircle", "midpoint4"}))
+    return invalid_argument("method must be bin, gravity, circumcircle or midpoint4");
+  if (!known(in.placement, {"fill", "pour", "jet"}))
+    return invalid_argument("placement must be fill, pour or jet");
+  if (in.render_width < 0 || in.render_height < 0 || in.render_width > 16384 ||
+      in.render_height > 16384)
+    return invalid_argument("render_width and render_height must be in 0..16384");
+  if (in.formats != "none") {
+    std::stringstream ss(in.formats);
+    std::string part;
+    while (std::getline(ss, part, '+'))
+      if (!known(part, {"mp4", "webm", "gif"}))
+        return invalid_argument("formats: '" + part + "' is not mp4, webm or gif");
+  }
+  if (!known(in.backend, {"cpu", "cuda"})) return invalid_argument("backend must be cpu or cuda");
+  if (in.threads < 0) return invalid_argument("threads must be >= 0");
+  return Status::ok();
+}
+
+Status validate(const JobMeasure& m) {
+  const std::pair<const char*, double> fields[] = {
+      {"total_s", m.total_s},         {"prepare_s", m.prepare_s},
+      {"simulate_s", m.simulate_s},   {"render_s", m.render_s},
+      {"per_frame_s", m.per_frame_s}, {"peak_host_bytes", m.peak_host_bytes},
+      {"peak_device_bytes", m.peak_device_bytes}, {"gpu_load", m.gpu_load},
+      {"output_bytes", m.output_bytes}, {"load_avg", m.load_avg}};
+  for (const auto& [name, v] : fields)
+    if (!std::isfinite(v) || v < 0) return invalid_argument(std::string(name) + " must be >= 0");
+  if (m.gpu_load > 1) return invalid_argument("gpu_load must be <= 1");
+  return Status::ok();
+}
+
+namespace {
+
+// The row's fields by column name, as text (writing) or parsed (reading).
+std::string cell(const JobRecord& r, const std::string& c) {
+  const JobInputs& i = r.inputs;
+  const JobMeasure& m = r.measure;
+  auto n = [](double v) { return g::format_double(v); };
+  auto u = [](uint64_t v) { return std::to_string(v); };
+  if (c == "wall") return g::quote_csv(i.wall);
+  if (c == "particles") return u(i.particles);
+  if (c == "triangles") return u(i.triangles);
+  if (c == "pieces") return n(i.pieces);
+  if (c == "wall_cells") return n(i.wall_cells);
+  if (c == "wall_area") return n(i.wall_area);
+  if (c == "box_x") return n(i.box[0]);
+  if (c == "box_y") return n(i.box[1]);
+  if (c == "box_z") return n(i.box[2]);
+  if (c == "r_min") return n(i.r_min);
+  if (c == "r_max") return n(i.r_max);
+  if (c == "method") return i.method;
+  if (c == "placement") return i.placement;
+  if (c == "release_s") return n(i.release_s);
+  if (c == "particle_contacts") return i.particle_contacts ? "1" : "0";
+  if (c == "friction") return n(i.friction);
+  if (c == "gravity") return n(i.gravity);
+  if (c == "duration") return n(i.duration);
+  if (c == "fps") return n(i.fps);
+  if (c == "frames") return u(i.frames);
+  if (c == "step_s") return n(i.step_s);
+  if (c == "steps_per_frame") return u(i.steps_per_frame);
+  if (c == "steps") return u(i.steps);
+  if (c == "render_width") return std::to_string(i.render_width);
+  if (c == "render_height") return std::to_string(i.render_height);
+  if (c == "formats") return i.formats;
+  if (c == "backend") return i.backend;
+  if (c == "device") return g::quote_csv(i.device);
+  if (c == "threads") return std::to_string(i.threads);
+  if (c == "total_s") return n(m.total_s);
+  if (c == "prepare_s") return n(m.prepare_s);
+  if (c == "simulate_s") return n(m.simulate_s);
+  if (c == "render_s") return n(m.render_s);
+  if (c == "per_frame_s") return n(m.per_frame_s);
+  if (c == "peak_host_bytes") return n(m.peak_host_bytes);
+  if (c == "peak_device_bytes") return n(m.peak_device_bytes);
+  if (c == "gpu_load") return n(m.gpu_load);
+  if (c == "output_bytes") return n(m.output_bytes);
+  if (c == "steps_taken") return u(m.steps_taken);
+  if (c == "load_avg") return n(m.load_avg);
+  return "";
+}
+
+// Reads one field into the row; false with *what (the expected form) when it does not parse.
+bool read_cell(JobRecord* r, const std::string& c, const std::string& v, std::string* what) {
+  JobInputs& i = r->inputs;
+  JobMeasure& m = r->measure;
+  auto num = [&](double* out) {
+    *what = "a finite number";
+    return g::parse_double(v, out);
+  };
+  auto cnt = [&](uint64_t* out) {
+    *what = "a whole number >= 0";
+    int64_t x = 0;
+    if (!g::parse_int(v, &x) || x < 0) return false;
+    *out = uint64_t(x);
+    return true;
+  };
+  auto small = [&](int* out) {
+    *what = "a whole number >= 0";
+    int64_t x = 0;
+    if (!g::parse_int(v, &x) || x < 0 || x > (int64_t(1) << 30)) return false;
+    *out = int(x);
+    return true;
+  };
+  if (c == "wall") return i.wall = v, true;
+  if (c == "particles") return cnt(&i.particles);
+  if (c == "triangles") return cnt(&i.triangles);
+  if (c == "pieces") return num(&i.pieces);
+  if (c == "wall_cells") return num(&i.wall_cells);
+  if (c == "wall_area") return num(&i.wall_area);
+  if (c == "box_x") return num(&i.box[0]);
+  if (c == "box_y") return num(&i.box[1]);
+  if (c == "box_z") return num(&i.box[2]);
+  if (c == "r_min") return num(&i.r_min);
+  if (c == "r_max") return num(&i.r_max);
+  if (c == "method") return i.method = v, true;
+  if (c == "placement") return i.placement = v, true;
+  if (c == "release_s") return num(&i.release_s);
+  if (c == "particle_contacts") {
+    *what = "0 or 1";
+    if (v != "0" && v != "1") return false;
+    i.particle_contacts = v == "1";
+    return true;
+  }
+  if (c == "friction") return num(&i.friction);
+  if (c == "gravity") return num(&i.gravity);
+  if (c == "duration") return num(&i.duration);
+  if (c == "fps") return num(&i.fps);
+  if (c == "frames") return cnt(&i.frames);
+  if (c == "step_s") return num(&i.step_s);
+  if (c == "steps_per_frame") return cnt(&i.steps_per_frame);
+  if (c == "steps") return cnt(&i.steps);
+  if (c == "render_width") return small(&i.render_width);
+  if (c == "render_height") return small(&i.render_height);
+  if (c == "formats") return i.formats = v, true;
+  if (c == "backend") return i.backend = v, true;
+  if (c == "device") return i.device = v, true;
+  if (c == "threads") return small(&i.threads);
+  if (c == "total_s") return num(&m.total_s);
+  if (c == "prepare_s") return num(&m.prepare_s);
+  if (c == "simulate_s") return num(&m.simulate_s);
+  if (c == "render_s") return num(&m.render_s);
+  if (c == "per_frame_s") return num(&m.per_frame_s);
+  if (c == "peak_host_bytes") return num(&m.peak_host_bytes);
+  if (c == "peak_device_bytes") return num(&m.peak_device_bytes);
+  if (c == "gpu_load") return num(&m.gpu_load);
+  if (c == "output_bytes") return num(&m.output_bytes);
+  if (c == "steps_taken") return cnt(&m.steps_taken);
+  if (c == "load_avg") return num(&m.load_avg);
+  *what = "a known column";
+  return false;
+}
+
+bool same_inputs(const JobInputs& a, const JobInputs& b) {
+  return a.wall == b.wall && a.particles == b.particles && a.triangles == b.triangles &&
+         a.pieces == b.pieces && a.wall_cells == b.wall_cells && a.wall_area == b.wall_area &&
+         a.box[0] == b.box[0] && a.box[1] == b.box[1] && a.box[2] == b.box[2] &&
+         a.r_min == b.r_min && a.r_max == b.r_max && a.method == b.method &&
+         a.placement == b.placement && a.release_s == b.release_s &&
+         a.particle_contacts == b.particle_contacts && a.friction == b.friction &&
+         a.gravity == b.gravity && a.duration == b.duration && a.fps == b.fps &&
+         a.frames == b.frames && a.step_s == b.step_s && a.steps_per_frame == b.steps_per_frame &&
+         a.steps == b.steps && a.render_width == b.render_width &&
+         a.render_height == b.render_height && a.formats == b.formats && a.backend == b.backend &&
+         a.device == b.device && a.threads == b.threads;
+}
+
+}  // namespace
+
+Expected<std::vector<JobRecord>> parse_job_log(const std::string& text) {
+  auto recs = g::split_csv(text);
+  if (!recs) return recs.status();
+  if (recs->empty()) return parse_error("line 1: empty job log, no header line");
+  const g::CsvRecord& header = recs->front();
+  std::map<std::string, size_t> where;
+  for (size_t c = 0; c < header.fields.size(); ++c) {
+    const std::string name = g::trim(header.fields[c]);
+    if (where.count(name))
+      return parse_error("line " + std::to_string(header.line) + ", column " +
+                         std::to_string(c + 1) + ": duplicate column '" + name + "'");
+    where[name] = c;
+  }
+  const auto& cols = job_log_columns();
+  std::vector<size_t> at;
+  for (const std::string& name : cols) {
+    auto it = where.find(name);
+    if (it == where.end())
+      return parse_error("line " + std::to_string(header.line) + ": missing column '" + name +
+                         "' (a job log; see docs/gvm.md \"Job log\")");
+    at.push_back(it->second);
+  }
+  std::vector<JobRecord> rows;
+  for (size_t r = 1; r < recs->size(); ++r) {
+    const g::CsvRecord& rec = (*recs)[r];
+    const std::string line = "line " + std::to_string(rec.line);
+    if (rec.fields.size() != header.fields.size())
+      return parse_error(line + ": " + std::to_string(rec.fields.size()) +
+                         " fields, the header has " + std::to_string(header.fields.size()));
+    JobRecord row;
+    for (size_t k = 0; k < cols.size(); ++k) {
+      const std::string v = g::trim(rec.fields[at[k]]);
+      std::string what;
+      if (!read_cell(&row, cols[k], v, &what))
+        return parse_error(line + ", column " + std::to_string(at[k] + 1) + " (" + cols[k] +
+                           "): expected " + what + ", got '" + v + "'");
+    }
+    Status s = validate(row.inputs);
+    if (s) s = validate(row.measure);
+    if (!s) return parse_error(line + ": " + s.message());
+    rows.push_back(std::move(row));
+  }
+  return rows;
+}
+
+std::string format_job_log(const std::vector<JobRecord>& rows) {
+  const auto& cols = job_log_columns();
+  std::string out;
+  for (size_t k = 0; k < cols.size(); ++k) out += (k ? "," : "") + cols[k];
+  out += "\n";
+  for (const JobRecord& r : rows) {
+    for (size_t k = 0; k < cols.size(); ++k) out += (k ? "," : "") + cell(r, cols[k]);
+    out += "\n";
+  }
+  return out;
+}
+
+Expected<std::vector<JobRecord>> read_job_log(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return io_error("cannot open job log '" + path + "'");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  auto rows = parse_job_log(ss.str());
+  if (!rows) return Status(rows.status().code(), path + ": " + rows.status().message());
+  return rows;
+}
+
+Status write_job_log(const std::string& path, const std::vector<JobRecord>& rows) {
+  return write_file_atomic(path, format_job_log(rows));
+}
+
+std::vector<JobRecord> merge_job_repeats(const std::vector<JobRecord>& rows) {
+  std::vector<JobRecord> out;
+  for (const JobRecord& r : rows) {
+    auto it = std::find_if(out.begin(), out.end(),
+                           [&](const JobRecord& o) { return same_inputs(o.inputs, r.inputs); });
+    if (it == out.end()) {
+      out.push_back(r);
+      continue;
+    }
+    JobMeasure& m = it->measure;
+    const JobMeasure& n = r.measure;
+    const double host = std::max(m.peak_host_bytes, n.peak_host_bytes);
+    const double device = std::max(m.peak_device_bytes, n.peak_device_bytes);
+    const double bytes = std::max(m.output_bytes, n.output_bytes);
+    const double per_frame = std::min(m.per_frame_s, n.per_frame_s);
+    if (n.total_s < m.total_s) m = n;  // the fastest run's times, load and steps
+    m.peak_host_bytes = host;
+    m.peak_device_bytes = device;
+    m.output_bytes = bytes;
+    m.per_frame_s = per_frame;
+  }
+  return out;
+}
+
+LogKind log_kind(const std::string& text) {
+  auto recs = g::split_csv(text.substr(0, text.find('\n') + 1));
+  if (!recs || recs->empty()) return LogKind::kUnknown;
+  bool steps_per_frame = false, traversal = false, time_per_frame = false;
+  for (const std::string& f : recs->front().fields) {
+    const std::string c = g::trim(f);
+    steps_per_frame = steps_per_frame || c == "steps_per_frame";
+    traversal = traversal || c == "traversal";
+    time_per_frame = time_per_frame || c == "time_per_frame_s";
+  }
+  if (steps_per_frame) return LogKind::kJob;
+  if (traversal && time_per_frame) return LogKind::kDetection;
+  return LogKind::kUnknown;
+}
+
+const char* to_string(LogKind k) {
+  return k == LogKind::kJob ? "job" : k == LogKind::kDetection ? "detection" : "unknown";
+}
+
+}  // namespace collido::job

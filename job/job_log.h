@@ -1,0 +1,101 @@
+// The job log: one row per finished job, what it was asked to do (every input known
+// before it runs, from the scene through assess_job()) and what it cost. The job cost
+// model (job/cost_model.h) trains on it; `collidoscope calibrate --jobs` writes it.
+// Files are CSV with a header line, as the detection run log (gvm/run_log.h), whose
+// columns differ: the header says which kind a log is (log_kind).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "common/status.h"
+
+namespace collido::job {
+
+struct JobAssessment;
+
+// What a job was asked to do: the cost model's inputs. Lengths in metres.
+struct JobInputs {
+  std::string wall;             // the wall spec or file name (a label; not an input of the model)
+  uint64_t particles = 0;
+  uint64_t triangles = 0;       // of the wall as loaded
+  double pieces = 0;            // triangles after division, estimated (= triangles for bin)
+  double wall_cells = 0;        // (triangle, cell) pairs the bin preparation visits (0 if divided)
+  double wall_area = 0;         // m^2
+  double box[3] = {0, 0, 0};    // m: the wall's bounding-box sides
+  double r_min = 0, r_max = 0;  // m
+  std::string method = "bin";   // bin, gravity, circumcircle, midpoint4
+  std::string placement = "fill";  // fill, pour, jet
+  double release_s = 0;            // s: when an inlet releases its last particle (0 for fill)
+  bool particle_contacts = false;
+  double friction = 0;           // Coulomb coefficient
+  double gravity = 9.81;         // |g|, m/s^2
+  double duration = 0;           // simulated seconds
+  double fps = 0;                // frames per simulated second
+  uint64_t frames = 0;           // written after the initial one
+  double step_s = 0;             // the planned step (sim::plan_steps)
+  uint64_t steps_per_frame = 0;  // planned
+  uint64_t steps = 0;            // planned, over every frame
+  int render_width = 0, render_height = 0;  // pixels; 0 x 0 = no rendering
+  std::string formats = "none";  // videos asked for, '+'-joined: "mp4+webm+gif", or "none"
+  std::string backend = "cpu";   // cpu, cuda: as the job runs
+  std::string device;            // the CPU's or GPU's name
+  int threads = 1;               // CPU threads of the job's pool
+
+  bool renders() const { return render_width > 0 && render_height > 0; }
+  bool has_format(const std::string& f) const;
+};
+
+// What a job cost, measured (result.json's cost, the artifacts' sizes).
+struct JobMeasure {
+  double total_s = 0;          // wall seconds, start to result.json
+  double prepare_s = 0;        // scene, wall, placement, engine set-up, first files
+  double simulate_s = 0;       // every frame: steps, snapshots, statistics, checkpoints
+  double render_s = 0;         // PNGs, poster and videos (0 without rendering)
+  double per_frame_s = 0;      // (simulate_s + render_s) / frames written (the initial one too)
+  double peak_host_bytes = 0;  // the job process's own peak resident set (VmHWM)
+  double peak_device_bytes = 0;  // held by the engine on the GPU (0 on the CPU)
+  double gpu_load = 0;           // share of the job's wall time inside the GPU engine (0 on the CPU)
+  double output_bytes = 0;       // every file of the run directory
+  uint64_t steps_taken = 0;      // measured: the plan's check, not a model output
+  double load_avg = 0;           // the machine's 1-minute load when the job started (a note)
+};
+
+struct JobRecord {
+  JobInputs inputs;
+  JobMeasure measure;
+};
+
+// The inputs of an assessed job run on `backend` ("cpu" or "cuda") by `device` with
+// `threads` CPU threads (0 = what the job's pool would take: this machine's CPUs).
+JobInputs job_inputs(const JobAssessment& a, const std::string& backend,
+                     const std::string& device, int threads);
+
+// The CSV columns in the order they are written.
+const std::vector<std::string>& job_log_columns();
+
+// Checks the values (counts, finite sizes, known names); names the bad field.
+Status validate(const JobInputs& in);
+Status validate(const JobMeasure& m);
+
+// Parses CSV text: columns in any order, unknown ones ignored, every listed one
+// required. Errors name the line and the column.
+Expected<std::vector<JobRecord>> parse_job_log(const std::string& text);
+// CSV text with a header line; doubles with 17 significant digits (round trip).
+std::string format_job_log(const std::vector<JobRecord>& rows);
+Expected<std::vector<JobRecord>> read_job_log(const std::string& path);
+Status write_job_log(const std::string& path, const std::vector<JobRecord>& rows);
+
+// Combines repeated runs of one job (rows whose inputs are equal in every column):
+// other work on a machine only adds time, so the fastest run's times and GPU load are
+// kept, and the largest memory and output (peaks). First-appearance order.
+std::vector<JobRecord> merge_job_repeats(const std::vector<JobRecord>& rows);
+
+// Which kind of log a CSV text is, from its header line: detection frames
+// (gvm/run_log.h), jobs (this file), or neither.
+enum class LogKind { kDetection, kJob, kUnknown };
+LogKind log_kind(const std::string& csv_text);
+const char* to_string(LogKind k);
+
+}  // namespace collido::job

@@ -1,0 +1,370 @@
+// The job cost model end to end: the job log (round trip, errors, repeats, kinds),
+// the time-step plan against the steps a run takes, a quick job sweep through
+// job-exec, and the model trained on the committed CPU log (files, refusals,
+// intervals, the outside-training check).
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "job/assess.h"
+#include "job/calibrate_jobs.h"
+#include "job/cost_model.h"
+#include "job/job.h"
+#include "job/job_log.h"
+#include "gvm/run_log.h"
+
+namespace collido::job {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string tmp(const std::string& name) {
+  return ::testing::TempDir() + "/cost_model_test_" + std::to_string(getpid()) + "_" + name;
+}
+
+JobRecord sample_record(uint64_t particles) {
+  JobRecord r;
+  JobInputs& in = r.inputs;
+  in.wall = "cylinder:r=10,h=30,segments=32";
+  in.particles = particles;
+  in.triangles = 128;
+  in.pieces = 128;
+  in.wall_cells = 31415.5;
+  in.wall_area = 2513.2741228718346;
+  in.box[0] = 20, in.box[1] = 20.000000000000004, in.box[2] = 30;
+  in.r_min = 0.25, in.r_max = 0.5;
+  in.method = "bin";
+  in.placement = "pour";
+  in.release_s = 1.25;
+  in.particle_contacts = true;
+  in.friction = 0.3;
+  in.duration = 2;
+  in.fps = 15;
+  in.frames = 30;
+  in.step_s = 1.0 / 3000;
+  in.steps_per_frame = 200;
+  in.steps = 6000;
+  in.render_width = 320, in.render_height = 180;
+  in.formats = "mp4+gif";
+  in.backend = "cpu";
+  in.device = "Some CPU, with a comma";
+  in.threads = 2;
+  JobMeasure& m = r.measure;
+  m.total_s = 1.5, m.prepare_s = 0.1, m.simulate_s = 1.2, m.render_s = 0.2;
+  m.per_frame_s = 1.4 / 31;
+  m.peak_host_bytes = 1.25e8;
+  m.output_bytes = 3.5e6;
+  m.steps_taken = 6000;
+  m.load_avg = 0.5;
+  return r;
+}
+
+TEST(JobLog, RoundTripsEveryColumnExactly) {
+  std::vector<JobRecord> rows = {sample_record(100), sample_record(2000)};
+  rows[1].inputs.formats = "none";
+  rows[1].inputs.render_width = rows[1].inputs.render_height = 0;
+  const std::string text = format_job_log(rows);
+  EXPECT_EQ(log_kind(text), LogKind::kJob);
+  auto back = parse_job_log(text);
+  ASSERT_TRUE(back) << back.status().message();
+  ASSERT_EQ(back->size(), 2u);
+  EXPECT_EQ(format_job_log(*back), text);  // 17 digits: every double comes back as written
+  EXPECT_EQ((*back)[0].inputs.device, "Some CPU, with a comma");
+  EXPECT_EQ((*back)[0].inputs.release_s, 1.25);
+  EXPECT_EQ((*back)[1].inputs.formats, "none");
+  EXPECT_TRUE((*back)[0].inputs.has_format("gif"));
+  EXPECT_FALSE((*back)[0].inputs.has_format("webm"));
+
+  const std::string path = tmp("log.csv");
+  ASSERT_TRUE(write_job_log(path, rows));
+  auto read = read_job_log(path);
+  ASSERT_TRUE(read) << read.status().message();
+  EXPECT_EQ(read->size(), 2u);
+}
+
+TEST(JobLog, ErrorsNameTheLineAndTheColumn) {
+  const std::string good = format_job_log({sample_record(100)});
+  const std::string header = good.substr(0, good.find('\n') + 1);
+  std::string row = good.substr(header.size());
+
+  // A count that is not a number.
+  std::string bad = row;
+  bad.replace(bad.find(",100,"), 5, ",many,");
+  auto r = parse_job_log(header + bad);
+  ASSERT_FALSE(r);
+  EXPECT_NE(r.status().message().find("line 2"), std::string::npos) << r.status().message();
+  EXPECT_NE(r.status().message().find("particles"), std::string::npos) << r.status().message();
+
+  // A missing column.
+  std::string no_steps = header;
+  no_steps.replace(no_steps.find(",steps,"), 7, ",stepz,");
+  r = parse_job_log(no_steps + row);
+  ASSERT_FALSE(r);
+  EXPECT_NE(r.status().message().find("steps"), std::string::npos) << r.status().message();
+
+  // A row with a field short, an empty file, a negative time.
+  EXPECT_FALSE(parse_job_log(header + row.substr(0, row.rfind(','))));
+  EXPECT_FALSE(parse_job_log(""));
+  JobRecord neg = sample_record(100);
+  neg.measure.total_s = -1;
+  EXPECT_FALSE(validate(neg.measure));
+  JobRecord method = sample_record(100);
+  method.inputs.method = "magic";
+  EXPECT_FALSE(validate(method.inputs));
+  EXPECT_FALSE(read_job_log(tmp("absent.csv")));
+}
+
+TEST(JobLog, KindsAreToldApartByTheirHeaders) {
+  EXPECT_EQ(log_kind(format_job_log({sample_record(10)})), LogKind::kJob);
+  std::string detection;
+  for (const std::string& c : gvm::run_log_columns()) detection += (detection.empty() ? "" : ",") + c;
+  EXPECT_EQ(log_kind(detection + "\n"), LogKind::kDetection);
+  EXPECT_EQ(log_kind("a,b,c\n1,2,3\n"), LogKind::kUnknown);
+  EXPECT_EQ(log_kind(""), LogKind::kUnknown);
+}
+
+TEST(JobLog, RepeatsKeepTheFastestTimeAndTheLargestPeak) {
+  JobRecord a = sample_record(100), b = a, other = sample_record(200);
+  b.measure.total_s = 1.0;             // faster
+  b.measure.peak_host_bytes = 2.0e8;   // larger
+  a.measure.output_bytes = 4e6;        // larger
+  const auto merged = merge_job_repeats({a, other, b});
+  ASSERT_EQ(merged.size(), 2u);
+  EXPECT_EQ(merged[0].inputs.particles, 100u);  // first appearance order
+  EXPECT_EQ(merged[0].measure.total_s, 1.0);
+  EXPECT_EQ(merged[0].measure.peak_host_bytes, 2.0e8);
+  EXPECT_EQ(merged[0].measure.output_bytes, 4e6);
+  EXPECT_EQ(merged[1].inputs.particles, 200u);
+}
+
+// The plan that prices a job is the run's where the step is fixed or the spring sets
+// it (the automatic stiffness): a fill with pair contacts, a pour, a fixed step. (With
+// a radius range the run sizes its spring from the radii drawn, which the plan cannot
+// know: there it is an estimate, AMotionLimitedPlanIsNearTheRun's bound.)
+TEST(StepPlan, PlannedStepsAreTheStepsARunTakes) {
+  const char* scenes[] = {
+      R"({"wall": "box:x=6,y=6,z=6", "particles": {"count": 64, "radius": 0.35},
+          "placement": {"kind": "fill", "region": {"min": [-2, -2, 1], "max": [2, 2, 5]}},
+          "material": {"restitution": 0.5, "friction": 0.3},
+          "particle_contacts": true, "duration": 0.5, "fps": 20, "backend": "cpu"})",
+      R"({"wall": "cylinder:r=3,h=6,segments=24", "particles": {"count": 80, "radius": 0.2},
+          "placement": {"kind": "pour", "rate": 400},
+          "duration": 0.4, "fps": 10, "backend": "cpu"})",
+      R"({"wall": "wall1", "particles": {"count": 50, "radius": 1},
+          "time_step": 0.002, "duration": 0.3, "fps": 10, "backend": "cpu"})",
+  };
+  int k = 0;
+  for (const char* scene : scenes) {
+    JobSpec spec;
+    spec.scene_json = scene;
+    spec.out_dir = tmp("plan" + std::to_string(k++));
+    spec.threads = 1;
+    spec.checkpoint_interval_s = 0;
+    fs::remove_all(spec.out_dir);
+    auto a = assess_job(spec);
+    ASSERT_TRUE(a) << a.status().message();
+    const JobResult r = run_job(spec, {});
+    ASSERT_TRUE(r.status) << r.status.message();
+    EXPECT_EQ(a->steps.steps, r.cost.steps) << scene;
+    EXPECT_EQ(a->steps.steps_per_frame * a->frames, a->steps.steps) << scene;
+    EXPECT_FALSE(a->steps.motion_limited) << scene;
+    EXPECT_EQ(a->frames + 1, r.cost.frames) << scene;  // the run counts the initial frame
+  }
+}
+
+// Where the motion bound sets the step (a soft spring), the plan is an estimate at the
+// fastest speed the scene expects, and with a radius range the radii drawn change the
+// step a little: the run's steps stay within a factor of the plan.
+TEST(StepPlan, AMotionLimitedPlanIsNearTheRun) {
+  JobSpec spec;
+  spec.scene_json = R"({"wall": "box:x=6,y=6,z=6", "particles": {"count": 64, "radius": [0.3, 0.4]},
+      "placement": {"kind": "fill", "region": {"min": [-2, -2, 1], "max": [2, 2, 5]}},
+      "material": {"restitution": 0.5, "stiffness": 1e5}, "duration": 0.5, "fps": 20,
+      "backend": "cpu"})";
+  spec.out_dir = tmp("plan_motion");
+  spec.threads = 1;
+  spec.checkpoint_interval_s = 0;
+  fs::remove_all(spec.out_dir);
+  auto a = assess_job(spec);
+  ASSERT_TRUE(a) << a.status().message();
+  const JobResult r = run_job(spec, {});
+  ASSERT_TRUE(r.status) << r.status.message();
+  EXPECT_TRUE(a->steps.motion_limited);
+  EXPECT_LE(double(r.cost.steps), 2.5 * double(a->steps.steps));
+  EXPECT_GE(double(r.cost.steps), 0.25 * double(a->steps.steps));
+  EXPECT_NE(r.cost.steps, a->steps.steps);  // an estimate here, and the test says so
+}
+
+// Trained once on the committed CPU job log (bench/data/jobs_cpu.csv), small machines.
+class TrainedModel : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    auto rows = read_job_log(std::string(COLLIDO_SOURCE_DIR) + "/bench/data/jobs_cpu.csv");
+    ASSERT_TRUE(rows) << rows.status().message();
+    rows_ = new std::vector<JobRecord>(std::move(*rows));
+    JobCostOptions o;
+    o.gvm.hidden = 6;
+    o.gvm.epochs = 60;
+    o.folds = 3;
+    JobTrainReport report;
+    auto m = JobCostModel::train(*rows_, o, &report);
+    ASSERT_TRUE(m) << m.status().message();
+    model_ = new JobCostModel(std::move(*m));
+    EXPECT_EQ(report.curve.size(), 60u);
+    EXPECT_GT(report.proposals, 0);
+  }
+  static void TearDownTestSuite() {
+    delete model_;
+    delete rows_;
+  }
+  static JobCostModel* model_;
+  static std::vector<JobRecord>* rows_;
+};
+JobCostModel* TrainedModel::model_ = nullptr;
+std::vector<JobRecord>* TrainedModel::rows_ = nullptr;
+
+TEST_F(TrainedModel, IntervalsAreOrderedAndPositive) {
+  ASSERT_TRUE(model_->trained_for("cpu"));
+  EXPECT_FALSE(model_->trained_for("cuda"));
+  for (size_t i = 0; i < rows_->size(); i += 17) {
+    auto p = model_->predict((*rows_)[i].inputs);
+    ASSERT_TRUE(p) << p.status().message();
+    for (const CostInterval* c : {&p->total_s, &p->per_frame_s, &p->peak_host_bytes, &p->output_bytes}) {
+      EXPECT_TRUE(std::isfinite(c->p10) && std::isfinite(c->p90));
+      EXPECT_GT(c->p10, 0.0);
+      EXPECT_LE(c->p10, c->p50);
+      EXPECT_LE(c->p50, c->p90);
+    }
+    EXPECT_EQ(p->peak_device_bytes.p90, 0.0);  // a CPU job holds no device memory
+    EXPECT_EQ(p->gpu_load.p90, 0.0);
+  }
+  // The interval is the out-of-fold residuals': wider than nothing, narrower than 100x.
+  for (size_t k : {size_t(0), size_t(2)}) {
+    EXPECT_LT(model_->residual_lo(k), 0.0);
+    EXPECT_GT(model_->residual_hi(k), 0.0);
+    EXPECT_LT(model_->residual_hi(k) - model_->residual_lo(k), 2.0);
+  }
+}
+
+TEST_F(TrainedModel, SavesLoadsAndPredictsTheSame) {
+  const std::string path = tmp("model.json");
+  ASSERT_TRUE(model_->save(path));
+  auto back = JobCostModel::load(path);
+  ASSERT_TRUE(back) << back.status().message();
+  const JobInputs& in = (*rows_)[5].inputs;
+  auto a = model_->predict(in), b = back->predict(in);
+  ASSERT_TRUE(a && b);
+  EXPECT_NEAR(a->total_s.p50, b->total_s.p50, 1e-9 * a->total_s.p50);
+  EXPECT_NEAR(a->peak_host_bytes.p90, b->peak_host_bytes.p90, 1e-9 * a->peak_host_bytes.p90);
+  EXPECT_EQ(back->training_rows(), model_->training_rows());
+}
+
+TEST_F(TrainedModel, RefusesTheOtherKindOfModelAndBrokenFiles) {
+  auto detection = JobCostModel::from_json(R"({"kind": "collidoscope-resource-predictor"})");
+  ASSERT_FALSE(detection);
+  EXPECT_NE(detection.status().message().find("detection"), std::string::npos)
+      << detection.status().message();
+  EXPECT_FALSE(JobCostModel::from_json("{"));
+  EXPECT_FALSE(JobCostModel::from_json(R"({"kind": "something else"})"));
+  std::string text = model_->to_json();
+  text.resize(text.size() / 2);
+  EXPECT_FALSE(JobCostModel::from_json(text));
+  EXPECT_FALSE(JobCostModel::load(tmp("absent-model.json")));
+}
+
+TEST_F(TrainedModel, SaysWhenAJobLiesOutsideItsTraining) {
+  JobInputs in = (*rows_)[0].inputs;
+  auto inside = model_->predict(in);
+  ASSERT_TRUE(inside);
+  EXPECT_FALSE(inside->outside_training) << inside->outside_reason;
+
+  in.particles = 50'000'000;
+  auto many = model_->predict(in);
+  ASSERT_TRUE(many);
+  EXPECT_TRUE(many->outside_training);
+  EXPECT_NE(many->outside_reason.find("particles"), std::string::npos) << many->outside_reason;
+
+  // A backend the model never saw is an error, not a guess.
+  JobInputs cuda = (*rows_)[0].inputs;
+  cuda.backend = "cuda";
+  EXPECT_FALSE(model_->predict(cuda));
+}
+
+TEST_F(TrainedModel, PricesAnAssessedScene) {
+  JobSpec spec;
+  spec.scene_json = R"({"wall": "wall1", "particles": {"count": 2000, "radius": 1},
+                        "placement": {"kind": "pour", "rate": 1000},
+                        "duration": 2, "fps": 10, "backend": "cpu"})";
+  spec.out_dir = tmp("priced");
+  auto a = assess_job(spec);
+  ASSERT_TRUE(a) << a.status().message();
+  auto p = model_->predict(*a, "cpu", 2);
+  ASSERT_TRUE(p) << p.status().message();
+  EXPECT_EQ(p->backend, "cpu");
+  EXPECT_EQ(p->threads, 2);
+  EXPECT_EQ(p->steps, a->steps.steps);
+  EXPECT_GT(p->particle_steps, 0.0);
+  EXPECT_GT(p->total_s.p50, 0.0);
+  // More simulated time costs more: the same scene over 4 s.
+  spec.scene_json = R"({"wall": "wall1", "particles": {"count": 2000, "radius": 1},
+                        "placement": {"kind": "pour", "rate": 1000},
+                        "duration": 4, "fps": 10, "backend": "cpu"})";
+  auto longer = assess_job(spec);
+  ASSERT_TRUE(longer);
+  auto q = model_->predict(*longer, "cpu", 2);
+  ASSERT_TRUE(q);
+  EXPECT_GT(q->steps, p->steps);
+  auto js = nlohmann::json::parse(to_json(*p).dump());
+  for (const char* k : {"total_s", "per_frame_s", "peak_host_bytes", "peak_device_bytes",
+                        "gpu_load", "output_bytes"}) {
+    ASSERT_TRUE(js.contains(k)) << k;
+    EXPECT_TRUE(js[k].contains("p10") && js[k].contains("p50") && js[k].contains("p90")) << k;
+  }
+  EXPECT_TRUE(js.contains("outside_training"));
+}
+
+// A quick sweep through job-exec children writes job-log rows the model can read.
+TEST(JobSweep, QuickSweepWritesJobRows) {
+  JobSweepSpec s;
+  s.configs = 3;
+  s.quick = true;
+  s.repeats = 1;
+  s.threads = 1;
+  s.render = false;
+  s.seed = 2;
+  s.out_path = tmp("jobs.csv");
+  s.work_dir = tmp("sweep-work");
+  s.executable = COLLIDO_BINARY;
+  auto summary = calibrate_jobs(s, {});
+  ASSERT_TRUE(summary) << summary.status().message();
+  EXPECT_EQ(summary->measured + summary->failed, 3u);
+  auto rows = read_job_log(s.out_path);
+  ASSERT_TRUE(rows) << rows.status().message();
+  ASSERT_EQ(rows->size(), summary->measured);
+  ASSERT_GT(rows->size(), 0u);
+  for (const JobRecord& r : *rows) {
+    EXPECT_TRUE(validate(r.inputs)) << validate(r.inputs).message();
+    EXPECT_EQ(r.inputs.backend, "cpu");
+    EXPECT_EQ(r.inputs.formats, "none");
+    // The plan, exact where the spring sets the step, an estimate where motion does.
+    EXPECT_GE(double(r.measure.steps_taken), 0.5 * double(r.inputs.steps));
+    EXPECT_LE(double(r.measure.steps_taken), 2.0 * double(r.inputs.steps));
+    EXPECT_GT(r.measure.total_s, 0.0);
+    EXPECT_GT(r.measure.peak_host_bytes, 1e6);
+    EXPECT_GT(r.measure.output_bytes, 0.0);
+  }
+  JobSweepSpec bad = s;
+  bad.configs = 0;
+  EXPECT_FALSE(validate(bad));
+  bad = s;
+  bad.backend = "tpu";
+  EXPECT_FALSE(validate(bad));
+}
+
+}  // namespace
+}  // namespace collido::job
