@@ -43,6 +43,9 @@ const std::vector<FlagSpec>& serve_flags() {
       {"memory-gb", true, "memory the jobs may use in all, GiB (default: this machine's)"},
       {"public-url", true, "base URL of share links (default http://HOST:PORT)"},
       {"web", true, "folder of the browser UI (default web/static when present)"},
+      {"cost-model", true,
+       "job cost model file(s), comma-separated (collidoscope gvm train on a job log); "
+       "default: bench/data/job_model_cpu.json and job_model_cuda.json where present"},
       {"demo", false, "start with the demo account and a demo job (make run)"},
       {"help", false, "this help"},
   };
@@ -93,6 +96,19 @@ int cmd_serve(const Args& args) {
   config.max_upload_bytes = uint64_t(upload_mb) << 20;
   config.max_queued_per_user = int(max_queued);
   config.host_bytes = uint64_t(memory_gb * double(1ull << 30));
+  if (parsed->has("cost-model")) {
+    std::string list = parsed->get("cost-model", "");
+    for (size_t start = 0; start <= list.size();) {
+      const size_t comma = std::min(list.find(',', start), list.size());
+      if (comma > start) config.cost_models.push_back(list.substr(start, comma - start));
+      start = comma + 1;
+    }
+    if (config.cost_models.empty()) return usage_error(cmd, "--cost-model: no file named");
+  } else {
+    // The committed models, when serving from the repository (make run).
+    for (const char* f : {"bench/data/job_model_cpu.json", "bench/data/job_model_cuda.json"})
+      if (std::filesystem::exists(f)) config.cost_models.push_back(f);
+  }
   service::ServerOptions options;
   options.host = parsed->get("host", "127.0.0.1");
   options.port = uint16_t(port);
@@ -119,6 +135,10 @@ int cmd_serve(const Args& args) {
   (*svc)->start_workers();
   std::printf("collidoscope: serving on %s  (API %s/api/v1, data in %s)\n", url.c_str(), url.c_str(),
               config.data_dir.c_str());
+  if (config.cost_models.empty())
+    std::printf("collidoscope: no job cost model: time is not predicted (see --cost-model)\n");
+  for (const std::string& m : config.cost_models)
+    std::printf("collidoscope: jobs priced by %s\n", m.c_str());
   if (parsed->has("demo")) {
     auto demo = (*svc)->start_demo();
     if (!demo) {

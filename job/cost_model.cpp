@@ -449,10 +449,19 @@ Expected<JobCostModel> JobCostModel::train(const std::vector<JobRecord>& rows,
       res.push_back(y(r, k) - p);
     }
     std::sort(res.begin(), res.end());
+    for (size_t r = 0; r < N; ++r) {
+      if (std::isnan(y(r, k))) continue;
+      double p;
+      model.members_[k][size_t(fold[r])].predict(x.row(r), &p);
+      const bool cuda = is_cuda(rows[r].inputs);
+      model.held_out_[k].push_back({decode_cost(k, y(r, k), cuda), decode_cost(k, p, cuda)});
+    }
     model.q_lo_[k] = conformal_quantile(res, (1 - opt.coverage) / 2);
     model.q_hi_[k] = conformal_quantile(res, (1 + opt.coverage) / 2);
   }
-  if (report) {
+  JobTrainReport own;
+  if (!report) report = &own;
+  {
     report->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     report->curve.clear();
     report->proposals = report->accepted = 0;
@@ -470,6 +479,10 @@ Expected<JobCostModel> JobCostModel::train(const std::vector<JobRecord>& rows,
       }
     }
   }
+  // The curve kept in the file: at most kKeptEpochs epochs, evenly spaced, the last kept.
+  const size_t E = report->curve.size();
+  for (size_t i = 0; i < std::min(E, kKeptEpochs); ++i)
+    model.curve_.push_back(report->curve[E <= kKeptEpochs ? i : (i + 1) * E / kKeptEpochs - 1]);
   return model;
 }
 
@@ -626,11 +639,15 @@ std::string JobCostModel::to_json() const {
                    {"delta", options_.gvm.delta},
                    {"activation", g::activation_name(options_.gvm.activation)},
                    {"beta_max", options_.gvm.beta_max}};
+  j["curve"] = json::array();
+  for (const g::EpochLoss& e : curve_)
+    j["curve"].push_back({e.epoch, e.train_loss, e.validation_loss, e.acceptance});
   j["outputs"] = json::array();
   for (size_t k = 0; k < kJobOutputs; ++k) {
     json o = {{"name", job_output_names()[k]},
               {"residual_lo", q_lo_[k]},
               {"residual_hi", q_hi_[k]},
+              {"held_out", held_out_[k]},
               {"members", json::array()}};
     for (const g::Machine& m : members_[k]) o["members"].push_back(json::parse(m.to_json()));
     j["outputs"].push_back(o);
@@ -677,6 +694,11 @@ Expected<JobCostModel> JobCostModel::from_json(const std::string& text) {
     m.options_.gvm.delta = t.at("delta").get<double>();
     m.options_.gvm.beta_max = t.at("beta_max").get<double>();
     if (auto a = g::parse_activation(t.at("activation").get<std::string>())) m.options_.gvm.activation = *a;
+    if (j.contains("curve"))
+      for (const json& e : j.at("curve"))
+        m.curve_.push_back(g::EpochLoss{e.at(0).get<int>(), e.at(1).get<double>(),
+                                        e.at(2).is_number() ? e.at(2).get<double>() : kNaN,
+                                        e.at(3).get<double>()});
     const json& outs = j.at("outputs");
     if (!outs.is_array() || outs.size() != kJobOutputs)
       return parse_error("model file needs 'outputs', one per cost");
@@ -687,6 +709,8 @@ Expected<JobCostModel> JobCostModel::from_json(const std::string& text) {
         return parse_error("outputs[" + std::to_string(k) + "] is not " + job_output_names()[k]);
       m.q_lo_[k] = o.at("residual_lo").get<double>();
       m.q_hi_[k] = o.at("residual_hi").get<double>();
+      if (o.contains("held_out"))
+        m.held_out_[k] = o.at("held_out").get<std::vector<std::pair<double, double>>>();
       for (const json& mj : o.at("members")) {
         auto machine = g::Machine::from_json(mj.dump());
         if (!machine) return machine.status();
@@ -700,6 +724,29 @@ Expected<JobCostModel> JobCostModel::from_json(const std::string& text) {
   }
   if (m.members_[kTotal].empty()) return parse_error("the model has no machine for the total time");
   return m;
+}
+
+json JobCostModel::summary() const {
+  json j = {{"backends", backends_},
+            {"devices", devices_},
+            {"rows", rows_},
+            {"folds", options_.folds},
+            {"coverage", coverage_},
+            {"hidden", options_.gvm.hidden},
+            {"epochs", options_.gvm.epochs}};
+  j["curve"] = json::array();
+  for (const g::EpochLoss& e : curve_) j["curve"].push_back({e.epoch, e.train_loss, e.validation_loss});
+  j["costs"] = json::object();
+  for (size_t k = 0; k < kJobOutputs; ++k) {
+    if (members_.size() != kJobOutputs || members_[k].empty()) continue;
+    // The interval as factors of the median (times and bytes are predicted as logs).
+    const bool log_cost = k != kGpuLoad;
+    json c = {{"held_out", held_out_[k]}};
+    if (log_cost) c["interval_factors"] = {std::pow(10.0, q_lo_[k]), std::pow(10.0, q_hi_[k])};
+    else c["interval_offsets"] = {q_lo_[k], q_hi_[k]};
+    j["costs"][job_output_names()[k]] = c;
+  }
+  return j;
 }
 
 Status JobCostModel::save(const std::string& path) const {

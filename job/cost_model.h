@@ -144,6 +144,15 @@ class JobCostModel {
   // Output k's interval quantiles of the out-of-fold residuals (model space).
   double residual_lo(size_t k) const { return q_lo_[k]; }
   double residual_hi(size_t k) const { return q_hi_[k]; }
+  // What training showed, kept in the file for people (the service's admin page):
+  // the loss per epoch (mean over every machine, at most kKeptEpochs of them, evenly
+  // spaced), and each training row's cost k measured against its out-of-fold
+  // prediction (the member that never saw it): {measured, predicted} pairs.
+  static constexpr size_t kKeptEpochs = 300;
+  const std::vector<gvm::EpochLoss>& curve() const { return curve_; }
+  const std::vector<std::pair<double, double>>& held_out(size_t k) const { return held_out_[k]; }
+  // The above with the training settings and intervals, as JSON.
+  nlohmann::json summary() const;
 
  private:
   struct Usual {
@@ -162,6 +171,8 @@ class JobCostModel {
   size_t rows_ = 0;
   JobCostOptions options_;
   std::vector<std::string> formats_seen_, methods_seen_, placements_seen_;
+  std::vector<gvm::EpochLoss> curve_;
+  std::vector<std::pair<double, double>> held_out_[kJobOutputs];
 };
 
 // ---- Evaluation against the baselines ----------------------------------------------

@@ -386,6 +386,8 @@ std::vector<Route> make_routes(JobService* svc, const ServerOptions& opt) {
     };
     return reply(svc->admin_logs(*q.user, size_t(num(limit, 100)), num(before, 0)));
   });
+  add("GET", "/api/v1/admin/predictor", Auth::kAdmin,
+      [=](Request& q) { return reply(svc->admin_predictor(*q.user)); });
   if (!opt.web_dir.empty()) {
     const std::string root = opt.web_dir;
     auto serve_static = [root](const std::string& rel, const Http::Request& http) {

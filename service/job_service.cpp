@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <thread>
 
 #include "common/atomic_file.h"
 #include "job/assess.h"
@@ -15,6 +16,9 @@
 #include "job/wall_source.h"
 #include "scene/scene.h"
 #include "service/workers.h"
+#ifdef COLLIDO_HAVE_JOB_COST
+#include "job/cost_model.h"
+#endif
 #include "sim/detect.h"
 #include "sim/mesh.h"
 #include "sim/shapes.h"
@@ -147,6 +151,20 @@ int http_status_of(const Status& st) {
 
 static Reply status_reply(const Status& st) { return error_reply(http_status_of(st), st.message()); }
 
+#ifdef COLLIDO_HAVE_JOB_COST
+struct JobService::CostModels {
+  std::vector<job::JobCostModel> models;
+  std::vector<std::string> paths;
+  const job::JobCostModel* for_backend(const std::string& backend) const {
+    for (const auto& m : models)
+      if (m.trained_for(backend)) return &m;
+    return nullptr;
+  }
+};
+#else
+struct JobService::CostModels {};
+#endif
+
 Expected<std::unique_ptr<JobService>> JobService::open(const ServiceConfig& config) {
   if (!init_crypto()) return backend_error("libsodium did not start (no entropy source)");
   std::unique_ptr<JobService> svc(new JobService(config));
@@ -155,6 +173,17 @@ Expected<std::unique_ptr<JobService>> JobService::open(const ServiceConfig& conf
     fs::create_directories(fs::path(config.data_dir) / sub, ec);
     if (ec) return io_error(config.data_dir + "/" + sub + ": " + ec.message());
   }
+#ifdef COLLIDO_HAVE_JOB_COST
+  for (const std::string& path : config.cost_models) {
+    auto m = job::JobCostModel::load(path);
+    if (!m) return Status(m.status().code(), "cost model: " + m.status().message());
+    svc->cost_->models.push_back(std::move(*m));
+    svc->cost_->paths.push_back(path);
+  }
+#else
+  if (!config.cost_models.empty())
+    return invalid_argument("this build has no job cost model (the gvm module was left out)");
+#endif
   auto store = open_sqlite_store((fs::path(config.data_dir) / "collidoscope.db").string());
   if (!store) return store.status();
   svc->store_ = std::move(*store);
@@ -164,7 +193,8 @@ Expected<std::unique_ptr<JobService>> JobService::open(const ServiceConfig& conf
   return svc;
 }
 
-JobService::JobService(ServiceConfig config) : config_(std::move(config)) {}
+JobService::JobService(ServiceConfig config)
+    : config_(std::move(config)), cost_(std::make_unique<CostModels>()) {}
 JobService::~JobService() { stop_workers(); }
 
 Status JobService::seed() {
@@ -559,7 +589,6 @@ Expected<JobService::PreparedJob> JobService::prepare(const User& u, const json&
   }
   const job::JobAssessment& a = *assessed;
   const scene::Scene& s = a.resolved.scene;
-  p.host_bytes = uint64_t(a.work.host_bytes);
   p.assessment = {
       {"particles", a.particles},
       {"radius", {a.r_min, a.r_max}},
@@ -590,25 +619,78 @@ Expected<JobService::PreparedJob> JobService::prepare(const User& u, const json&
                               {"wall", spec.render_settings.wall}}}};
   key_doc["scene"].erase("wall");
   p.key = sha256_hex(key_doc.dump());
+  p.prediction = price(a, p.assessment, &p.host_bytes);
   return p;
 }
 
-// What is known of a job's cost before it runs. The memory figure is the
-// engine's own estimate (job/budget.h), the one the budget refuses by; the
-// time needs the trained job cost model (issue #12), so it is not given yet.
-static json prediction_of(const json& assessment, uint64_t host_bytes) {
-  return {{"basis", "analytic"},
-          {"peak_host_bytes", {{"value", host_bytes}}},
-          {"total_time_s", nullptr},
-          {"note", "time is not predicted yet: no job cost model is trained on this server"},
-          {"inputs", assessment}};
+// What is known of a job's cost before it runs. With a job cost model for the
+// backend the job will run on: time, memory, output and (on the GPU) device memory
+// and load, each {value (median), low, high} (the model's 10-90 % interval), and
+// whether the job lies outside what the model was trained on. Memory admits by the
+// interval's top inside the trained range; outside it, by the larger of that and
+// the engine's own estimate (job/budget.h), which is also the whole answer where
+// no model is loaded.
+json JobService::price(const job::JobAssessment& a, const json& assessment,
+                       uint64_t* admit_bytes) const {
+  const uint64_t analytic = uint64_t(a.work.host_bytes);
+  *admit_bytes = analytic;
+  json p = {{"basis", "analytic"},
+            {"peak_host_bytes", {{"value", analytic}, {"analytic", analytic}}},
+            {"total_time_s", nullptr},
+            {"inputs", assessment}};
+  const scene::Scene& sc = a.resolved.scene;
+  // The backend a worker runs it on: the scene's, "auto" = the GPU when one is visible.
+  const std::string backend =
+      sc.backend_auto ? (visible_gpus().empty() ? "cpu" : "cuda") : sim::to_string(sc.dynamics.backend);
+  p["backend"] = backend;
+#ifdef COLLIDO_HAVE_JOB_COST
+  if (const job::JobCostModel* model = cost_->for_backend(backend)) {
+    const int threads = config_.job_threads > 0
+                            ? config_.job_threads
+                            : int(std::max(1u, std::thread::hardware_concurrency()));
+    auto c = model->predict(a, backend, threads);
+    if (c) {
+      auto iv = [](const job::CostInterval& v) {
+        return json{{"value", v.p50}, {"low", v.p10}, {"high", v.p90}};
+      };
+      p["basis"] = "job cost model";
+      p["total_time_s"] = iv(c->total_s);
+      p["time_per_frame_s"] = iv(c->per_frame_s);
+      p["output_bytes"] = iv(c->output_bytes);
+      if (backend == "cuda") {
+        p["peak_device_bytes"] = iv(c->peak_device_bytes);
+        p["gpu_load"] = iv(c->gpu_load);
+      }
+      const uint64_t high = uint64_t(std::ceil(c->peak_host_bytes.p90));
+      *admit_bytes = c->outside_training ? std::max(high, analytic) : high;
+      p["peak_host_bytes"] = iv(c->peak_host_bytes);
+      p["peak_host_bytes"]["analytic"] = analytic;
+      p["peak_host_bytes"]["admitted_by"] = *admit_bytes;
+      p["outside_training"] = c->outside_training;
+      p["outside_reasons"] = c->outside_reasons;
+      p["device"] = c->device;
+      p["threads"] = c->threads;
+      p["drivers"] = {{"steps", c->steps},
+                      {"steps_per_frame", c->steps_per_frame},
+                      {"particle_steps", c->particle_steps},
+                      {"pair_contacts", c->pair_contacts},
+                      {"pixel_frames", c->pixel_frames}};
+      return p;
+    }
+    p["note"] = "the job cost model cannot price this job: " + c.status().message();
+    return p;
+  }
+#endif
+  p["note"] = "time is not predicted: no job cost model for the " + backend +
+              " backend is loaded on this server (serve --cost-model)";
+  return p;
 }
 
 Reply JobService::predict(const User& u, const json& body) {
   auto p = prepare(u, body);
   if (!p) return status_reply(p.status());
   Reply r;
-  r.body = prediction_of(p->assessment, p->host_bytes);
+  r.body = p->prediction;
   return r;
 }
 
@@ -660,7 +742,7 @@ Reply JobService::submit(const User& u, const json& body) {
   j.owner_id = u.id;
   j.scene_json = p->scene.dump();
   j.scene_key = p->key;
-  j.prediction_json = prediction_of(p->assessment, p->host_bytes).dump();
+  j.prediction_json = p->prediction.dump();
   j.predicted_host_bytes = p->host_bytes;
   j.created_at = now;
   if (!fresh) {
@@ -941,6 +1023,20 @@ Reply JobService::admin_logs(const User& u, size_t limit, int64_t before_id) {
   return r;
 }
 
+Reply JobService::admin_predictor(const User& u) {
+  if (u.role != "admin") return error_reply(403, "administrators only");
+  Reply r;
+  r.body = {{"models", json::array()}};
+#ifdef COLLIDO_HAVE_JOB_COST
+  for (size_t i = 0; i < cost_->models.size(); ++i) {
+    json m = cost_->models[i].summary();
+    m["file"] = fs::path(cost_->paths[i]).filename().string();
+    r.body["models"].push_back(std::move(m));
+  }
+#endif
+  return r;
+}
+
 Reply JobService::health() {
   Reply r;
   auto users = store_->count_users();
@@ -1046,8 +1142,8 @@ void JobService::job_finished(const Job& j, const std::string& state, const std:
   row.peak_device_bytes = cost.value("peak_device_bytes", uint64_t(0));
   row.gpu_load = cost.value("gpu_busy_fraction", 0.0);
   row.predicted_host_bytes = j.predicted_host_bytes;
-  if (pred.is_object() && pred.contains("total_time_s") && pred["total_time_s"].is_number())
-    row.predicted_total_s = pred["total_time_s"].get<double>();
+  if (pred.is_object() && pred.contains("total_time_s") && pred["total_time_s"].is_object())
+    row.predicted_total_s = pred["total_time_s"].value("value", -1.0);
   row.created_at = unix_now();
   store_->insert_log(row);
   finished_since_start_.fetch_add(1);

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "common/status.h"
+#include "job/assess.h"
 #include "job/job.h"
 #include "service/auth.h"
 #include "service/store.h"
@@ -39,6 +40,10 @@ struct ServiceConfig {
   // a job predicted above it is refused, one above what is free now waits.
   uint64_t host_bytes = 0;
   job::RenderSettings render = job::job_render_defaults();
+  // Job cost model files (`collidoscope gvm train` on a job log; one per backend, or
+  // one trained on both). Without one, time is not predicted and memory is the
+  // engine's own estimate (job/budget.h).
+  std::vector<std::string> cost_models;
 };
 
 // An answer: the HTTP status, a JSON body, extra headers.
@@ -128,6 +133,9 @@ class JobService {
 
   // Administration.
   Reply admin_logs(const User& u, size_t limit, int64_t before_id);
+  // The job cost models in use: their training (loss per epoch, held-out predictions
+  // against measurements) and intervals; an empty list when none is loaded.
+  Reply admin_predictor(const User& u);
 
   Reply health();
   // Prometheus text: queue length, jobs by state, prediction error of finished jobs.
@@ -152,9 +160,12 @@ class JobService {
     job::JobSpec spec;     // what job-exec runs (out_dir not yet set)
     std::string key;
     json assessment;       // what is known before it runs
-    uint64_t host_bytes = 0;
+    json prediction;       // its cost, as the predict route answers
+    uint64_t host_bytes = 0;  // the memory the job is admitted by (waits and fits)
   };
   Expected<PreparedJob> prepare(const User& u, const json& body);
+  // The predicted cost of an assessed job; *admit_bytes: the memory it is admitted by.
+  json price(const job::JobAssessment& a, const json& assessment, uint64_t* admit_bytes) const;
   json job_json(const Job& j);
   // job_json's text, rebuilt only when the job's row has changed since.
   std::shared_ptr<const std::string> job_view(const Job& j);
@@ -164,6 +175,8 @@ class JobService {
 
   ServiceConfig config_;
   std::unique_ptr<Store> store_;
+  struct CostModels;  // the loaded job cost models (none where the gvm module is left out)
+  std::unique_ptr<CostModels> cost_;
   LoginThrottle throttle_;
   std::unique_ptr<WorkerPool> workers_;
   mutable std::mutex url_mu_;

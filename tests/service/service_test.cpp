@@ -105,7 +105,7 @@ class ServiceTest : public ::testing::Test {
     server_.reset();
     svc_.reset();
   }
-  void start(uint64_t host_bytes = 0, int max_queued = 8) {
+  void start(uint64_t host_bytes = 0, int max_queued = 8, std::vector<std::string> cost_models = {}) {
     if (dir_.empty()) dir_ = temp_dir(::testing::UnitTest::GetInstance()->current_test_info()->name());
     ServiceConfig c;
     c.data_dir = dir_;
@@ -115,6 +115,7 @@ class ServiceTest : public ::testing::Test {
     c.max_upload_bytes = 1 << 20;
     c.host_bytes = host_bytes;
     c.max_queued_per_user = max_queued;
+    c.cost_models = std::move(cost_models);
     auto svc = JobService::open(c);
     ASSERT_TRUE(svc) << svc.status().message();
     svc_ = std::move(*svc);
@@ -134,6 +135,74 @@ class ServiceTest : public ::testing::Test {
   std::unique_ptr<JobService> svc_;
   std::unique_ptr<Server> server_;
 };
+
+// With the committed job cost models, a prediction gives time and memory with their
+// ranges, says when a job lies outside the training, and admits memory by the range's
+// top; the job keeps what it was told.
+TEST_F(ServiceTest, PricesJobsWithTheJobCostModel) {
+  server_.reset();
+  svc_.reset();
+  const std::string data = std::string(COLLIDO_SOURCE_DIR) + "/bench/data/";
+  start(0, 8, {data + "job_model_cpu.json", data + "job_model_cuda.json"});
+  Client c = client();
+  c.sign_up("grace");
+  json pred = c.call_json("POST", "/api/v1/predict", tiny_job("wall1", 400, 1.0));
+  EXPECT_EQ(pred["basis"], "job cost model") << pred.dump();
+  for (const char* k : {"total_time_s", "time_per_frame_s", "peak_host_bytes", "output_bytes"}) {
+    ASSERT_TRUE(pred[k].is_object()) << k << ": " << pred.dump();
+    const double lo = pred[k]["low"], mid = pred[k]["value"], hi = pred[k]["high"];
+    EXPECT_GT(lo, 0) << k;
+    EXPECT_LE(lo, mid) << k;
+    EXPECT_LE(mid, hi) << k;
+  }
+  EXPECT_TRUE(pred["outside_training"].is_boolean());
+  EXPECT_GE(pred["peak_host_bytes"]["admitted_by"].get<double>(),
+            pred["peak_host_bytes"]["high"].get<double>() - 1);
+  EXPECT_GT(pred["drivers"]["steps"].get<double>(), 0);
+
+  // Far more particles than any training job: said, and memory admitted by the larger figure.
+  json big = tiny_job("wall1", 150000, 1.0);
+  big["scene"]["particles"]["radius"] = 0.3;
+  json far = c.call_json("POST", "/api/v1/predict", big);
+  ASSERT_EQ(far["outside_training"], true) << far.dump();
+  EXPECT_NE(far["outside_reasons"].dump().find("particles"), std::string::npos) << far.dump();
+  EXPECT_GE(far["peak_host_bytes"]["admitted_by"].get<double>(),
+            far["peak_host_bytes"]["analytic"].get<double>());
+
+  // The models' training, for the admin page: loss curves and held-out predictions.
+  EXPECT_EQ(c.call("GET", "/api/v1/admin/predictor").status, 403);
+  ASSERT_TRUE(svc_->create_admin("root", "correct horse battery"));
+  Client admin = client();
+  admin.token = admin.call_json("POST", "/api/v1/sessions",
+                                {{"name", "root"}, {"password", "correct horse battery"}})["token"];
+  json models = admin.call_json("GET", "/api/v1/admin/predictor")["models"];
+  ASSERT_EQ(models.size(), 2u) << models.dump().substr(0, 500);
+  for (const json& m : models) {
+    EXPECT_GT(m["rows"].get<int>(), 100);
+    EXPECT_GT(m["curve"].size(), 10u);
+    EXPECT_LE(m["curve"].size(), 300u);
+    const json& held = m["costs"]["total_s"]["held_out"];
+    EXPECT_EQ(held.size(), m["rows"].get<size_t>());
+    EXPECT_LT(m["costs"]["total_s"]["interval_factors"][0].get<double>(), 1.0);
+    EXPECT_GT(m["costs"]["total_s"]["interval_factors"][1].get<double>(), 1.0);
+  }
+
+  json job = c.call_json("POST", "/api/v1/jobs", tiny_job("wall1"), 202);
+  EXPECT_EQ(job["prediction"]["basis"], "job cost model");
+  EXPECT_GT(job["prediction"]["total_time_s"]["value"].get<double>(), 0);
+  job = c.wait_job(job["id"]);
+  EXPECT_EQ(job["state"], "done") << job.dump();
+}
+
+TEST_F(ServiceTest, AModelFileThatIsNotAJobCostModelStopsTheStart) {
+  ServiceConfig c;
+  c.data_dir = dir_ + "-bad-model";
+  c.job_executable = COLLIDO_BINARY;
+  c.cost_models = {dir_ + "/absent-model.json"};
+  auto svc = JobService::open(c);
+  ASSERT_FALSE(svc);
+  EXPECT_NE(svc.status().message().find("cost model"), std::string::npos) << svc.status().message();
+}
 
 TEST_F(ServiceTest, SubmitWatchDownloadShareRevoke) {
   Client c = client();

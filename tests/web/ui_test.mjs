@@ -88,7 +88,8 @@ before(async () => {
   assert.equal(made.status, 0, `admin create failed: ${made.stderr}`);
   server = spawn(binary, ['serve', '--port', '0', '--data', dataDir, '--web', path.join(root, 'web', 'static'),
     // One worker of one thread, and a memory budget the test can go past on purpose.
-    '--workers', '1', '--job-threads', '1', '--memory-gb', '4'], { cwd: root, detached: true, stdio: ['ignore', 'pipe', 'pipe'] });
+    '--workers', '1', '--job-threads', '1', '--memory-gb', '4',
+    '--cost-model', path.join(root, 'bench', 'data', 'job_model_cpu.json')], { cwd: root, detached: true, stdio: ['ignore', 'pipe', 'pipe'] });
   const port = await new Promise((resolve, reject) => {
     const timer = setTimeout(() => reject(new Error(`serve printed no address in 20 s:\n${serverLog}`)), 20_000);
     const read = (chunk) => {
@@ -354,8 +355,12 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     await pred.getByText('Up to date.').waitFor();
     await pred.locator('dt:text-is("Frames") + dd', { hasText: /^4$/ }).waitFor();
     assert.match(await pred.locator('dt:text-is("Peak memory") + dd').innerText(), /^\d+(\.\d)? (KiB|MiB|GiB)/);
-    assert.equal(await pred.locator('dt:text-is("Time") + dd').innerText(), 'not predicted yet');
-    await pred.getByText(/Time is not predicted yet/).waitFor();
+    // The job cost model's time, with its range, and what priced it.
+    assert.match(await pred.locator('dt:text-is("Time") + dd').innerText(), /\(likely .+ to .+\)$/);
+    assert.match(await pred.locator('dt:text-is("Peak memory") + dd').innerText(), /\(likely .+ to .+\)$/);
+    await pred.locator('dt:text-is("Estimated by") + dd', { hasText: 'job cost model' }).waitFor();
+    // One thread per job, where the model was trained on two: said in plain words.
+    await pred.getByText(/outside what the predictor was trained on \(.*threads/).waitFor();
     // Too many particles for the server's memory: a plain warning that it would be refused.
     await page.getByLabel('Count').fill('100000000');
     await pred.getByText(/This job would be refused: the run needs about [\d.]+ GiB of memory/).waitFor();
@@ -503,7 +508,7 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
       await page.waitForLoadState('networkidle');
       await checkFits(page, hash);
       // On a phone the prediction is below the form; a line at the foot of the screen follows it.
-      if (hash === '#/new') await page.locator('.pred-mini', { hasText: /^Prediction: time not predicted yet, [\d.]+ [KMG]iB of memory/ }).waitFor();
+      if (hash === '#/new') await page.locator('.pred-mini', { hasText: /^Prediction: .+ \(likely .+\), [\d.]+ [KMG]iB .*of memory/ }).waitFor();
       if (name) await shot(page, name);
     }
     await page.setViewportSize(VIEWPORT);
@@ -531,8 +536,13 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     await page.getByRole('heading', { name: 'Administration', level: 1 }).waitFor();
     const logRow = page.getByRole('row', { name: new RegExp(jobId.slice(0, 8)) });
     await logRow.waitFor();
-    assert.match(await logRow.innerText(), /not predicted/);
-    await page.getByRole('region', { name: 'Cost predictor' }).getByText('Not available yet.').waitFor();
+    assert.doesNotMatch(await logRow.innerText(), /not predicted/);
+    const predictor = page.getByRole('region', { name: 'Cost predictor' });
+    await predictor.getByRole('heading', { name: /job_model_cpu\.json: cpu jobs/ }).waitFor();
+    await predictor.getByText(/Predicted at submission against measured.*total time off by/).waitFor();
+    // The loss curve and the held-out predictions, drawn.
+    await predictor.locator('canvas').nth(1).waitFor();
+    assert.equal(await predictor.locator('canvas').count(), 2);
     await page.getByRole('region', { name: 'Algorithms' }).getByRole('row', { name: /gravity/ }).waitFor();
     await checkA11y(page, 'admin');
     await shot(page, '07-admin');

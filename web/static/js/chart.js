@@ -91,3 +91,46 @@ export function statsCharts(box, csvText, statsUrl) {
   if (more.length) { picker.addEventListener('change', drawMore); drawMore(); }
   return () => { disposers.forEach((d) => d()); disposeMore?.(); };
 }
+
+// A job cost model's training (GET /api/v1/admin/predictor): the loss per epoch
+// (train and held-out fold, log scale) and the held-out predictions of total time
+// against the measured times, log-log with the line of perfect prediction.
+// Answers a dispose function.
+export function predictorCharts(box, model) {
+  const disposers = [];
+  const chart = (opts, data) => {
+    const plotBox = h('div', { class: 'chart', 'aria-hidden': 'true' });
+    box.append(plotBox);
+    const width = () => Math.max(260, Math.min(520, box.clientWidth || 500));
+    const plot = new uPlot({ width: width(), height: 260, ...opts }, data, plotBox);
+    const observer = new ResizeObserver(() => plot.setSize({ width: width(), height: 260 }));
+    observer.observe(box);
+    disposers.push(() => { observer.disconnect(); plot.destroy(); });
+  };
+  const curve = model.curve || [];
+  if (curve.length) {
+    chart({
+      title: `Loss per epoch (${model.file})`,
+      scales: { x: { time: false }, y: { distr: 3 } },
+      axes: [{ label: 'epoch', values: tick }, { label: 'mean squared error (scaled)', values: tick, size: 64 }],
+      series: [{ label: 'epoch' },
+        { label: 'training rows', stroke: COLOURS[0], width: 2 },
+        { label: 'held-out fold', stroke: COLOURS[1], width: 2 }],
+    }, [curve.map((e) => e[0]), curve.map((e) => e[1]), curve.map((e) => e[2])]);
+  }
+  const held = (model.costs?.total_s?.held_out || []).filter(([m, p]) => m > 0 && p > 0)
+    .sort((a, b) => a[0] - b[0]);
+  if (held.length) {
+    const lo = held[0][0], hi = held[held.length - 1][0];
+    chart({
+      title: 'Total time: held-out prediction against measured (s)',
+      scales: { x: { time: false, distr: 3 }, y: { distr: 3 } },
+      axes: [{ label: 'measured (s)', values: tick }, { label: 'predicted (s)', values: tick, size: 64 }],
+      series: [{ label: 'measured' },
+        { label: 'predicted', stroke: COLOURS[0], width: 0, points: { show: true, size: 5, fill: COLOURS[0] } },
+        { label: 'perfect', stroke: COLOURS[4], width: 1, dash: [4, 4], points: { show: false }, spanGaps: true }],
+    }, [held.map((r) => r[0]), held.map((r) => r[1]),
+      held.map((r) => (r[0] === lo || r[0] === hi ? r[0] : null))]);
+  }
+  return () => disposers.forEach((d) => d());
+}

@@ -1,10 +1,12 @@
 // Administrators: the run log (GET /api/v1/admin/logs), one row per finished
 // job with its inputs and measured against predicted cost, paged by id; the
-// algorithms (GET /api/v1/algorithms); the cost predictor's training, which
-// has no API yet.
+// algorithms (GET /api/v1/algorithms); the job cost models' training
+// (GET /api/v1/admin/predictor): loss curves, held-out predictions against
+// measurements, intervals.
 import { get } from '../api.js';
 import { h, tableBox, errorBox, showError, fmtBytes, fmtSeconds, fmtDate } from '../dom.js';
 import { algorithmsTable } from './methods.js';
+import { predictorCharts } from '../chart.js';
 
 const PAGE = 50;
 
@@ -35,6 +37,10 @@ export async function render(main) {
 
   const cols = [['Row'], ['Finished'], ['Job'], ['Particles', 1], ['Triangles', 1], ['Method'], ['Ran on'],
     ['Time', 1], ['Predicted time', 1], ['Peak memory', 1], ['Predicted memory', 1]];
+  const predictor = h('div');
+  let models = null;
+  try { models = (await get('/api/v1/admin/predictor')).models; } catch (e) { showError(error, e); }
+  if (models) predictor.replaceChildren(...predictorSections(models));
   let algorithms = null;
   try { algorithms = await get('/api/v1/algorithms'); } catch (e) { showError(error, e); }
   main.append(
@@ -51,10 +57,7 @@ export async function render(main) {
       h('div', { class: 'actions' }, older)),
     h('section', { 'aria-labelledby': 'pred-h' },
       h('h2', { id: 'pred-h' }, 'Cost predictor'),
-      h('div', { class: 'alert note' },
-        h('strong', {}, 'Not available yet. '),
-        'The job cost model is not trained on this server, and the service has no API for its training ',
-        '(loss curves, predicted against measured time). Until it has, jobs are priced by the engine’s formula for memory, and their time is not predicted.'),
+      predictor,
       summary),
     h('section', { 'aria-labelledby': 'alg-h' },
       h('h2', { id: 'alg-h' }, 'Algorithms'),
@@ -62,15 +65,42 @@ export async function render(main) {
   await load();
 }
 
-// How far the formula's memory estimate was from the measured peak, over the rows shown.
+// One section per job cost model in use: what it was trained on, its intervals, charts.
+function predictorSections(models) {
+  if (!models.length) {
+    return [h('div', { class: 'alert note' }, h('strong', {}, 'No job cost model is loaded. '),
+      'Jobs are priced by the engine’s formula for memory, and their time is not predicted. ',
+      'Train one with ', h('code', {}, 'collidoscope calibrate --jobs'), ' and ', h('code', {}, 'collidoscope gvm train'),
+      ', then start the server with ', h('code', {}, '--cost-model'), '.')];
+  }
+  const factor = (f) => (f >= 1 ? `×${f.toFixed(2)}` : `÷${(1 / f).toFixed(2)}`);
+  return models.map((m) => {
+    const box = h('div', { class: 'chart-row' });
+    const costs = Object.entries(m.costs || {}).filter(([, c]) => c.interval_factors);
+    const section = h('div', { class: 'predictor' },
+      h('h3', {}, `${m.file}: ${m.backends.join(', ')} jobs on ${m.devices.join(', ')}`),
+      h('p', {}, `Trained on ${m.rows} measured jobs: per cost ${m.folds} general vector machines, each with one fold held out; `
+        + `the range given with each prediction held ${Math.round(m.coverage * 100)} % of the held-out jobs.`),
+      h('p', { class: 'hint' }, `Ranges around the median: ${costs.map(([k, c]) => `${k.replaceAll('_', ' ')} ${factor(c.interval_factors[0])} to ${factor(c.interval_factors[1])}`).join('; ')}.`),
+      box);
+    requestAnimationFrame(() => predictorCharts(box, m));
+    return section;
+  });
+}
+
+// How far the predictions given at submission were from what the jobs measured,
+// over the rows shown: memory (every job has one) and time (where a model gave one).
 function memorySummary(rows) {
-  const pairs = rows.map((l) => [l.predicted?.peak_host_bytes?.value, l.measured?.peak_host_bytes])
-    .filter(([p, m]) => p > 0 && m > 0);
-  if (!pairs.length) return h('p', { class: 'hint' }, 'No finished job has both a predicted and a measured peak memory yet.');
-  const errs = pairs.map(([p, m]) => Math.abs(p - m) / m);
-  const mean = errs.reduce((a, b) => a + b, 0) / errs.length;
-  return h('p', {}, `Memory, the formula against the measured peak over the ${pairs.length} job${pairs.length === 1 ? '' : 's'} shown: `
-    + `off by ${(mean * 100).toFixed(0)} % on average (largest ${(Math.max(...errs) * 100).toFixed(0)} %).`);
+  const off = (pairs) => {
+    const errs = pairs.map(([p, m]) => Math.abs(p - m) / m);
+    const mean = errs.reduce((a, b) => a + b, 0) / errs.length;
+    return `off by ${(mean * 100).toFixed(0)} % on average (largest ${(Math.max(...errs) * 100).toFixed(0)} %) over ${pairs.length} job${pairs.length === 1 ? '' : 's'}`;
+  };
+  const memory = rows.map((l) => [l.predicted?.peak_host_bytes?.value, l.measured?.peak_host_bytes]).filter(([p, m]) => p > 0 && m > 0);
+  const time = rows.map((l) => [l.predicted?.total_time_s?.value, l.measured?.total_s]).filter(([p, m]) => p > 0 && m > 0);
+  if (!memory.length) return h('p', { class: 'hint' }, 'No finished job has both a predicted and a measured peak memory yet.');
+  return h('p', {}, `Predicted at submission against measured, in the rows shown: peak memory ${off(memory)}`
+    + `${time.length ? `; total time ${off(time)}` : '; no job had its time predicted'}.`);
 }
 
 function rowOf(l) {
@@ -88,7 +118,7 @@ function rowOf(l) {
     td(i.method, false),
     td(i.backend ? `${i.backend}${i.threads ? ` × ${i.threads}` : ''}` : undefined, false),
     td(fmtSeconds(m.total_s)),
-    td(typeof p.total_time_s === 'number' ? fmtSeconds(p.total_time_s) : 'not predicted'),
+    td(Number.isFinite(p.total_time_s?.value) ? fmtSeconds(p.total_time_s.value) : 'not predicted'),
     td(fmtBytes(m.peak_host_bytes)),
     td(fmtBytes(p.peak_host_bytes?.value)));
 }

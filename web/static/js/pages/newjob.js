@@ -38,10 +38,10 @@ async function serverLoad(signal) {
 // What the prediction warns of, in plain words: [{level: 'error'|'note', text}].
 function warningsOf(p, load) {
   const out = [];
-  // Fields a trained cost model may add (the analytic one has none of them).
-  const outside = p.outside_training ?? (p.in_training_range === false ? true : undefined);
-  if (outside) {
-    const what = Array.isArray(outside) ? `: ${outside.join(', ')}` : typeof outside === 'string' ? `: ${outside}` : '';
+  // Only a trained cost model says this (the analytic estimate has no training).
+  if (p.outside_training) {
+    const reasons = Array.isArray(p.outside_reasons) ? p.outside_reasons : [];
+    const what = reasons.length ? ` (${reasons.join('; ')})` : '';
     out.push({ level: 'note', text: `This job lies outside what the predictor was trained on${what}. Treat the figures as rough.` });
   }
   for (const w of Array.isArray(p.warnings) ? p.warnings : []) out.push({ level: 'note', text: String(w.message ?? w) });
@@ -181,7 +181,7 @@ export async function render(main, ctx, modelParam) {
         ...fact('Wall triangles', i.triangles?.toLocaleString()),
         ...fact('Pieces after division', i.pieces?.toLocaleString()),
         ...fact('Method', i.method),
-        ...fact('Estimated by', p.basis === 'analytic' ? 'formula (no trained model yet)' : p.basis));
+        ...fact('Estimated by', p.basis === 'analytic' ? 'formula (no trained model on this server)' : p.basis));
       predNote.textContent = p.note ? `${p.note[0].toUpperCase()}${p.note.slice(1)}.` : '';
       showWarnings(warningsOf(p, l));
       mini(`Prediction: ${time ?? 'time not predicted yet'}, ${memoryText} of memory`
