@@ -30,7 +30,7 @@ namespace {
 
 constexpr const char* kKind = "collidoscope-job-cost-model";
 constexpr const char* kDetectionKind = "collidoscope-resource-predictor";
-constexpr int kVersion = 1;
+constexpr int kVersion = 2;  // 2: each member has its prior
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 // Feature indices of the fixed block.
@@ -132,6 +132,120 @@ uint64_t member_seed(uint64_t seed, size_t k, int m) {
 }
 
 bool is_cuda(const JobInputs& in) { return in.backend == "cuda"; }
+
+// ---- The prior: a cost as the sum of what drives it ----------------------------------
+//
+// To first order a job's memory is a fixed floor (the process, its libraries) plus
+// terms in proportion to what it holds: particles, bin cells, divided pieces,
+// triangles, and a frame's pixels per encoder; its output is the snapshots plus the
+// encoders' bytes per pixel-frame. For these costs the prior is that sum, its weights
+// non-negative and fitted by least squares on the relative error, and each member's
+// GVM learns the prior's error (in model space) from every feature. Out of the trained
+// range the prior extrapolates as the memory does, while the GVM's correction stays
+// bounded (its activation saturates). Times have no prior: neither a non-negative sum
+// of stages nor a power law in the same drivers beat the GVM alone on both logs
+// (docs/gvm.md), as a job's time turns on its dynamics (how many particles rest on
+// the wall, how many touch) more than on its sizes.
+constexpr size_t kMaxPriorTerms = 16;
+
+// Writes output k's terms for a job into t; answers how many (0: k has no prior).
+size_t prior_terms(size_t k, const JobInputs& in, double* t) {
+  const CostDrivers d = cost_drivers(in);
+  const double frames = double(in.frames + 1);
+  const double pixels = in.renders() ? double(in.render_width) * double(in.render_height) : 0;
+  const double render = in.renders() ? 1 : 0;
+  const double mp4 = in.has_format("mp4"), webm = in.has_format("webm"), gif = in.has_format("gif");
+  size_t n = 0;
+  switch (k) {
+    case kHost:
+      for (double v : {1.0, double(in.particles), double(in.particles) * in.particle_contacts,
+                       in.wall_cells, in.pieces, double(in.triangles), render, pixels, mp4,
+                       pixels * mp4, webm, pixels * webm, gif, pixels * gif})
+        t[n++] = v;
+      return n;
+    case kDevice:
+      for (double v : {1.0, double(in.particles), double(in.particles) * in.particle_contacts,
+                       in.wall_cells, in.pieces, double(in.triangles)})
+        t[n++] = v;
+      return n;
+    case kOutputBytes:
+      for (double v : {1.0, d.snapshot_bytes, frames, pixels * render, d.pixel_frames * mp4,
+                       d.pixel_frames * webm, d.pixel_frames * gif})
+        t[n++] = v;
+      return n;
+    default:
+      return 0;  // times (see above) and GPU load (a share, no sum of stages)
+  }
+}
+
+// Solves a z = b for an m x m symmetric positive definite a (lower triangle read,
+// overwritten by its Cholesky factor); false when a is not positive definite.
+bool cholesky_solve(std::vector<double>& a, std::vector<double>& z, size_t m) {
+  for (size_t i = 0; i < m; ++i)
+    for (size_t j = 0; j <= i; ++j) {
+      double sum = a[i * m + j];
+      for (size_t q = 0; q < j; ++q) sum -= a[i * m + q] * a[j * m + q];
+      if (i == j) {
+        if (!(sum > 0)) return false;
+        a[i * m + i] = std::sqrt(sum);
+      } else {
+        a[i * m + j] = sum / a[j * m + j];
+      }
+    }
+  for (size_t i = 0; i < m; ++i) {
+    for (size_t q = 0; q < i; ++q) z[i] -= a[i * m + q] * z[q];
+    z[i] /= a[i * m + i];
+  }
+  for (size_t i = m; i-- > 0;) {
+    for (size_t q = i + 1; q < m; ++q) z[i] -= a[q * m + i] * z[q];
+    z[i] /= a[i * m + i];
+  }
+  return true;
+}
+
+// Non-negative weights w minimising sum_r ((t_r . w - y_r) / y_r)^2 over rows with
+// y_r > 0: least squares on the columns scaled to unit length, dropping the most
+// negative weight until none is left (the terms are few: at most kMaxPriorTerms).
+std::vector<double> fit_prior(const std::vector<std::vector<double>>& t, const std::vector<double>& y) {
+  const size_t n = t.empty() ? 0 : t[0].size();
+  std::vector<double> w(n, 0.0);
+  std::vector<size_t> active;
+  std::vector<double> scale(n, 0.0);
+  for (size_t j = 0; j < n; ++j) {
+    for (size_t r = 0; r < t.size(); ++r)
+      if (y[r] > 0) scale[j] += (t[r][j] / y[r]) * (t[r][j] / y[r]);
+    scale[j] = std::sqrt(scale[j]);
+    if (scale[j] > 0 && std::isfinite(scale[j])) active.push_back(j);
+  }
+  while (!active.empty()) {
+    const size_t m = active.size();
+    // Normal equations of the scaled problem, a small ridge for conditioning.
+    std::vector<double> a(m * m, 0.0), b(m, 0.0);
+    for (size_t r = 0; r < t.size(); ++r) {
+      if (!(y[r] > 0)) continue;
+      for (size_t i = 0; i < m; ++i) {
+        const double ui = t[r][active[i]] / y[r] / scale[active[i]];
+        b[i] += ui;
+        for (size_t j = 0; j <= i; ++j) a[i * m + j] += ui * t[r][active[j]] / y[r] / scale[active[j]];
+      }
+    }
+    for (size_t i = 0; i < m; ++i) a[i * m + i] += 1e-9;
+    std::vector<double> z(b);
+    if (!cholesky_solve(a, z, m)) {  // a degenerate set of columns: drop the last, again
+      active.pop_back();
+      continue;
+    }
+    size_t worst = m;
+    for (size_t i = 0; i < m; ++i)
+      if (z[i] < 0 && (worst == m || z[i] < z[worst])) worst = i;
+    if (worst == m) {
+      for (size_t i = 0; i < m; ++i) w[active[i]] = z[i] / scale[active[i]];
+      return w;
+    }
+    active.erase(active.begin() + long(worst));
+  }
+  return w;
+}
 
 std::vector<std::string> feature_names_with(const std::vector<std::string>& devices) {
   std::vector<std::string> n = job_feature_names();
@@ -390,12 +504,14 @@ Expected<JobCostModel> JobCostModel::train(const std::vector<JobRecord>& rows,
   struct Task {
     size_t output;
     int member;
+    Prior prior;
     g::Matrix x, y, vx, vy;
     Expected<g::Machine> machine = invalid_argument("not trained");
     g::TrainReport report;
   };
   std::vector<Task> tasks;
   model.members_.assign(kJobOutputs, {});
+  model.priors_.assign(kJobOutputs, {});
   for (size_t k = 0; k < kJobOutputs; ++k) {
     size_t present = 0;
     for (size_t r = 0; r < N; ++r) present += !std::isnan(y(r, k));
@@ -406,13 +522,33 @@ Expected<JobCostModel> JobCostModel::train(const std::vector<JobRecord>& rows,
       t.member = m;
       t.x = t.vx = g::Matrix(0, F);
       t.y = t.vy = g::Matrix(0, 1);
+      // The prior from this member's training rows only: the held-out fold stays unseen.
+      std::vector<std::vector<double>> terms;
+      std::vector<double> values;
+      double smallest = std::numeric_limits<double>::infinity();
+      for (size_t r = 0; r < N; ++r) {
+        if (std::isnan(y(r, k)) || fold[r] == m) continue;
+        double tr[kMaxPriorTerms];
+        const size_t n = prior_terms(k, rows[r].inputs, tr);
+        if (n == 0) break;
+        double v[kJobOutputs];
+        job_measure_to_array(rows[r].measure, v);
+        terms.emplace_back(tr, tr + n);
+        values.push_back(v[k]);
+        if (v[k] > 0) smallest = std::min(smallest, v[k]);
+      }
+      if (!terms.empty()) {
+        t.prior.w = fit_prior(terms, values);
+        t.prior.floor = std::isfinite(smallest) ? smallest / 2 : 0;
+      }
       for (size_t r = 0; r < N; ++r) {
         if (std::isnan(y(r, k))) continue;
         std::vector<double> row(x.row(r), x.row(r) + F);
         for (size_t i = 0; i < F; ++i)
           if (!job_output_uses_feature(k, i)) row[i] = 0;
+        const double base = prior_value(k, t.prior, rows[r].inputs);
         (fold[r] == m ? t.vx : t.x).push_row(row);
-        (fold[r] == m ? t.vy : t.y).push_row({y(r, k)});
+        (fold[r] == m ? t.vy : t.y).push_row({y(r, k) - base});
       }
       tasks.push_back(std::move(t));
     }
@@ -436,6 +572,7 @@ Expected<JobCostModel> JobCostModel::train(const std::vector<JobRecord>& rows,
   for (Task& t : tasks) {
     if (!t.machine) return t.machine.status();
     model.members_[t.output].push_back(std::move(*t.machine));
+    model.priors_[t.output].push_back(std::move(t.prior));
   }
 
   // Out-of-fold residuals: each row through the member that never saw it.
@@ -444,15 +581,13 @@ Expected<JobCostModel> JobCostModel::train(const std::vector<JobRecord>& rows,
     std::vector<double> res;
     for (size_t r = 0; r < N; ++r) {
       if (std::isnan(y(r, k))) continue;
-      double p;
-      model.members_[k][size_t(fold[r])].predict(x.row(r), &p);
+      const double p = model.member_point(k, size_t(fold[r]), rows[r].inputs, x.row(r));
       res.push_back(y(r, k) - p);
     }
     std::sort(res.begin(), res.end());
     for (size_t r = 0; r < N; ++r) {
       if (std::isnan(y(r, k))) continue;
-      double p;
-      model.members_[k][size_t(fold[r])].predict(x.row(r), &p);
+      const double p = model.member_point(k, size_t(fold[r]), rows[r].inputs, x.row(r));
       const bool cuda = is_cuda(rows[r].inputs);
       model.held_out_[k].push_back({decode_cost(k, y(r, k), cuda), decode_cost(k, p, cuda)});
     }
@@ -492,16 +627,28 @@ bool JobCostModel::trained_for(const std::string& backend) const {
   return std::find(backends_.begin(), backends_.end(), backend) != backends_.end();
 }
 
-void JobCostModel::point(const double* x, double* y, bool cuda) const {
+double JobCostModel::prior_value(size_t k, const Prior& p, const JobInputs& in) {
+  if (p.w.empty()) return 0.0;
+  double t[kMaxPriorTerms];
+  const size_t n = prior_terms(k, in, t);
+  double v = 0;
+  for (size_t i = 0; i < n && i < p.w.size(); ++i) v += p.w[i] * t[i];
+  return encode_cost(k, std::max(v, p.floor), is_cuda(in));
+}
+
+double JobCostModel::member_point(size_t k, size_t m, const JobInputs& in, const double* x) const {
+  double v;
+  members_[k][m].predict(x, &v);
+  return v + prior_value(k, priors_[k][m], in);
+}
+
+void JobCostModel::point(const JobInputs& in, const double* x, double* y) const {
+  const bool cuda = is_cuda(in);
   for (size_t k = 0; k < kJobOutputs; ++k) {
     y[k] = kNaN;
     if (members_[k].empty() || (!cuda && (k == kDevice || k == kGpuLoad))) continue;
     double s = 0;
-    for (const g::Machine& m : members_[k]) {
-      double v;
-      m.predict(x, &v);
-      s += v;
-    }
+    for (size_t m = 0; m < members_[k].size(); ++m) s += member_point(k, m, in, x);
     y[k] = s / double(members_[k].size());
   }
 }
@@ -517,7 +664,7 @@ void JobCostModel::predict_point(const JobInputs& in, double* out) const {
   }
   job_features(in, devices_, xp);
   double y[kJobOutputs];
-  point(xp, y, is_cuda(in));
+  point(in, xp, y);
   for (size_t k = 0; k < kJobOutputs; ++k)
     out[k] = std::isnan(y[k]) ? 0.0 : decode_cost(k, y[k], is_cuda(in));
 }
@@ -573,7 +720,7 @@ Expected<JobCostPrediction> JobCostModel::predict(const JobInputs& in) const {
   job_features(in, devices_, xp);
   const bool cuda = is_cuda(in);
   double y[kJobOutputs];
-  point(xp, y, cuda);
+  point(in, xp, y);
   JobCostPrediction p;
   CostInterval* iv[kJobOutputs] = {&p.total_s,           &p.per_frame_s, &p.peak_host_bytes,
                                    &p.peak_device_bytes, &p.gpu_load,    &p.output_bytes};
@@ -650,6 +797,8 @@ std::string JobCostModel::to_json() const {
               {"held_out", held_out_[k]},
               {"members", json::array()}};
     for (const g::Machine& m : members_[k]) o["members"].push_back(json::parse(m.to_json()));
+    o["priors"] = json::array();
+    for (const Prior& pr : priors_[k]) o["priors"].push_back({{"w", pr.w}, {"floor", pr.floor}});
     j["outputs"].push_back(o);
   }
   return j.dump(1, ' ', false, json::error_handler_t::replace);
@@ -670,7 +819,8 @@ Expected<JobCostModel> JobCostModel::from_json(const std::string& text) {
   JobCostModel m;
   try {
     if (j.at("version").get<int>() != kVersion)
-      return parse_error("unsupported job cost model version " + j.at("version").dump());
+      return parse_error("job cost model version " + j.at("version").dump() + ", this build reads " +
+                         std::to_string(kVersion) + " (retrain it with `collidoscope gvm train`)");
     m.backends_ = j.at("backends").get<std::vector<std::string>>();
     m.devices_ = j.at("devices").get<std::vector<std::string>>();
     for (const json& u : j.at("usual"))
@@ -703,6 +853,7 @@ Expected<JobCostModel> JobCostModel::from_json(const std::string& text) {
     if (!outs.is_array() || outs.size() != kJobOutputs)
       return parse_error("model file needs 'outputs', one per cost");
     m.members_.assign(kJobOutputs, {});
+    m.priors_.assign(kJobOutputs, {});
     for (size_t k = 0; k < kJobOutputs; ++k) {
       const json& o = outs[k];
       if (o.at("name").get<std::string>() != job_output_names()[k])
@@ -718,6 +869,17 @@ Expected<JobCostModel> JobCostModel::from_json(const std::string& text) {
           return parse_error("a member of " + job_output_names()[k] + " does not match the features");
         m.members_[k].push_back(std::move(*machine));
       }
+      for (const json& pj : o.at("priors")) {
+        Prior pr;
+        pr.w = pj.at("w").get<std::vector<double>>();
+        pr.floor = pj.at("floor").get<double>();
+        double t[kMaxPriorTerms];
+        if (!pr.w.empty() && pr.w.size() != prior_terms(k, JobInputs{}, t))
+          return parse_error("a prior of " + job_output_names()[k] + " does not match this build's terms");
+        m.priors_[k].push_back(std::move(pr));
+      }
+      if (m.priors_[k].size() != m.members_[k].size())
+        return parse_error("outputs[" + std::to_string(k) + "]: one prior per member is needed");
     }
   } catch (const std::exception& e) {
     return parse_error(std::string("job cost model JSON: ") + e.what());

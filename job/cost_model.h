@@ -159,13 +159,24 @@ class JobCostModel {
     std::string backend, device;
     int threads;
   };
-  void point(const double* x, double* y, bool cuda) const;  // model space
+  // A member's prior (a cost as the sum of what drives it; cost_model.cpp): its
+  // weights, and a floor below which no prediction of the prior goes.
+  struct Prior {
+    std::vector<double> w;
+    double floor = 0;
+  };
+  // The prior of a job in model space (encode_cost); 0 where k has none.
+  static double prior_value(size_t k, const Prior& p, const JobInputs& in);
+  // Member m of output k: its prior, in model space (0 where k has none), plus its GVM.
+  double member_point(size_t k, size_t m, const JobInputs& in, const double* x) const;
+  void point(const JobInputs& in, const double* x, double* y) const;  // model space
   std::vector<std::string> check_range(const JobInputs& in, const double* x) const;
 
   std::vector<std::string> backends_, devices_;
   std::vector<Usual> usual_;
   std::vector<double> x_min_, x_max_;                 // per feature, training rows
   std::vector<std::vector<gvm::Machine>> members_;   // per output
+  std::vector<std::vector<Prior>> priors_;           // per output, one per member
   double q_lo_[kJobOutputs] = {}, q_hi_[kJobOutputs] = {};
   double coverage_ = 0.8;
   size_t rows_ = 0;

@@ -295,6 +295,36 @@ TEST_F(TrainedModel, SaysWhenAJobLiesOutsideItsTraining) {
   EXPECT_FALSE(model_->predict(cuda));
 }
 
+// Memory has a prior, the sum of what the job holds (cost_model.cpp): beyond the
+// largest job trained on it grows as that sum does, where a GVM alone saturates.
+TEST(JobCostModelPrior, MemoryExtrapolatesAsTheJobHoldsMore) {
+  auto host_bytes = [](uint64_t particles) { return 5e7 + 300.0 * double(particles); };
+  std::vector<JobRecord> rows;
+  for (int i = 0; i < 40; ++i) {
+    const uint64_t particles = uint64_t(100 * std::pow(200.0, i / 39.0));  // 100 .. 20,000
+    JobRecord r = sample_record(particles);
+    r.inputs.steps = 1000 + 37 * uint64_t(i);
+    // A few per cent of deterministic scatter, as a measured peak has.
+    r.measure.peak_host_bytes = host_bytes(particles) * (1 + 0.02 * std::sin(3.0 * i));
+    r.measure.output_bytes = 1e5 + 40.0 * double(particles);
+    r.measure.total_s = 1e-6 * double(particles * r.inputs.steps);
+    r.measure.per_frame_s = r.measure.total_s / 31;
+    rows.push_back(r);
+  }
+  JobCostOptions o;
+  o.gvm.hidden = 6;
+  o.gvm.epochs = 60;
+  o.folds = 3;
+  auto m = JobCostModel::train(rows, o, nullptr);
+  ASSERT_TRUE(m) << m.status().message();
+  JobInputs far = sample_record(200'000).inputs;  // 10x the largest trained
+  auto p = m->predict(far);
+  ASSERT_TRUE(p) << p.status().message();
+  EXPECT_TRUE(p->outside_training);
+  EXPECT_NEAR(p->peak_host_bytes.p50, host_bytes(200'000), 0.1 * host_bytes(200'000));
+  EXPECT_GE(p->peak_host_bytes.p90, 0.97 * host_bytes(200'000));
+}
+
 TEST_F(TrainedModel, PricesAnAssessedScene) {
   JobSpec spec;
   spec.scene_json = R"({"wall": "wall1", "particles": {"count": 2000, "radius": 1},
