@@ -46,6 +46,12 @@ const std::vector<FlagSpec>& serve_flags() {
       {"cost-model", true,
        "job cost model file(s), comma-separated (collidoscope gvm train on a job log); "
        "default: bench/data/job_model_cpu.json and job_model_cuda.json where present"},
+      {"training-logs", true,
+       "job logs a retrained cost model learns from besides the service's jobs, comma-separated; "
+       "default with the default models: bench/data/jobs_cpu.csv and jobs_cuda.csv where present"},
+      {"retrain-every", true,
+       "finished jobs of a backend after which the cost model retrains (default 25; 0 = only "
+       "when an administrator asks)"},
       {"demo", false, "start with the demo account and a demo job (make run)"},
       {"help", false, "this help"},
   };
@@ -79,7 +85,10 @@ int cmd_serve(const Args& args) {
   const int64_t upload_mb = parsed->get_int("max-upload-mb", 64, &error);
   const int64_t max_queued = parsed->get_int("max-queued", 8, &error);
   const double memory_gb = parsed->get_double("memory-gb", 0, &error);
+  const int64_t retrain_every = parsed->get_int("retrain-every", 25, &error);
   if (!error.empty()) return usage_error(cmd, error);
+  if (retrain_every < 0 || retrain_every > 1000000)
+    return usage_error(cmd, "--retrain-every must be in 0..1000000");
   if (port < 0 || port > 65535) return usage_error(cmd, "--port must be in 0..65535");
   if (threads < 1 || threads > 64) return usage_error(cmd, "--threads must be in 1..64");
   if (workers < -1 || workers > 64) return usage_error(cmd, "--workers must be in 0..64");
@@ -96,18 +105,32 @@ int cmd_serve(const Args& args) {
   config.max_upload_bytes = uint64_t(upload_mb) << 20;
   config.max_queued_per_user = int(max_queued);
   config.host_bytes = uint64_t(memory_gb * double(1ull << 30));
-  if (parsed->has("cost-model")) {
-    std::string list = parsed->get("cost-model", "");
+  config.retrain_every = int(retrain_every);
+  auto file_list = [&](const char* flag) {
+    std::vector<std::string> files;
+    const std::string list = parsed->get(flag, "");
     for (size_t start = 0; start <= list.size();) {
       const size_t comma = std::min(list.find(',', start), list.size());
-      if (comma > start) config.cost_models.push_back(list.substr(start, comma - start));
+      if (comma > start) files.push_back(list.substr(start, comma - start));
       start = comma + 1;
     }
+    return files;
+  };
+  if (parsed->has("cost-model")) {
+    config.cost_models = file_list("cost-model");
     if (config.cost_models.empty()) return usage_error(cmd, "--cost-model: no file named");
   } else {
-    // The committed models, when serving from the repository (make run).
+    // The committed models and the logs they were trained on, when serving from the
+    // repository (make run).
     for (const char* f : {"bench/data/job_model_cpu.json", "bench/data/job_model_cuda.json"})
       if (std::filesystem::exists(f)) config.cost_models.push_back(f);
+    for (const char* f : {"bench/data/jobs_cpu.csv", "bench/data/jobs_cuda.csv"})
+      if (std::filesystem::exists(f)) config.training_logs.push_back(f);
+  }
+  if (parsed->has("training-logs")) {
+    config.training_logs = file_list("training-logs");
+    for (const std::string& f : config.training_logs)
+      if (!std::filesystem::exists(f)) return usage_error(cmd, "--training-logs: no file " + f);
   }
   service::ServerOptions options;
   options.host = parsed->get("host", "127.0.0.1");

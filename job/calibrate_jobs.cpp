@@ -272,32 +272,13 @@ Expected<JobMeasure> run_one(const Planned& p, const JobSweepSpec& sw, const std
   if (cancel && cancel->load()) return cancelled("calibration cancelled");
   if (!cr.status) return cr.status;
   std::ifstream in(dir + "/result.json");
-  json r = json::parse(in, nullptr, false);
-  if (!r.is_object() || !r.contains("cost"))
-    return backend_error("the job left no readable result.json");
-  try {
-    const json& c = r.at("cost");
-    m.total_s = c.at("total_s").get<double>();
-    m.prepare_s = c.at("prepare_s").get<double>();
-    m.simulate_s = c.at("simulate_s").get<double>();
-    m.render_s = c.at("render_s").get<double>();
-    const double frames = c.at("frames").get<double>();
-    m.per_frame_s = frames > 0 ? (m.simulate_s + m.render_s) / frames : 0.0;
-    m.peak_host_bytes = c.at("peak_host_bytes").get<double>();
-    m.peak_device_bytes = c.at("peak_device_bytes").get<double>();
-    // The engine's share of the simulation, as a share of the whole job.
-    m.gpu_load = m.total_s > 0 ? std::min(1.0, c.at("gpu_busy_fraction").get<double>() *
-                                                   m.simulate_s / m.total_s)
-                               : 0.0;
-    m.steps_taken = c.at("steps").get<uint64_t>();
-    double bytes = 0;
-    for (const json& a : r.at("artifacts")) bytes += a.at("bytes").get<double>();
-    m.output_bytes = bytes;
-    *backend_ran = r.value("backend", std::string());
-  } catch (const std::exception& e) {
-    return backend_error(std::string("result.json: ") + e.what());
-  }
-  return m;
+  if (!in) return backend_error("the job left no readable result.json");
+  std::stringstream text;
+  text << in.rdbuf();
+  auto measured = job_measure_from_manifest(text.str(), backend_ran);
+  if (!measured) return measured.status();
+  measured->load_avg = m.load_avg;
+  return *measured;
 }
 
 Expected<CalibrateSummary> run_sweep(const JobSweepSpec& sw, const CalibrateHooks& hooks) {

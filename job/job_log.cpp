@@ -4,6 +4,7 @@
 #include <cmath>
 #include <fstream>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "common/atomic_file.h"
@@ -278,6 +279,38 @@ bool same_inputs(const JobInputs& a, const JobInputs& b) {
 }
 
 }  // namespace
+
+Expected<JobMeasure> job_measure_from_manifest(const std::string& result_json,
+                                               std::string* backend) {
+  using nlohmann::json;
+  const json r = json::parse(result_json, nullptr, false);
+  if (!r.is_object() || !r.contains("cost"))
+    return backend_error("the job's result.json is not a manifest with a cost");
+  JobMeasure m;
+  try {
+    const json& c = r.at("cost");
+    m.total_s = c.at("total_s").get<double>();
+    m.prepare_s = c.at("prepare_s").get<double>();
+    m.simulate_s = c.at("simulate_s").get<double>();
+    m.render_s = c.at("render_s").get<double>();
+    const double frames = c.at("frames").get<double>();
+    m.per_frame_s = frames > 0 ? (m.simulate_s + m.render_s) / frames : 0.0;
+    m.peak_host_bytes = c.at("peak_host_bytes").get<double>();
+    m.peak_device_bytes = c.at("peak_device_bytes").get<double>();
+    // The engine's share of the simulation, as a share of the whole job.
+    m.gpu_load = m.total_s > 0 ? std::min(1.0, c.at("gpu_busy_fraction").get<double>() *
+                                                   m.simulate_s / m.total_s)
+                               : 0.0;
+    m.steps_taken = c.at("steps").get<uint64_t>();
+    double bytes = 0;
+    for (const json& a : r.at("artifacts")) bytes += a.at("bytes").get<double>();
+    m.output_bytes = bytes;
+    if (backend) *backend = r.value("backend", std::string());
+  } catch (const std::exception& e) {
+    return backend_error(std::string("result.json: ") + e.what());
+  }
+  return m;
+}
 
 Expected<std::vector<JobRecord>> parse_job_log(const std::string& text) {
   auto recs = g::split_csv(text);

@@ -72,6 +72,12 @@ struct JobRecord {
 JobInputs job_inputs(const JobAssessment& a, const std::string& backend,
                      const std::string& device, int threads);
 
+// A finished job's measure from its manifest (the run directory's result.json text):
+// times per stage, peaks, GPU share of the whole job, steps taken, and the bytes of
+// every artifact. *backend (when given) is the backend the job ran on.
+Expected<JobMeasure> job_measure_from_manifest(const std::string& result_json,
+                                               std::string* backend = nullptr);
+
 // The CSV columns in the order they are written.
 const std::vector<std::string>& job_log_columns();
 

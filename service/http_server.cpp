@@ -388,6 +388,8 @@ std::vector<Route> make_routes(JobService* svc, const ServerOptions& opt) {
   });
   add("GET", "/api/v1/admin/predictor", Auth::kAdmin,
       [=](Request& q) { return reply(svc->admin_predictor(*q.user)); });
+  add("POST", "/api/v1/admin/predictor/retrain", Auth::kAdmin,
+      [=](Request& q) { return reply(svc->admin_retrain(*q.user)); });
   if (!opt.web_dir.empty()) {
     const std::string root = opt.web_dir;
     auto serve_static = [root](const std::string& rel, const Http::Request& http) {

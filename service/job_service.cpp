@@ -17,7 +17,10 @@
 #include "scene/scene.h"
 #include "service/workers.h"
 #ifdef COLLIDO_HAVE_JOB_COST
+#include "job/calibrate.h"
 #include "job/cost_model.h"
+#include "job/job_log.h"
+#include "service/cost_trainer.h"
 #endif
 #include "sim/detect.h"
 #include "sim/mesh.h"
@@ -153,13 +156,8 @@ static Reply status_reply(const Status& st) { return error_reply(http_status_of(
 
 #ifdef COLLIDO_HAVE_JOB_COST
 struct JobService::CostModels {
-  std::vector<job::JobCostModel> models;
-  std::vector<std::string> paths;
-  const job::JobCostModel* for_backend(const std::string& backend) const {
-    for (const auto& m : models)
-      if (m.trained_for(backend)) return &m;
-    return nullptr;
-  }
+  CostModelSet set;
+  std::unique_ptr<CostTrainer> trainer;  // made once the store is open
 };
 #else
 struct JobService::CostModels {};
@@ -174,12 +172,9 @@ Expected<std::unique_ptr<JobService>> JobService::open(const ServiceConfig& conf
     if (ec) return io_error(config.data_dir + "/" + sub + ": " + ec.message());
   }
 #ifdef COLLIDO_HAVE_JOB_COST
-  for (const std::string& path : config.cost_models) {
-    auto m = job::JobCostModel::load(path);
-    if (!m) return Status(m.status().code(), "cost model: " + m.status().message());
-    svc->cost_->models.push_back(std::move(*m));
-    svc->cost_->paths.push_back(path);
-  }
+  const std::string retrained_dir = (fs::path(config.data_dir) / "cost_models").string();
+  if (Status st = load_cost_models(config.cost_models, retrained_dir, &svc->cost_->set); !st)
+    return st;
 #else
   if (!config.cost_models.empty())
     return invalid_argument("this build has no job cost model (the gvm module was left out)");
@@ -187,6 +182,14 @@ Expected<std::unique_ptr<JobService>> JobService::open(const ServiceConfig& conf
   auto store = open_sqlite_store((fs::path(config.data_dir) / "collidoscope.db").string());
   if (!store) return store.status();
   svc->store_ = std::move(*store);
+#ifdef COLLIDO_HAVE_JOB_COST
+  CostTrainerConfig tc;
+  tc.base_logs = config.training_logs;
+  tc.every = config.retrain_every;
+  tc.model_dir = retrained_dir;
+  tc.options.gvm.epochs = config.retrain_epochs;
+  svc->cost_->trainer = std::make_unique<CostTrainer>(tc, *svc->store_, svc->cost_->set);
+#endif
   if (Status st = svc->seed(); !st) return st;
   auto requeued = svc->store_->requeue_running_jobs();
   if (!requeued) return requeued.status();
@@ -644,7 +647,7 @@ json JobService::price(const job::JobAssessment& a, const json& assessment,
       sc.backend_auto ? (visible_gpus().empty() ? "cpu" : "cuda") : sim::to_string(sc.dynamics.backend);
   p["backend"] = backend;
 #ifdef COLLIDO_HAVE_JOB_COST
-  if (const job::JobCostModel* model = cost_->for_backend(backend)) {
+  if (const auto model = cost_->set.for_backend(backend)) {
     const int threads = config_.job_threads > 0
                             ? config_.job_threads
                             : int(std::max(1u, std::thread::hardware_concurrency()));
@@ -1028,13 +1031,33 @@ Reply JobService::admin_predictor(const User& u) {
   Reply r;
   r.body = {{"models", json::array()}};
 #ifdef COLLIDO_HAVE_JOB_COST
-  for (size_t i = 0; i < cost_->models.size(); ++i) {
-    json m = cost_->models[i].summary();
-    m["file"] = fs::path(cost_->paths[i]).filename().string();
+  for (const CostModelSet::Entry& e : cost_->set.all()) {
+    json m = e.model->summary();
+    m["file"] = fs::path(e.file).filename().string();
     r.body["models"].push_back(std::move(m));
   }
+  r.body["retrain"] = cost_->trainer->status();
 #endif
   return r;
+}
+
+Reply JobService::admin_retrain(const User& u) {
+  if (u.role != "admin") return error_reply(403, "administrators only");
+#ifdef COLLIDO_HAVE_JOB_COST
+  if (!cost_->trainer->start()) return error_reply(409, "a retraining is running");
+  Reply r;
+  r.status = 202;
+  r.body = {{"retrain", cost_->trainer->status()}};
+  return r;
+#else
+  return error_reply(409, "this build has no job cost model (the gvm module was left out)");
+#endif
+}
+
+void JobService::wait_retrained() {
+#ifdef COLLIDO_HAVE_JOB_COST
+  cost_->trainer->wait_idle();
+#endif
 }
 
 Reply JobService::health() {
@@ -1145,8 +1168,39 @@ void JobService::job_finished(const Job& j, const std::string& state, const std:
   if (pred.is_object() && pred.contains("total_time_s") && pred["total_time_s"].is_object())
     row.predicted_total_s = pred["total_time_s"].value("value", -1.0);
   row.created_at = unix_now();
+#ifdef COLLIDO_HAVE_JOB_COST
+  row.job_record = job_record_of(j, pred, manifest);
+#endif
   store_->insert_log(row);
   finished_since_start_.fetch_add(1);
+#ifdef COLLIDO_HAVE_JOB_COST
+  if (!row.job_record.empty()) cost_->trainer->job_logged(manifest.value("backend", ""));
+#endif
 }
+
+#ifdef COLLIDO_HAVE_JOB_COST
+// A finished job as a job-log row (job/job_log.h), what the cost model retrains on:
+// its inputs from its spec, assessed again as at submission, and its measure from
+// its manifest. "" when either cannot be made (the row is then left out of training).
+std::string JobService::job_record_of(const Job& j, const json& prediction, const json& manifest) {
+  std::ifstream in((fs::path(job_dir(j.id)) / "spec.json").string());
+  std::stringstream text;
+  text << in.rdbuf();
+  auto spec = job::spec_from_json(text.str());
+  if (!in || !spec) return "";
+  auto a = job::assess_job(*spec);
+  auto m = job::job_measure_from_manifest(manifest.dump());
+  if (!a || !m) return "";
+  const std::string backend = manifest.value("backend", "");
+  // The device: the one the job was priced for on the GPU (its name is not in the
+  // manifest), this machine's CPU otherwise.
+  std::string device = job::cpu_model_name();
+  if (backend == "cuda")
+    device = prediction.is_object() ? prediction.value("device", std::string()) : std::string();
+  job::JobRecord rec{job::job_inputs(*a, backend, device, manifest.value("threads", 0)), *m};
+  if (!job::validate(rec.inputs) || !job::validate(rec.measure)) return "";
+  return job::format_job_log({rec});
+}
+#endif
 
 }  // namespace collido::service

@@ -44,6 +44,12 @@ struct ServiceConfig {
   // one trained on both). Without one, time is not predicted and memory is the
   // engine's own estimate (job/budget.h).
   std::vector<std::string> cost_models;
+  // Retraining (service/cost_trainer.h): the job logs a candidate trains on besides
+  // the service's own finished jobs, and how many new jobs of a backend start one
+  // (0: only when an administrator asks). Retrained models go to DATA/cost_models.
+  std::vector<std::string> training_logs;
+  int retrain_every = 25;
+  int retrain_epochs = 1500;  // per machine (fewer in tests)
 };
 
 // An answer: the HTTP status, a JSON body, extra headers.
@@ -136,6 +142,11 @@ class JobService {
   // The job cost models in use: their training (loss per epoch, held-out predictions
   // against measurements) and intervals; an empty list when none is loaded.
   Reply admin_predictor(const User& u);
+  // Starts retraining the job cost models on the base logs and the service's jobs
+  // (202); 409 while one runs. Its outcome appears in admin_predictor's "retrain".
+  Reply admin_retrain(const User& u);
+  // Blocks until no retraining runs (tests).
+  void wait_retrained();
 
   Reply health();
   // Prometheus text: queue length, jobs by state, prediction error of finished jobs.
@@ -167,6 +178,8 @@ class JobService {
   // The predicted cost of an assessed job; *admit_bytes: the memory it is admitted by.
   json price(const job::JobAssessment& a, const json& assessment, uint64_t* admit_bytes) const;
   json job_json(const Job& j);
+  // A finished job as a one-row job log (cost_trainer.h); "" when it cannot be made.
+  std::string job_record_of(const Job& j, const json& prediction, const json& manifest);
   // job_json's text, rebuilt only when the job's row has changed since.
   std::shared_ptr<const std::string> job_view(const Job& j);
   json links_of(const std::string& base, const Job& j);

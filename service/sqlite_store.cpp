@@ -95,6 +95,8 @@ CREATE TABLE logs (
   predicted_host_bytes INTEGER NOT NULL,
   created_at REAL NOT NULL);
 )sql",
+    // 2: each log row keeps its job as a job-log row, for retraining the cost model.
+    "ALTER TABLE logs ADD COLUMN job_record TEXT NOT NULL DEFAULT '';",
 };
 
 constexpr int kSchemaVersion = int(sizeof kMigrations / sizeof kMigrations[0]);
@@ -108,7 +110,7 @@ const char* const kModelColumns =
 const char* const kLogColumns =
     "id, job_id, inputs_json, measured_json, predicted_json, total_s, per_frame_s, "
     "peak_host_bytes, peak_device_bytes, gpu_load, predicted_total_s, predicted_host_bytes, "
-    "created_at";
+    "created_at, job_record";
 
 // A prepared statement, reset for reuse when a call ends.
 class Stmt {
@@ -484,11 +486,11 @@ class SqliteStore final : public Store {
   Status insert_log(const LogRow& r) override {
     std::lock_guard lock(mu_);
     Stmt s = stmt(std::string("INSERT INTO logs(") + kLogColumns +
-                  ") VALUES (NULL,?,?,?,?,?,?,?,?,?,?,?,?)");
+                  ") VALUES (NULL,?,?,?,?,?,?,?,?,?,?,?,?,?)");
     s.bind(1, r.job_id).bind(2, r.inputs_json).bind(3, r.measured_json).bind(4, r.predicted_json);
     s.bind(5, r.total_s).bind(6, r.per_frame_s).bind(7, r.peak_host_bytes);
     s.bind(8, r.peak_device_bytes).bind(9, r.gpu_load).bind(10, r.predicted_total_s);
-    s.bind(11, r.predicted_host_bytes).bind(12, r.created_at);
+    s.bind(11, r.predicted_host_bytes).bind(12, r.created_at).bind(13, r.job_record);
     return s.step() == SQLITE_DONE ? Status::ok() : error("insert_log");
   }
 
@@ -514,6 +516,7 @@ class SqliteStore final : public Store {
       r.predicted_total_s = s.real(10);
       r.predicted_host_bytes = uint64_t(s.i64(11));
       r.created_at = s.real(12);
+      r.job_record = s.text(13);
       out.push_back(std::move(r));
     }
     if (rc != SQLITE_DONE) return error("logs");

@@ -79,6 +79,9 @@ struct LogRow {
   double predicted_total_s = -1;  // < 0: none was given
   uint64_t predicted_host_bytes = 0;
   double created_at = 0;
+  // The job as a row of a job log (job/job_log.h: a header line and one row), what
+  // the cost model retrains on; empty where none could be made.
+  std::string job_record;
 };
 
 struct Algorithm {

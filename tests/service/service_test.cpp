@@ -20,6 +20,7 @@
 #include <thread>
 
 #include "common/atomic_file.h"
+#include "job/job_log.h"
 #include "service/http_server.h"
 #include "service/job_service.h"
 #include "service/store.h"
@@ -116,6 +117,7 @@ class ServiceTest : public ::testing::Test {
     c.host_bytes = host_bytes;
     c.max_queued_per_user = max_queued;
     c.cost_models = std::move(cost_models);
+    c.retrain_every = 0;  // retrained only when a test asks
     auto svc = JobService::open(c);
     ASSERT_TRUE(svc) << svc.status().message();
     svc_ = std::move(*svc);
@@ -192,6 +194,29 @@ TEST_F(ServiceTest, PricesJobsWithTheJobCostModel) {
   EXPECT_GT(job["prediction"]["total_time_s"]["value"].get<double>(), 0);
   job = c.wait_job(job["id"]);
   EXPECT_EQ(job["state"], "done") << job.dump();
+
+  // The finished job's log row holds it as a job-log row, what retraining learns from.
+  auto logs = svc_->store().logs(10, 0);
+  ASSERT_TRUE(logs && logs->size() == 1u);
+  auto record = job::parse_job_log(logs->front().job_record);
+  ASSERT_TRUE(record) << record.status().message() << "\n" << logs->front().job_record;
+  ASSERT_EQ(record->size(), 1u);
+  EXPECT_EQ(record->front().inputs.backend, "cpu");
+  EXPECT_EQ(record->front().inputs.particles, 40u);
+  EXPECT_EQ(record->front().inputs.formats, "mp4+gif");
+  EXPECT_GT(record->front().measure.steps_taken, 0u);
+  EXPECT_GT(record->front().measure.output_bytes, 0);
+
+  // An administrator retrains; one job is too few to compare on, so the models stay.
+  EXPECT_EQ(c.call("POST", "/api/v1/admin/predictor/retrain").status, 403);
+  json started = admin.call_json("POST", "/api/v1/admin/predictor/retrain", json::object(), 202);
+  EXPECT_TRUE(started["retrain"].contains("running")) << started.dump();
+  svc_->wait_retrained();
+  json after = admin.call_json("GET", "/api/v1/admin/predictor");
+  const json& cpu = after["retrain"]["last"]["backends"]["cpu"];
+  EXPECT_EQ(cpu["swapped"], false) << after["retrain"].dump();
+  EXPECT_NE(cpu["decision"].get<std::string>().find("too few"), std::string::npos) << cpu.dump();
+  EXPECT_EQ(after["retrain"]["retrainings"], 1);
 }
 
 TEST_F(ServiceTest, AModelFileThatIsNotAJobCostModelStopsTheStart) {

@@ -2,8 +2,9 @@
 // job with its inputs and measured against predicted cost, paged by id; the
 // algorithms (GET /api/v1/algorithms); the job cost models' training
 // (GET /api/v1/admin/predictor): loss curves, held-out predictions against
-// measurements, intervals.
-import { get } from '../api.js';
+// measurements, intervals, and retraining them on the jobs the service ran
+// (POST /api/v1/admin/predictor/retrain).
+import { get, post } from '../api.js';
 import { h, tableBox, errorBox, showError, fmtBytes, fmtSeconds, fmtDate } from '../dom.js';
 import { algorithmsTable } from './methods.js';
 import { predictorCharts } from '../chart.js';
@@ -38,9 +39,31 @@ export async function render(main) {
   const cols = [['Row'], ['Finished'], ['Job'], ['Particles', 1], ['Triangles', 1], ['Method'], ['Ran on'],
     ['Time', 1], ['Predicted time', 1], ['Peak memory', 1], ['Predicted memory', 1]];
   const predictor = h('div');
-  let models = null;
-  try { models = (await get('/api/v1/admin/predictor')).models; } catch (e) { showError(error, e); }
-  if (models) predictor.replaceChildren(...predictorSections(models));
+  const retrainStatus = h('p', { role: 'status', id: 'retrain-status' });
+  const retrainButton = h('button', { type: 'button', class: 'secondary' }, 'Retrain now');
+  async function showPredictor() {
+    let answer = null;
+    try { answer = await get('/api/v1/admin/predictor'); } catch (e) { showError(error, e); }
+    if (!answer) return null;
+    predictor.replaceChildren(...predictorSections(answer.models));
+    if (answer.retrain) retrainStatus.replaceChildren(...retrainText(answer.retrain));
+    return answer;
+  }
+  retrainButton.addEventListener('click', async () => {
+    retrainButton.disabled = true;
+    try {
+      await post('/api/v1/admin/predictor/retrain', {});
+      retrainStatus.textContent = 'Retraining…';
+      // Training takes seconds to a minute; poll until it has ended.
+      for (let i = 0; i < 300; i++) {
+        await new Promise((r) => setTimeout(r, 1000));
+        const answer = await showPredictor();
+        if (!answer?.retrain?.running) break;
+      }
+    } catch (e) { showError(error, e); }
+    retrainButton.disabled = false;
+  });
+  await showPredictor();
   let algorithms = null;
   try { algorithms = await get('/api/v1/algorithms'); } catch (e) { showError(error, e); }
   main.append(
@@ -58,7 +81,12 @@ export async function render(main) {
     h('section', { 'aria-labelledby': 'pred-h' },
       h('h2', { id: 'pred-h' }, 'Cost predictor'),
       predictor,
-      summary),
+      summary,
+      h('h3', {}, 'Retraining'),
+      h('p', { class: 'hint' }, 'A candidate learns from the committed sweeps and the jobs this service ran, '
+        + 'and replaces the model in use only when it misses held-out jobs (a fixed share, never trained on) by less.'),
+      retrainStatus,
+      h('div', { class: 'actions' }, retrainButton)),
     h('section', { 'aria-labelledby': 'alg-h' },
       h('h2', { id: 'alg-h' }, 'Algorithms'),
       algorithms ? algorithmsTable(algorithms) : h('p', {}, 'The list could not be read.')));
@@ -86,6 +114,22 @@ function predictorSections(models) {
     requestAnimationFrame(() => predictorCharts(box, m));
     return section;
   });
+}
+
+// The last retraining, per backend: what it learnt from and what it decided.
+function retrainText(r) {
+  const every = r.every > 0 ? `Retrains after every ${r.every} finished jobs of a backend, or when asked.`
+    : 'Retrains only when asked.';
+  if (r.running) return [`Retraining now. ${every}`];
+  if (!r.last?.backends) return [`Not retrained since the server started. ${every}`];
+  const pct = (e) => (e ? Object.entries(e).map(([k, v]) => `${k.replaceAll('_', ' ')} ${v.toFixed(1)} %`).join(', ') : '');
+  const parts = Object.entries(r.last.backends).map(([backend, b]) => {
+    const rows = `${b.rows.base} logged and ${b.rows.service} service jobs to train on, ${b.rows.held_out} held out`;
+    const errs = b.candidate_errors ? ` Held-out error: candidate ${pct(b.candidate_errors)}`
+      + `${b.current_errors ? `; in use ${pct(b.current_errors)}` : ''}.` : '';
+    return h('span', { class: 'retrain-backend' }, h('strong', {}, `${backend}: `), `${b.decision} (${rows}).${errs} `);
+  });
+  return [`Last retraining ${fmtDate(r.last.started_at)}, ${fmtSeconds(r.last.took_s)}: `, ...parts, every];
 }
 
 // How far the predictions given at submission were from what the jobs measured,

@@ -1,0 +1,279 @@
+#include "service/cost_trainer.h"
+
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+
+#include "common/stopwatch.h"
+
+namespace collido::service {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+namespace {
+
+double unix_seconds() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+bool shares_backend(const job::JobCostModel& a, const job::JobCostModel& b) {
+  for (const std::string& x : a.backends())
+    if (b.trained_for(x)) return true;
+  return false;
+}
+
+// FNV-1a: a stable hash of a job id, the same on every machine and every start.
+uint64_t stable_hash(const std::string& s) {
+  uint64_t h = 1469598103934665603ull;
+  for (unsigned char c : s) h = (h ^ c) * 1099511628211ull;
+  return h;
+}
+
+// The score two models are compared by: the mean of their errors on the costs
+// both predict (lower is better).
+double score(const json& errors) {
+  double sum = 0;
+  int n = 0;
+  for (const auto& [name, value] : errors.items())
+    if (value.is_number()) sum += value.get<double>(), ++n;
+  return n ? sum / n : INFINITY;
+}
+
+}  // namespace
+
+// ---- The set of models in use ---------------------------------------------------------
+
+std::shared_ptr<const job::JobCostModel> CostModelSet::for_backend(const std::string& backend) const {
+  std::lock_guard lock(mu_);
+  for (const Entry& e : entries_)
+    if (e.model->trained_for(backend)) return e.model;
+  return nullptr;
+}
+
+std::vector<CostModelSet::Entry> CostModelSet::all() const {
+  std::lock_guard lock(mu_);
+  return entries_;
+}
+
+void CostModelSet::put(std::shared_ptr<const job::JobCostModel> model, const std::string& file) {
+  std::lock_guard lock(mu_);
+  for (Entry& e : entries_)
+    if (shares_backend(*e.model, *model)) {
+      e = {std::move(model), file};
+      return;
+    }
+  entries_.push_back({std::move(model), file});
+}
+
+Status load_cost_models(const std::vector<std::string>& files, const std::string& retrained_dir,
+                        CostModelSet* set) {
+  std::vector<std::pair<std::string, fs::file_time_type>> loaded;
+  for (const std::string& path : files) {
+    auto m = job::JobCostModel::load(path);
+    if (!m) return Status(m.status().code(), "cost model: " + m.status().message());
+    std::error_code ec;
+    loaded.push_back({path, fs::last_write_time(path, ec)});
+    set->put(std::make_shared<const job::JobCostModel>(std::move(*m)), path);
+  }
+  if (retrained_dir.empty()) return Status::ok();
+  for (const char* backend : {"cpu", "cuda"}) {
+    const fs::path path = fs::path(retrained_dir) / (std::string("job_model_") + backend + ".json");
+    std::error_code ec;
+    if (!fs::exists(path, ec)) continue;
+    const auto when = fs::last_write_time(path, ec);
+    auto current = set->for_backend(backend);
+    if (current) {
+      // A configured file newer than the retrained one (a new sweep) is kept.
+      bool newer_configured = false;
+      for (const auto& e : set->all())
+        if (e.model == current)
+          for (const auto& [file, t] : loaded)
+            if (file == e.file && t > when) newer_configured = true;
+      if (newer_configured) continue;
+    }
+    auto m = job::JobCostModel::load(path.string());
+    if (!m) return Status(m.status().code(), "retrained cost model: " + m.status().message());
+    set->put(std::make_shared<const job::JobCostModel>(std::move(*m)), path.string());
+  }
+  return Status::ok();
+}
+
+// ---- Comparing models -----------------------------------------------------------------
+
+bool held_out_job(const std::string& job_id, int held_out_percent) {
+  return int(stable_hash(job_id) % 100) < held_out_percent;
+}
+
+json held_out_errors(const job::JobCostModel& model, const std::vector<job::JobRecord>& rows) {
+  double sums[job::kJobOutputs] = {};
+  int counts[job::kJobOutputs] = {};
+  const size_t used[] = {0, 2, 3};  // total time, peak host, peak device
+  for (const job::JobRecord& r : rows) {
+    double predicted[job::kJobOutputs], measured[job::kJobOutputs];
+    model.predict_point(r.inputs, predicted);
+    job::job_measure_to_array(r.measure, measured);
+    for (size_t k : used) {
+      if (!(measured[k] > 0)) continue;  // no device memory on the CPU
+      sums[k] += std::abs(predicted[k] - measured[k]) / measured[k];
+      ++counts[k];
+    }
+  }
+  json out = json::object();
+  for (size_t k : used)
+    if (counts[k]) out[job::job_output_names()[k]] = 100.0 * sums[k] / counts[k];
+  return out;
+}
+
+// ---- The trainer ------------------------------------------------------------------------
+
+CostTrainer::CostTrainer(CostTrainerConfig config, Store& store, CostModelSet& models)
+    : config_(std::move(config)), store_(store), models_(models) {}
+
+CostTrainer::~CostTrainer() { wait_idle(); }
+
+void CostTrainer::wait_idle() {
+  std::thread t;
+  {
+    std::lock_guard lock(mu_);
+    t = std::move(thread_);
+  }
+  if (t.joinable()) t.join();
+}
+
+void CostTrainer::job_logged(const std::string& backend) {
+  {
+    std::lock_guard lock(mu_);
+    if (config_.every <= 0 || ++new_rows_[backend] < config_.every) return;
+  }
+  start();
+}
+
+bool CostTrainer::start() {
+  std::lock_guard lock(mu_);
+  if (running_) return false;
+  if (thread_.joinable()) thread_.join();  // the last one has ended: running_ is false
+  running_ = true;
+  new_rows_.clear();
+  thread_ = std::thread([this] { run(); });
+  return true;
+}
+
+json CostTrainer::status() const {
+  std::lock_guard lock(mu_);
+  return {{"running", running_},
+          {"retrainings", retrainings_},
+          {"every", config_.every},
+          {"held_out_percent", config_.held_out_percent},
+          {"last", last_}};
+}
+
+void CostTrainer::run() {
+  // Training takes every core for seconds: below the jobs and the requests.
+  setpriority(PRIO_PROCESS, pid_t(syscall(SYS_gettid)), 10);
+  const double started = unix_seconds();
+  json result = json::object();
+  std::vector<job::JobRecord> base;
+  json base_errors = json::array();
+  for (const std::string& path : config_.base_logs) {
+    auto rows = job::read_job_log(path);
+    if (!rows) {
+      base_errors.push_back(rows.status().message());
+      continue;
+    }
+    base.insert(base.end(), rows->begin(), rows->end());
+  }
+  // The service's rows: every log row that kept its job record.
+  std::vector<std::pair<std::string, job::JobRecord>> service_rows;
+  int64_t before = 0;
+  for (;;) {
+    auto page = store_.logs(1000, before);
+    if (!page || page->empty()) break;
+    for (const LogRow& l : *page) {
+      before = l.id;
+      if (l.job_record.empty()) continue;
+      auto rec = job::parse_job_log(l.job_record);
+      if (rec && rec->size() == 1) service_rows.push_back({l.job_id, rec->front()});
+    }
+  }
+  for (const char* backend : {"cpu", "cuda"}) {
+    json r = retrain(backend, base, service_rows);
+    if (!r.is_null()) result[backend] = std::move(r);
+  }
+  std::lock_guard lock(mu_);
+  last_ = {{"started_at", started},
+           {"took_s", unix_seconds() - started},
+           {"backends", std::move(result)}};
+  if (!base_errors.empty()) last_["base_log_errors"] = std::move(base_errors);
+  ++retrainings_;
+  running_ = false;
+}
+
+json CostTrainer::retrain(const std::string& backend, const std::vector<job::JobRecord>& base,
+                          const std::vector<std::pair<std::string, job::JobRecord>>& service_rows) {
+  std::vector<job::JobRecord> train, held;
+  size_t from_base = 0, from_service = 0;
+  for (const job::JobRecord& r : base)
+    if (r.inputs.backend == backend) train.push_back(r), ++from_base;
+  for (const auto& [id, r] : service_rows) {
+    if (r.inputs.backend != backend) continue;
+    if (held_out_job(id, config_.held_out_percent)) {
+      held.push_back(r);
+    } else {
+      train.push_back(r);
+      ++from_service;
+    }
+  }
+  const auto current = models_.for_backend(backend);
+  if (train.empty() && held.empty() && !current) return nullptr;  // nothing of this backend
+  json r = {{"rows", {{"base", from_base}, {"service", from_service}, {"held_out", held.size()}}},
+            {"swapped", false}};
+  if (train.size() < config_.min_rows) {
+    r["decision"] = "too few rows to train on (" + std::to_string(train.size()) + ", at least " +
+                    std::to_string(config_.min_rows) + ")";
+    return r;
+  }
+  if (current && held.size() < config_.min_held_out) {
+    r["decision"] = "too few held-out rows to compare on (" + std::to_string(held.size()) +
+                    ", at least " + std::to_string(config_.min_held_out) + "): the model in use stays";
+    return r;
+  }
+  const auto t0 = SteadyClock::now();
+  job::JobTrainReport report;
+  auto candidate = job::JobCostModel::train(train, config_.options, &report);
+  r["train_s"] = seconds_since(t0);
+  if (!candidate) {
+    r["decision"] = "training failed: " + candidate.status().message();
+    return r;
+  }
+  const json cand_err = held_out_errors(*candidate, held);
+  r["candidate_errors"] = cand_err;
+  bool better = !current;
+  if (current) {
+    const json cur_err = held_out_errors(*current, held);
+    r["current_errors"] = cur_err;
+    better = score(cand_err) < score(cur_err);
+  }
+  if (!better) {
+    r["decision"] = "the model in use misses the held-out rows by less: it stays";
+    return r;
+  }
+  const std::string path = (fs::path(config_.model_dir) / ("job_model_" + backend + ".json")).string();
+  std::error_code ec;
+  fs::create_directories(config_.model_dir, ec);
+  if (Status st = candidate->save(path); !st) {
+    r["decision"] = "better, but not saved: " + st.message();
+    return r;
+  }
+  models_.put(std::make_shared<const job::JobCostModel>(std::move(*candidate)), path);
+  r["swapped"] = true;
+  r["decision"] = current ? "better on the held-out rows: swapped in" : "no model before: put in use";
+  return r;
+}
+
+}  // namespace collido::service
