@@ -5,7 +5,8 @@
 #      Range of a video;
 #   2. 50 connections downloading random Ranges of a video while a job runs;
 #   3. job submission with its prediction, on a second server with no workers
-#      (each request a new scene, so none is answered from an earlier result).
+#      (each request a new scene, so none is answered from an earlier result),
+#      by CONNECTIONS clients at once and by one.
 # Prints Markdown tables for docs/benchmarks.md. Bounded: each wrk run lasts
 # DURATION seconds; the servers are stopped at the end, pass or fail.
 #
@@ -104,7 +105,7 @@ LUA
 row() {
   local name=$1 conns=$2; shift 2
   local out
-  out=$(wrk -t 2 -c "$conns" -d "${duration}s" --latency "$@" 2>&1)
+  out=$(wrk -t "$(( conns < 2 ? conns : 2 ))" -c "$conns" -d "${duration}s" --latency "$@" 2>&1)
   local rps p50 p99 non2xx errors
   rps=$(awk '/Requests\/sec/ {print $2}' <<<"$out")
   p50=$(awk '$1 == "50%" {print $2}' <<<"$out")
@@ -126,6 +127,7 @@ long=$(curl -sf -X POST -H "$auth" "$base/api/v1/jobs" -d "$(scene 3000 4)" | js
 sleep 1
 row "GET video, random 64 KiB Ranges, while a job runs" 50 -s "$work/ranges.lua" "$base$video"
 row "POST /api/v1/jobs (new scene, prediction, queued)" "$connections" -s "$work/submit.lua" "$base2/api/v1/jobs"
+row "POST /api/v1/jobs, one client at a time" 1 -s "$work/submit.lua" "$base2/api/v1/jobs"
 wait_done "$long"
 echo
 echo "the job that ran during the Range downloads: $(curl -sf -H "$auth" "$base/api/v1/jobs/$long" | json '["state"]')"
