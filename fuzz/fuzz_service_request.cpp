@@ -2,7 +2,8 @@
 // submissions, models and accounts. Whatever the body, the answer is a 2xx or
 // a 4xx with a message: a 5xx means an input reached something it should not.
 // The service lives in a temporary data folder; no worker runs, so submitted
-// jobs stay queued.
+// jobs stay queued. The committed CPU job cost model prices them where the build
+// knows the source folder, so odd scenes reach the model too.
 #include <unistd.h>
 
 #include <cstdint>
@@ -28,6 +29,11 @@ struct Fixture {
     c.data_dir = dir;
     c.job_executable = "/bin/false";
     c.max_queued_per_user = 1 << 30;
+    c.retrain_every = 0;
+#ifdef COLLIDO_SOURCE_DIR
+    const std::string model = std::string(COLLIDO_SOURCE_DIR) + "/bench/data/job_model_cpu.json";
+    if (std::filesystem::exists(model)) c.cost_models = {model};
+#endif
     auto s = JobService::open(c);
     if (!s) std::abort();
     service = std::move(*s);
