@@ -126,27 +126,29 @@ struct Route {
 };
 
 // The pattern's parts match the path: literals equal, {name} takes one
-// segment, {name*} the rest (one or more).
+// segment, {name*} the rest (one or more). Checked before anything is copied:
+// every request is tried against the routes in turn.
 bool match(const Route& r, Request& req) {
   const auto& p = r.parts;
   const auto& s = req.segments;
+  auto is_rest = [](const std::string& part) {
+    return part.size() > 3 && part.front() == '{' && part[part.size() - 2] == '*';
+  };
+  const bool rest = !p.empty() && is_rest(p.back());
+  if (rest ? s.size() < p.size() : s.size() != p.size()) return false;
+  for (size_t i = 0; i + (rest ? 1 : 0) < p.size(); ++i)
+    if (p[i].front() != '{' && p[i] != s[i]) return false;
   std::map<std::string, std::string> params;
-  size_t i = 0;
-  for (; i < p.size(); ++i) {
+  for (size_t i = 0; i < p.size(); ++i) {
     const std::string& part = p[i];
-    if (part.size() > 3 && part.front() == '{' && part[part.size() - 2] == '*') {
-      if (i >= s.size()) return false;
-      std::string rest;
-      for (size_t k = i; k < s.size(); ++k) rest += (k > i ? "/" : "") + s[k];
-      params[part.substr(1, part.size() - 3)] = rest;
-      req.params = std::move(params);
-      return true;
+    if (rest && i + 1 == p.size()) {
+      std::string tail;
+      for (size_t k = i; k < s.size(); ++k) tail += (k > i ? "/" : "") + s[k];
+      params[part.substr(1, part.size() - 3)] = std::move(tail);
+    } else if (part.front() == '{') {
+      params[part.substr(1, part.size() - 2)] = s[i];
     }
-    if (i >= s.size()) return false;
-    if (part.front() == '{') params[part.substr(1, part.size() - 2)] = s[i];
-    else if (part != s[i]) return false;
   }
-  if (i != s.size()) return false;
   req.params = std::move(params);
   return true;
 }

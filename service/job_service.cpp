@@ -800,21 +800,41 @@ Expected<Job> JobService::own_job(const User& u, const std::string& id) {
 
 constexpr size_t kMaxJobViews = 20000;
 
+// Everything of a job's row that changes after submission: its view is made again
+// only when this does.
+static std::string view_fingerprint(const JobStatus& j) {
+  char numbers[112];
+  std::snprintf(numbers, sizeof numbers, "%.17g|%d|%.17g|%.17g|%llu", j.progress, j.attempts,
+                j.started_at, j.finished_at, static_cast<unsigned long long>(j.cost_bytes));
+  return j.state + "|" + j.stage + "|" + numbers + "|" + j.error;
+}
+
+static JobStatus status_of(const Job& j) {
+  JobStatus s;
+  s.id = j.id;
+  s.owner_id = j.owner_id;
+  s.state = j.state, s.stage = j.stage, s.error = j.error;
+  s.progress = j.progress, s.started_at = j.started_at, s.finished_at = j.finished_at;
+  s.attempts = j.attempts;
+  s.cost_bytes = j.cost_json.size();
+  return s;
+}
+
+std::shared_ptr<const std::string> JobService::cached_view(const JobStatus& s) {
+  const std::string fingerprint = view_fingerprint(s);
+  std::lock_guard lock(view_mu_);
+  auto it = job_views_.find(s.id);
+  if (it != job_views_.end() && it->second.fingerprint == fingerprint) return it->second.text;
+  return nullptr;
+}
+
 std::shared_ptr<const std::string> JobService::job_view(const Job& j) {
-  // Everything of the row that changes after submission.
-  char numbers[96];
-  std::snprintf(numbers, sizeof numbers, "%.17g|%d|%.17g|%.17g|%zu", j.progress, j.attempts,
-                j.started_at, j.finished_at, j.cost_json.size());
-  const std::string fingerprint = j.state + "|" + j.stage + "|" + numbers + "|" + j.error;
-  {
-    std::lock_guard lock(view_mu_);
-    auto it = job_views_.find(j.id);
-    if (it != job_views_.end() && it->second.fingerprint == fingerprint) return it->second.text;
-  }
+  const JobStatus s = status_of(j);
+  if (auto text = cached_view(s)) return text;
   auto text = std::make_shared<const std::string>(job_json(j).dump());
   std::lock_guard lock(view_mu_);
   if (job_views_.size() >= kMaxJobViews) job_views_.clear();
-  job_views_[j.id] = {fingerprint, text};
+  job_views_[j.id] = {view_fingerprint(s), text};
   return text;
 }
 
@@ -833,10 +853,18 @@ Reply JobService::list_jobs(const User& u) {
 }
 
 Reply JobService::get_job(const User& u, const std::string& id) {
-  auto j = own_job(u, id);
-  if (!j) return status_reply(j.status());
+  // A poll of a job whose row has not changed is answered from its view, read
+  // without the row's documents.
+  auto s = store_->job_status(id);
+  if (!s || s->owner_id != u.id) return status_reply(not_found("no job '" + id + "'"));
+  std::shared_ptr<const std::string> text = cached_view(*s);
+  if (!text) {
+    auto j = own_job(u, id);
+    if (!j) return status_reply(j.status());
+    text = job_view(*j);
+  }
   Reply r;
-  r.serialized = std::make_shared<const std::string>(*job_view(*j) + "\n");
+  r.serialized = std::make_shared<const std::string>(*text + "\n");
   return r;
 }
 

@@ -182,6 +182,8 @@ class JobService {
   std::string job_record_of(const Job& j, const json& prediction, const json& manifest);
   // job_json's text, rebuilt only when the job's row has changed since.
   std::shared_ptr<const std::string> job_view(const Job& j);
+  // The view made for a job in this state, if one is kept; null otherwise.
+  std::shared_ptr<const std::string> cached_view(const JobStatus& s);
   json links_of(const std::string& base, const Job& j);
   Expected<Job> own_job(const User& u, const std::string& id);
   Expected<std::string> file_in_run(const Job& j, const std::string& file);

@@ -330,6 +330,27 @@ class SqliteStore final : public Store {
     return job_of(s);
   }
 
+  Expected<JobStatus> job_status(const std::string& id) override {
+    std::lock_guard lock(mu_);
+    Stmt s = stmt(
+        "SELECT owner_id, state, stage, progress, started_at, finished_at, attempts, "
+        "length(CAST(cost_json AS BLOB)), error FROM jobs WHERE id = ?");
+    s.bind(1, id);
+    if (s.step() != SQLITE_ROW) return not_found("no job '" + id + "'");
+    JobStatus j;
+    j.id = id;
+    j.owner_id = s.i64(0);
+    j.state = s.text(1);
+    j.stage = s.text(2);
+    j.progress = s.real(3);
+    j.started_at = s.real(4);
+    j.finished_at = s.real(5);
+    j.attempts = int(s.i64(6));
+    j.cost_bytes = uint64_t(s.i64(7));
+    j.error = s.text(8);
+    return j;
+  }
+
   Expected<std::vector<Job>> jobs_of(int64_t owner_id, size_t limit) override {
     std::lock_guard lock(mu_);
     Stmt s = stmt(std::string("SELECT ") + kJobColumns +

@@ -57,6 +57,17 @@ struct Job {
   int attempts = 0;
 };
 
+// What of a job changes after submission, read without its documents (a status
+// poll asks for it many times a second).
+struct JobStatus {
+  std::string id;
+  int64_t owner_id = 0;
+  std::string state, stage, error;
+  double progress = 0, started_at = 0, finished_at = 0;
+  int attempts = 0;
+  uint64_t cost_bytes = 0;  // the size of cost_json
+};
+
 struct Share {
   std::string token;
   std::string job_id;
@@ -122,6 +133,7 @@ class Store {
   // Jobs.
   virtual Status insert_job(const Job& j) = 0;
   virtual Expected<Job> job_by_id(const std::string& id) = 0;
+  virtual Expected<JobStatus> job_status(const std::string& id) = 0;
   virtual Expected<std::vector<Job>> jobs_of(int64_t owner_id, size_t limit) = 0;
   virtual Expected<uint64_t> count_jobs(int64_t owner_id, const std::string& state) = 0;
   // The newest finished job with this key, to reuse its result.
