@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 
+#include "gvm/linalg.h"
 #include "gvm/rng.h"
 
 namespace collido::gvm {
@@ -13,35 +14,6 @@ namespace {
 bool same_kind(const RunConfig& a, const RunConfig& b) {
   return a.method == b.method && a.traversal == b.traversal && a.backend == b.backend &&
          a.device == b.device && a.threads == b.threads;
-}
-
-// Solves the symmetric positive definite system A x = b (n x n, row-major) by Cholesky.
-// Returns false when A is not positive definite.
-bool cholesky_solve(std::vector<double> a, size_t n, std::vector<double>* bx) {
-  for (size_t j = 0; j < n; ++j) {
-    double d = a[j * n + j];
-    for (size_t k = 0; k < j; ++k) d -= a[j * n + k] * a[j * n + k];
-    if (!(d > 0.0)) return false;
-    const double l = std::sqrt(d);
-    a[j * n + j] = l;
-    for (size_t i = j + 1; i < n; ++i) {
-      double s = a[i * n + j];
-      for (size_t k = 0; k < j; ++k) s -= a[i * n + k] * a[j * n + k];
-      a[i * n + j] = s / l;
-    }
-  }
-  std::vector<double>& x = *bx;
-  for (size_t i = 0; i < n; ++i) {  // L y = b
-    double s = x[i];
-    for (size_t k = 0; k < i; ++k) s -= a[i * n + k] * x[k];
-    x[i] = s / a[i * n + i];
-  }
-  for (size_t i = n; i-- > 0;) {  // L^T x = y
-    double s = x[i];
-    for (size_t k = i + 1; k < n; ++k) s -= a[k * n + i] * x[k];
-    x[i] = s / a[i * n + i];
-  }
-  return true;
 }
 
 inline double scale01(double v, double lo, double hi) {

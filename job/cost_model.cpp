@@ -18,6 +18,7 @@
 
 #include "common/atomic_file.h"
 #include "gvm/baselines.h"
+#include "gvm/linalg.h"
 #include "gvm/rng.h"
 #include "job/assess.h"
 
@@ -178,31 +179,6 @@ size_t prior_terms(size_t k, const JobInputs& in, double* t) {
   }
 }
 
-// Solves a z = b for an m x m symmetric positive definite a (lower triangle read,
-// overwritten by its Cholesky factor); false when a is not positive definite.
-bool cholesky_solve(std::vector<double>& a, std::vector<double>& z, size_t m) {
-  for (size_t i = 0; i < m; ++i)
-    for (size_t j = 0; j <= i; ++j) {
-      double sum = a[i * m + j];
-      for (size_t q = 0; q < j; ++q) sum -= a[i * m + q] * a[j * m + q];
-      if (i == j) {
-        if (!(sum > 0)) return false;
-        a[i * m + i] = std::sqrt(sum);
-      } else {
-        a[i * m + j] = sum / a[j * m + j];
-      }
-    }
-  for (size_t i = 0; i < m; ++i) {
-    for (size_t q = 0; q < i; ++q) z[i] -= a[i * m + q] * z[q];
-    z[i] /= a[i * m + i];
-  }
-  for (size_t i = m; i-- > 0;) {
-    for (size_t q = i + 1; q < m; ++q) z[i] -= a[q * m + i] * z[q];
-    z[i] /= a[i * m + i];
-  }
-  return true;
-}
-
 // Non-negative weights w minimising sum_r ((t_r . w - y_r) / y_r)^2 over rows with
 // y_r > 0: least squares on the columns scaled to unit length, dropping the most
 // negative weight until none is left (the terms are few: at most kMaxPriorTerms).
@@ -231,7 +207,7 @@ std::vector<double> fit_prior(const std::vector<std::vector<double>>& t, const s
     }
     for (size_t i = 0; i < m; ++i) a[i * m + i] += 1e-9;
     std::vector<double> z(b);
-    if (!cholesky_solve(a, z, m)) {  // a degenerate set of columns: drop the last, again
+    if (!gvm::cholesky_solve(a, m, &z)) {  // a degenerate set of columns: drop the last, again
       active.pop_back();
       continue;
     }

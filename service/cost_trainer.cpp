@@ -22,12 +22,6 @@ double unix_seconds() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
 
-bool shares_backend(const job::JobCostModel& a, const job::JobCostModel& b) {
-  for (const std::string& x : a.backends())
-    if (b.trained_for(x)) return true;
-  return false;
-}
-
 // FNV-1a: a stable hash of a job id, the same on every machine and every start.
 uint64_t stable_hash(const std::string& s) {
   uint64_t h = 1469598103934665603ull;
@@ -63,12 +57,15 @@ std::vector<CostModelSet::Entry> CostModelSet::all() const {
 
 void CostModelSet::put(std::shared_ptr<const job::JobCostModel> model, const std::string& file) {
   std::lock_guard lock(mu_);
-  for (Entry& e : entries_)
-    if (shares_backend(*e.model, *model)) {
-      e = {std::move(model), file};
-      return;
-    }
-  entries_.push_back({std::move(model), file});
+  // The new model answers first for its backends; an older one that covers no other
+  // backend goes (one trained on both backends stays for the other).
+  std::vector<Entry> kept{{model, file}};
+  for (Entry& e : entries_) {
+    bool covered = true;
+    for (const std::string& b : e.model->backends()) covered = covered && model->trained_for(b);
+    if (!covered) kept.push_back(std::move(e));
+  }
+  entries_ = std::move(kept);
 }
 
 Status load_cost_models(const std::vector<std::string>& files, const std::string& retrained_dir,

@@ -37,7 +37,7 @@ class CostModelSet {
   // The model trained for a backend ("cpu", "cuda"); null when none.
   std::shared_ptr<const job::JobCostModel> for_backend(const std::string& backend) const;
   std::vector<Entry> all() const;
-  // Adds a model, or replaces the one of the same backends.
+  // Adds a model, which answers first for its backends; one it covers entirely goes.
   void put(std::shared_ptr<const job::JobCostModel> model, const std::string& file);
 
  private:

@@ -76,6 +76,25 @@ CostTrainerConfig trainer_config(const std::string& dir) {
   return c;
 }
 
+TEST(CostModelSet, AModelOfOneBackendLeavesTheOtherToTheModelOfBoth) {
+  auto cuda = job::read_job_log(std::string(COLLIDO_SOURCE_DIR) + "/bench/data/jobs_cuda.csv");
+  ASSERT_TRUE(cuda) << cuda.status().message();
+  std::vector<job::JobRecord> rows = committed_rows();
+  const auto cpu_only = train(rows);
+  rows.insert(rows.end(), cuda->begin(), cuda->begin() + 60);
+  const auto both = train(rows);
+  CostModelSet set;
+  set.put(both, "both.json");
+  set.put(cpu_only, "cpu.json");
+  EXPECT_EQ(set.for_backend("cpu"), cpu_only);
+  EXPECT_EQ(set.for_backend("cuda"), both);
+  EXPECT_EQ(set.all().size(), 2u);
+  set.put(both, "both-again.json");  // covers both: the CPU-only model goes
+  EXPECT_EQ(set.for_backend("cpu"), both);
+  ASSERT_EQ(set.all().size(), 1u);
+  EXPECT_EQ(set.all()[0].file, "both-again.json");
+}
+
 TEST(CostTrainer, HeldOutJobsAreAFixedShareChosenByTheirId) {
   int held = 0;
   for (int i = 0; i < 2000; ++i) held += held_out_job("job-" + std::to_string(i), 30);
