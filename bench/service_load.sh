@@ -53,12 +53,13 @@ pids+=($!)
 base2=$(wait_url "$work/serve2.log" 'http://127.0.0.1:[0-9]*')
 
 json() { python3 -c "import json,sys; print(json.load(sys.stdin)$1)"; }
-sign_in() {  # BASE -> token
-  curl -sf -X POST "$1/api/v1/accounts" -d '{"name":"load","password":"load-password-1"}' >/dev/null
-  curl -sf -X POST "$1/api/v1/sessions" -d '{"name":"load","password":"load-password-1"}' | json '["token"]'
+sign_in() {  # BASE NAME -> token
+  curl -sf -X POST "$1/api/v1/accounts" -d "{\"name\":\"$2\",\"password\":\"load-password-1\"}" >/dev/null
+  curl -sf -X POST "$1/api/v1/sessions" -d "{\"name\":\"$2\",\"password\":\"load-password-1\"}" | json '["token"]'
 }
-token=$(sign_in "$base")
-token2=$(sign_in "$base2")
+token=$(sign_in "$base" load)
+token2=$(sign_in "$base2" load)
+token3=$(sign_in "$base2" load-one)  # the one-client row's jobs, apart from the queue limit of the first
 auth="Authorization: Bearer $token"
 scene() {  # PARTICLES DURATION
   echo "{\"scene\":{\"wall\":\"wall1\",\"particles\":{\"count\":$1,\"radius\":0.5},\"placement\":{\"kind\":\"pour\"},\"duration\":$2,\"fps\":24},\"render\":{\"width\":640,\"height\":360,\"formats\":[\"mp4\"]}}"
@@ -100,6 +101,20 @@ request = function()
                                               ["Content-Type"] = "application/json"}, body)
 end
 LUA
+cat >"$work/submit_one.lua" <<LUA
+-- Each request a scene not seen before: particle counts from a per-thread range.
+local next_id = 1
+local counter = 0
+setup = function(thread) thread:set("base", next_id * 1000000); next_id = next_id + 1 end
+request = function()
+  counter = counter + 1
+  local body = string.format('{"scene":{"wall":"wall1","particles":{"count":%d,"radius":0.5},'
+      .. '"placement":{"kind":"pour"},"duration":1,"fps":24},"render":{"width":640,"height":360}}',
+      (base or 0) + counter)
+  return wrk.format("POST", "/api/v1/jobs", {["Authorization"] = "Bearer $token3",
+                                              ["Content-Type"] = "application/json"}, body)
+end
+LUA
 
 # One wrk run as a table row: requests/s, latency percentiles, errors.
 row() {
@@ -127,7 +142,7 @@ long=$(curl -sf -X POST -H "$auth" "$base/api/v1/jobs" -d "$(scene 3000 4)" | js
 sleep 1
 row "GET video, random 64 KiB Ranges, while a job runs" 50 -s "$work/ranges.lua" "$base$video"
 row "POST /api/v1/jobs (new scene, prediction, queued)" "$connections" -s "$work/submit.lua" "$base2/api/v1/jobs"
-row "POST /api/v1/jobs, one client at a time" 1 -s "$work/submit.lua" "$base2/api/v1/jobs"
+row "POST /api/v1/jobs, one client at a time" 1 -s "$work/submit_one.lua" "$base2/api/v1/jobs"
 wait_done "$long"
 echo
 echo "the job that ran during the Range downloads: $(curl -sf -H "$auth" "$base/api/v1/jobs/$long" | json '["state"]')"

@@ -97,6 +97,9 @@ CREATE TABLE logs (
 )sql",
     // 2: each log row keeps its job as a job-log row, for retraining the cost model.
     "ALTER TABLE logs ADD COLUMN job_record TEXT NOT NULL DEFAULT '';",
+    // 3: a user's queued jobs counted from an index alone (every submission counts
+    // them; without it the count read every row of theirs, documents and all).
+    "CREATE INDEX jobs_owner_state ON jobs(owner_id, state);",
 };
 
 constexpr int kSchemaVersion = int(sizeof kMigrations / sizeof kMigrations[0]);
