@@ -162,6 +162,13 @@ int cmd_serve(const Args& args) {
     std::printf("collidoscope: no job cost model: time is not predicted (see --cost-model)\n");
   for (const std::string& m : config.cost_models)
     std::printf("collidoscope: jobs priced by %s\n", m.c_str());
+  if (!config.cost_models.empty() && config.retrain_every > 0) {
+    std::string logs;
+    for (const std::string& l : config.training_logs) logs += (logs.empty() ? "" : ", ") + l;
+    std::printf("collidoscope: the cost models retrain after every %d finished jobs of a backend, on "
+                "the service's jobs%s%s\n",
+                config.retrain_every, logs.empty() ? "" : " and ", logs.c_str());
+  }
   if (parsed->has("demo")) {
     auto demo = (*svc)->start_demo();
     if (!demo) {
