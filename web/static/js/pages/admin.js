@@ -83,7 +83,7 @@ export async function render(main) {
       predictor,
       summary,
       h('h3', {}, 'Retraining'),
-      h('p', { class: 'hint' }, 'A candidate learns from the committed sweeps and the jobs this service ran, '
+      h('p', { class: 'hint' }, 'A candidate learns from the job logs the server was given (the committed sweeps by default) and the jobs this service ran, '
         + 'and replaces the model in use only when it misses held-out jobs (a fixed share, never trained on) by less.'),
       retrainStatus,
       h('div', { class: 'actions' }, retrainButton)),
@@ -125,7 +125,7 @@ function retrainText(r) {
   const pct = (e) => (e ? Object.entries(e).map(([k, v]) => `${k.replaceAll('_', ' ')} ${v.toFixed(1)} %`).join(', ') : '');
   const parts = Object.entries(r.last.backends).map(([backend, b]) => {
     const rows = `${b.rows.base} logged and ${b.rows.service} service jobs to train on, ${b.rows.held_out} held out`;
-    const errs = b.candidate_errors ? ` Held-out error: candidate ${pct(b.candidate_errors)}`
+    const errs = Object.keys(b.candidate_errors || {}).length ? ` Held-out error: candidate ${pct(b.candidate_errors)}`
       + `${b.current_errors ? `; in use ${pct(b.current_errors)}` : ''}.` : '';
     return h('span', { class: 'retrain-backend' }, h('strong', {}, `${backend}: `), `${b.decision} (${rows}).${errs} `);
   });
