@@ -87,7 +87,8 @@ request = function()
                                        ["Range"] = "bytes=" .. first .. "-" .. (first + 65535)})
 end
 LUA
-cat >"$work/submit.lua" <<LUA
+submit_lua() {  # TOKEN -> a wrk script submitting, as that user, scenes not seen before
+  cat <<LUA
 -- Each request a scene not seen before: particle counts from a per-thread range.
 local next_id = 1
 local counter = 0
@@ -97,24 +98,13 @@ request = function()
   local body = string.format('{"scene":{"wall":"wall1","particles":{"count":%d,"radius":0.5},'
       .. '"placement":{"kind":"pour"},"duration":1,"fps":24},"render":{"width":640,"height":360}}',
       (base or 0) + counter)
-  return wrk.format("POST", "/api/v1/jobs", {["Authorization"] = "Bearer $token2",
+  return wrk.format("POST", "/api/v1/jobs", {["Authorization"] = "Bearer $1",
                                               ["Content-Type"] = "application/json"}, body)
 end
 LUA
-cat >"$work/submit_one.lua" <<LUA
--- Each request a scene not seen before: particle counts from a per-thread range.
-local next_id = 1
-local counter = 0
-setup = function(thread) thread:set("base", next_id * 1000000); next_id = next_id + 1 end
-request = function()
-  counter = counter + 1
-  local body = string.format('{"scene":{"wall":"wall1","particles":{"count":%d,"radius":0.5},'
-      .. '"placement":{"kind":"pour"},"duration":1,"fps":24},"render":{"width":640,"height":360}}',
-      (base or 0) + counter)
-  return wrk.format("POST", "/api/v1/jobs", {["Authorization"] = "Bearer $token3",
-                                              ["Content-Type"] = "application/json"}, body)
-end
-LUA
+}
+submit_lua "$token2" >"$work/submit.lua"
+submit_lua "$token3" >"$work/submit_one.lua"
 
 # One wrk run as a table row: requests/s, latency percentiles, errors.
 row() {

@@ -4,6 +4,7 @@
 #include "job/cost_model.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -17,6 +18,7 @@
 #include <thread>
 
 #include "common/atomic_file.h"
+#include "common/stopwatch.h"
 #include "gvm/baselines.h"
 #include "gvm/linalg.h"
 #include "gvm/rng.h"
@@ -418,7 +420,7 @@ Expected<JobCostModel> JobCostModel::train(const std::vector<JobRecord>& rows,
     if (s) s = validate(rows[r].measure);
     if (!s) return invalid_argument("row " + std::to_string(r + 1) + ": " + s.message());
   }
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = SteadyClock::now();
   JobCostModel model;
   model.options_ = opt;
   model.coverage_ = opt.coverage;
@@ -488,6 +490,17 @@ Expected<JobCostModel> JobCostModel::train(const std::vector<JobRecord>& rows,
   std::vector<Task> tasks;
   model.members_.assign(kJobOutputs, {});
   model.priors_.assign(kJobOutputs, {});
+  // Each row's prior terms per output (empty where the output has no prior) and its
+  // measured costs, made once for every member.
+  std::vector<std::vector<std::vector<double>>> terms(kJobOutputs, std::vector<std::vector<double>>(N));
+  std::vector<std::array<double, kJobOutputs>> measured(N);
+  for (size_t r = 0; r < N; ++r) {
+    job_measure_to_array(rows[r].measure, measured[r].data());
+    for (size_t k = 0; k < kJobOutputs; ++k) {
+      double t[kMaxPriorTerms];
+      terms[k][r].assign(t, t + prior_terms(k, rows[r].inputs, t));
+    }
+  }
   for (size_t k = 0; k < kJobOutputs; ++k) {
     size_t present = 0;
     for (size_t r = 0; r < N; ++r) present += !std::isnan(y(r, k));
@@ -499,22 +512,19 @@ Expected<JobCostModel> JobCostModel::train(const std::vector<JobRecord>& rows,
       t.x = t.vx = g::Matrix(0, F);
       t.y = t.vy = g::Matrix(0, 1);
       // The prior from this member's training rows only: the held-out fold stays unseen.
-      std::vector<std::vector<double>> terms;
+      std::vector<std::vector<double>> fit_terms;
       std::vector<double> values;
       double smallest = std::numeric_limits<double>::infinity();
-      for (size_t r = 0; r < N; ++r) {
+      const bool has_prior = !terms[k][0].empty();  // the same for every row
+      for (size_t r = 0; has_prior && r < N; ++r) {
         if (std::isnan(y(r, k)) || fold[r] == m) continue;
-        double tr[kMaxPriorTerms];
-        const size_t n = prior_terms(k, rows[r].inputs, tr);
-        if (n == 0) break;
-        double v[kJobOutputs];
-        job_measure_to_array(rows[r].measure, v);
-        terms.emplace_back(tr, tr + n);
-        values.push_back(v[k]);
-        if (v[k] > 0) smallest = std::min(smallest, v[k]);
+        const double v = measured[r][k];
+        fit_terms.push_back(terms[k][r]);
+        values.push_back(v);
+        if (v > 0) smallest = std::min(smallest, v);
       }
-      if (!terms.empty()) {
-        t.prior.w = fit_prior(terms, values);
+      if (!fit_terms.empty()) {
+        t.prior.w = fit_prior(fit_terms, values);
         t.prior.floor = std::isfinite(smallest) ? smallest / 2 : 0;
       }
       for (size_t r = 0; r < N; ++r) {
@@ -522,7 +532,8 @@ Expected<JobCostModel> JobCostModel::train(const std::vector<JobRecord>& rows,
         std::vector<double> row(x.row(r), x.row(r) + F);
         for (size_t i = 0; i < F; ++i)
           if (!job_output_uses_feature(k, i)) row[i] = 0;
-        const double base = prior_value(k, t.prior, rows[r].inputs);
+        const double base = prior_value(k, t.prior, terms[k][r].data(), terms[k][r].size(),
+                                        is_cuda(rows[r].inputs));
         (fold[r] == m ? t.vx : t.x).push_row(row);
         (fold[r] == m ? t.vy : t.y).push_row({y(r, k) - base});
       }
@@ -557,23 +568,20 @@ Expected<JobCostModel> JobCostModel::train(const std::vector<JobRecord>& rows,
     std::vector<double> res;
     for (size_t r = 0; r < N; ++r) {
       if (std::isnan(y(r, k))) continue;
-      const double p = model.member_point(k, size_t(fold[r]), rows[r].inputs, x.row(r));
-      res.push_back(y(r, k) - p);
-    }
-    std::sort(res.begin(), res.end());
-    for (size_t r = 0; r < N; ++r) {
-      if (std::isnan(y(r, k))) continue;
-      const double p = model.member_point(k, size_t(fold[r]), rows[r].inputs, x.row(r));
       const bool cuda = is_cuda(rows[r].inputs);
+      const double p = model.member_point(k, size_t(fold[r]), terms[k][r].data(),
+                                          terms[k][r].size(), cuda, x.row(r));
+      res.push_back(y(r, k) - p);
       model.held_out_[k].push_back({decode_cost(k, y(r, k), cuda), decode_cost(k, p, cuda)});
     }
+    std::sort(res.begin(), res.end());
     model.q_lo_[k] = conformal_quantile(res, (1 - opt.coverage) / 2);
     model.q_hi_[k] = conformal_quantile(res, (1 + opt.coverage) / 2);
   }
   JobTrainReport own;
   if (!report) report = &own;
   {
-    report->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    report->seconds = seconds_since(t0);
     report->curve.clear();
     report->proposals = report->accepted = 0;
     for (const Task& t : tasks) {
@@ -603,19 +611,19 @@ bool JobCostModel::trained_for(const std::string& backend) const {
   return std::find(backends_.begin(), backends_.end(), backend) != backends_.end();
 }
 
-double JobCostModel::prior_value(size_t k, const Prior& p, const JobInputs& in) {
-  if (p.w.empty()) return 0.0;
-  double t[kMaxPriorTerms];
-  const size_t n = prior_terms(k, in, t);
+double JobCostModel::prior_value(size_t k, const Prior& p, const double* terms, size_t n,
+                                 bool cuda) {
+  if (p.w.empty() || n == 0) return 0.0;
   double v = 0;
-  for (size_t i = 0; i < n && i < p.w.size(); ++i) v += p.w[i] * t[i];
-  return encode_cost(k, std::max(v, p.floor), is_cuda(in));
+  for (size_t i = 0; i < n && i < p.w.size(); ++i) v += p.w[i] * terms[i];
+  return encode_cost(k, std::max(v, p.floor), cuda);
 }
 
-double JobCostModel::member_point(size_t k, size_t m, const JobInputs& in, const double* x) const {
+double JobCostModel::member_point(size_t k, size_t m, const double* terms, size_t n, bool cuda,
+                                  const double* x) const {
   double v;
   members_[k][m].predict(x, &v);
-  return v + prior_value(k, priors_[k][m], in);
+  return v + prior_value(k, priors_[k][m], terms, n, cuda);
 }
 
 void JobCostModel::point(const JobInputs& in, const double* x, double* y) const {
@@ -623,24 +631,19 @@ void JobCostModel::point(const JobInputs& in, const double* x, double* y) const 
   for (size_t k = 0; k < kJobOutputs; ++k) {
     y[k] = kNaN;
     if (members_[k].empty() || (!cuda && (k == kDevice || k == kGpuLoad))) continue;
+    double terms[kMaxPriorTerms];
+    const size_t n = prior_terms(k, in, terms);  // once: the members differ in weights only
     double s = 0;
-    for (size_t m = 0; m < members_[k].size(); ++m) s += member_point(k, m, in, x);
+    for (size_t m = 0; m < members_[k].size(); ++m) s += member_point(k, m, terms, n, cuda, x);
     y[k] = s / double(members_[k].size());
   }
 }
 
 void JobCostModel::predict_point(const JobInputs& in, double* out) const {
-  double x[96];
-  std::vector<double> big;
-  double* xp = x;
-  const size_t F = kJobFixedFeatures + devices_.size();
-  if (F > 96) {
-    big.resize(F);
-    xp = big.data();
-  }
-  job_features(in, devices_, xp);
+  std::vector<double> x(kJobFixedFeatures + devices_.size());
+  job_features(in, devices_, x.data());
   double y[kJobOutputs];
-  point(in, xp, y);
+  point(in, x.data(), y);
   for (size_t k = 0; k < kJobOutputs; ++k)
     out[k] = std::isnan(y[k]) ? 0.0 : decode_cost(k, y[k], is_cuda(in));
 }
@@ -685,18 +688,11 @@ Expected<JobCostPrediction> JobCostModel::predict(const JobInputs& in) const {
                             " job log); it has no figures for the " + in.backend +
                             " backend: use a model trained on " + in.backend + " jobs");
   }
-  double x[96];
-  std::vector<double> big;
-  double* xp = x;
-  const size_t F = kJobFixedFeatures + devices_.size();
-  if (F > 96) {
-    big.resize(F);
-    xp = big.data();
-  }
-  job_features(in, devices_, xp);
+  std::vector<double> x(kJobFixedFeatures + devices_.size());
+  job_features(in, devices_, x.data());
   const bool cuda = is_cuda(in);
   double y[kJobOutputs];
-  point(in, xp, y);
+  point(in, x.data(), y);
   JobCostPrediction p;
   CostInterval* iv[kJobOutputs] = {&p.total_s,           &p.per_frame_s, &p.peak_host_bytes,
                                    &p.peak_device_bytes, &p.gpu_load,    &p.output_bytes};
@@ -707,7 +703,7 @@ Expected<JobCostPrediction> JobCostModel::predict(const JobInputs& in) const {
     const double hi = decode_cost(k, y[k] + std::max(q_hi_[k], 0.0), cuda);
     *iv[k] = {lo, mid, hi};
   }
-  p.outside_reasons = check_range(in, xp);
+  p.outside_reasons = check_range(in, x.data());
   p.outside_training = !p.outside_reasons.empty();
   for (const std::string& r : p.outside_reasons)
     p.outside_reason += (p.outside_reason.empty() ? "" : "; ") + r;
@@ -1032,10 +1028,6 @@ JobErrors score(const std::vector<JobRecord>& rows,
   return e;
 }
 
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
 }  // namespace
 
 Expected<JobComparison> compare_job_models(const std::vector<JobRecord>& rows,
@@ -1051,7 +1043,7 @@ Expected<JobComparison> compare_job_models(const std::vector<JobRecord>& rows,
   for (size_t i = 0; i < idx.size(); ++i)
     (i < n_train ? c.train : c.validation).push_back(rows[idx[i]]);
 
-  auto t0 = std::chrono::steady_clock::now();
+  auto t0 = SteadyClock::now();
   auto model = JobCostModel::train(c.train, options, &c.report);
   if (!model) return model.status();
   c.model = std::move(*model);
@@ -1072,7 +1064,7 @@ Expected<JobComparison> compare_job_models(const std::vector<JobRecord>& rows,
     c.scores.push_back(s);
   }
   {
-    t0 = std::chrono::steady_clock::now();
+    t0 = SteadyClock::now();
     PaperLinearJobs fit(c.train);
     JobModelScore s;
     s.name = "paper-linear";
@@ -1089,44 +1081,32 @@ Expected<JobComparison> compare_job_models(const std::vector<JobRecord>& rows,
     for (size_t k = 0; k < kJobOutputs; ++k)
       out[k] = std::isnan(yy[k]) ? 0.0 : decode_cost(k, yy[k], is_cuda(in));
   };
-  {
-    t0 = std::chrono::steady_clock::now();
-    auto fit = g::LinearRegression::fit(x, y);
-    if (!fit) return fit.status();
+  // A baseline fitted on the encoded features: scored on both halves.
+  auto add_fitted = [&](const char* name, double fit_seconds, const auto& fit) {
     JobModelScore s;
-    s.name = "least-squares";
-    s.fit_seconds = seconds_since(t0);
+    s.name = name;
+    s.fit_seconds = fit_seconds;
     auto pt = [&](const JobInputs& in, double* out) {
       std::vector<double> f(kJobFixedFeatures + devices.size());
       job_features(in, devices, f.data());
       double yy[kJobOutputs];
-      fit->predict(f.data(), yy);
+      fit.predict(f.data(), yy);
       decode_all(yy, in, out);
     };
     s.validation = score(c.validation, pt);
     s.train = score(c.train, pt);
     c.scores.push_back(s);
-  }
-  {
-    t0 = std::chrono::steady_clock::now();
-    g::MlpOptions mo;
-    mo.epochs = mlp_epochs;
-    auto fit = g::MlpRegression::fit(x, y, mo);
-    if (!fit) return fit.status();
-    JobModelScore s;
-    s.name = "mlp-backprop";
-    s.fit_seconds = seconds_since(t0);
-    auto pt = [&](const JobInputs& in, double* out) {
-      std::vector<double> f(kJobFixedFeatures + devices.size());
-      job_features(in, devices, f.data());
-      double yy[kJobOutputs];
-      fit->predict(f.data(), yy);
-      decode_all(yy, in, out);
-    };
-    s.validation = score(c.validation, pt);
-    s.train = score(c.train, pt);
-    c.scores.push_back(s);
-  }
+  };
+  t0 = SteadyClock::now();
+  auto linear = g::LinearRegression::fit(x, y);
+  if (!linear) return linear.status();
+  add_fitted("least-squares", seconds_since(t0), *linear);
+  t0 = SteadyClock::now();
+  g::MlpOptions mo;
+  mo.epochs = mlp_epochs;
+  auto mlp = g::MlpRegression::fit(x, y, mo);
+  if (!mlp) return mlp.status();
+  add_fitted("mlp-backprop", seconds_since(t0), *mlp);
   return c;
 }
 

@@ -165,10 +165,12 @@ class JobCostModel {
     std::vector<double> w;
     double floor = 0;
   };
-  // The prior of a job in model space (encode_cost); 0 where k has none.
-  static double prior_value(size_t k, const Prior& p, const JobInputs& in);
-  // Member m of output k: its prior, in model space (0 where k has none), plus its GVM.
-  double member_point(size_t k, size_t m, const JobInputs& in, const double* x) const;
+  // A prior at a job's n terms (prior_terms in cost_model.cpp), in model space
+  // (encode_cost); 0 where k has none.
+  static double prior_value(size_t k, const Prior& p, const double* terms, size_t n, bool cuda);
+  // Member m of output k at a job's prior terms and features: its prior plus its GVM.
+  double member_point(size_t k, size_t m, const double* terms, size_t n, bool cuda,
+                      const double* x) const;
   void point(const JobInputs& in, const double* x, double* y) const;  // model space
   std::vector<std::string> check_range(const JobInputs& in, const double* x) const;
 

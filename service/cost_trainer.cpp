@@ -5,7 +5,6 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <filesystem>
 
@@ -17,10 +16,6 @@ namespace fs = std::filesystem;
 using json = nlohmann::json;
 
 namespace {
-
-double unix_seconds() {
-  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-}
 
 // FNV-1a: a stable hash of a job id, the same on every machine and every start.
 uint64_t stable_hash(const std::string& s) {
@@ -70,30 +65,24 @@ void CostModelSet::put(std::shared_ptr<const job::JobCostModel> model, const std
 
 Status load_cost_models(const std::vector<std::string>& files, const std::string& retrained_dir,
                         CostModelSet* set) {
-  std::vector<std::pair<std::string, fs::file_time_type>> loaded;
   for (const std::string& path : files) {
     auto m = job::JobCostModel::load(path);
     if (!m) return Status(m.status().code(), "cost model: " + m.status().message());
-    std::error_code ec;
-    loaded.push_back({path, fs::last_write_time(path, ec)});
     set->put(std::make_shared<const job::JobCostModel>(std::move(*m)), path);
   }
   if (retrained_dir.empty()) return Status::ok();
   for (const char* backend : {"cpu", "cuda"}) {
     const fs::path path = fs::path(retrained_dir) / (std::string("job_model_") + backend + ".json");
-    std::error_code ec;
-    if (!fs::exists(path, ec)) continue;
-    const auto when = fs::last_write_time(path, ec);
-    auto current = set->for_backend(backend);
-    if (current) {
-      // A configured file newer than the retrained one (a new sweep) is kept.
-      bool newer_configured = false;
-      for (const auto& e : set->all())
-        if (e.model == current)
-          for (const auto& [file, t] : loaded)
-            if (file == e.file && t > when) newer_configured = true;
-      if (newer_configured) continue;
-    }
+    std::error_code ec, configured_ec;
+    const auto retrained_at = fs::last_write_time(path, ec);
+    if (ec) continue;  // never retrained
+    // A configured file newer than the retrained model (a new sweep) is kept.
+    std::string configured;
+    for (const CostModelSet::Entry& e : set->all())  // the one answering for the backend
+      if (configured.empty() && e.model->trained_for(backend)) configured = e.file;
+    if (!configured.empty() && fs::last_write_time(configured, configured_ec) > retrained_at &&
+        !configured_ec)
+      continue;
     auto m = job::JobCostModel::load(path.string());
     if (!m) return Status(m.status().code(), "retrained cost model: " + m.status().message());
     set->put(std::make_shared<const job::JobCostModel>(std::move(*m)), path.string());
@@ -173,7 +162,7 @@ json CostTrainer::status() const {
 void CostTrainer::run() {
   // Training takes every core for seconds: below the jobs and the requests.
   setpriority(PRIO_PROCESS, pid_t(syscall(SYS_gettid)), 10);
-  const double started = unix_seconds();
+  const double started = unix_now();
   json result = json::object();
   std::vector<job::JobRecord> base;
   json base_errors = json::array();
@@ -204,7 +193,7 @@ void CostTrainer::run() {
   }
   std::lock_guard lock(mu_);
   last_ = {{"started_at", started},
-           {"took_s", unix_seconds() - started},
+           {"took_s", unix_now() - started},
            {"backends", std::move(result)}};
   if (!base_errors.empty()) last_["base_log_errors"] = std::move(base_errors);
   ++retrainings_;

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <filesystem>
 
 #include "job/job_log.h"
@@ -134,6 +135,18 @@ TEST(CostTrainer, ABetterCandidateIsSwappedInAndWritten) {
   ASSERT_TRUE(load_cost_models({}, dir + "/cost_models", &reloaded));
   ASSERT_NE(reloaded.for_backend("cpu"), nullptr);
   EXPECT_EQ(reloaded.for_backend("cpu")->training_rows(), now->training_rows());
+  // A configured file older than the retrained model gives way to it; a newer one (a
+  // new sweep) is kept.
+  const std::string configured = dir + "/configured.json";
+  ASSERT_TRUE(wrong->save(configured));
+  fs::last_write_time(configured, fs::last_write_time(file) - std::chrono::seconds(60));
+  CostModelSet older;
+  ASSERT_TRUE(load_cost_models({configured}, dir + "/cost_models", &older));
+  EXPECT_EQ(older.for_backend("cpu")->training_rows(), now->training_rows());
+  fs::last_write_time(configured, fs::last_write_time(file) + std::chrono::seconds(60));
+  CostModelSet newer;
+  ASSERT_TRUE(load_cost_models({configured}, dir + "/cost_models", &newer));
+  EXPECT_EQ(newer.for_backend("cpu")->training_rows(), wrong->training_rows());
   EXPECT_EQ(trainer.status()["retrainings"], 1);
 }
 
