@@ -474,6 +474,33 @@ TEST_F(ServiceTest, ClientClosingMidVideoLeavesTheServerRunning) {
   EXPECT_EQ(c.call("GET", stl).body.size(), bin.size());
 }
 
+// Pistache 0.0.5 answers a request without a Connection header "Connection: Close";
+// HTTP/1.1 keeps it open, and so does the server: two requests on one connection.
+TEST_F(ServiceTest, AnHttp11ConnectionWithoutAConnectionHeaderStaysOpen) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_port = htons(server_->port());
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ASSERT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+  timeval tv{10, 0};  // bounded: a server that closed or never answers fails, not hangs
+  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+  const std::string req = "GET /api/v1/health HTTP/1.1\r\nHost: x\r\n\r\n";
+  for (int i = 0; i < 2; ++i) {
+    ASSERT_EQ(::send(fd, req.data(), req.size(), MSG_NOSIGNAL), ssize_t(req.size())) << "request " << i;
+    std::string got;
+    char buf[4096];
+    while (got.find("\"status\"") == std::string::npos) {
+      const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
+      ASSERT_GT(n, 0) << "request " << i << " got no answer; so far: " << got;
+      got.append(buf, size_t(n));
+    }
+    EXPECT_EQ(got.compare(0, 15, "HTTP/1.1 200 OK"), 0) << got;
+    EXPECT_EQ(got.find("Connection: Close"), std::string::npos) << got;
+  }
+  ::close(fd);
+}
+
 TEST_F(ServiceTest, AdmissionQueueLimitAndCancel) {
   Client c = client();
   c.sign_up("busy");
