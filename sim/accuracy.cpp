@@ -69,4 +69,48 @@ Particles particles_near_surface(const TriangleMesh& mesh, size_t n, double r_lo
   return p;
 }
 
+Particles particles_touching(const TriangleMesh& mesh, size_t n, double r_lo, double r_hi, double rel,
+                             uint64_t seed) {
+  SplitMix64 rng(seed);
+  Particles p;
+  p.resize(n);
+  const size_t m = mesh.triangles.size();
+  for (size_t i = 0; i < n && m; ++i) {
+    const size_t t = rng.next() % m;
+    const Vec3d a = mesh.corner(t, 0), b = mesh.corner(t, 1), c = mesh.corner(t, 2);
+    const double r = r_lo == r_hi ? r_lo : rng.uniform(r_lo, r_hi);
+    const double s = rng.uniform(-rel, rel);
+    Vec3d on, dir;
+    Vec3d random{rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-1, 1)};
+    random = random * (1.0 / std::max(1e-12, length(random)));
+    switch (i % 3) {
+      case 0: {  // off the face, along its normal
+        double u = rng.uniform(), v = rng.uniform();
+        if (u + v > 1) u = 1 - u, v = 1 - v;
+        on = a + (b - a) * u + (c - a) * v;
+        const Vec3d nrm = cross(b - a, c - a);
+        const double len = length(nrm);
+        dir = len > 0 ? nrm * ((rng.next() & 1 ? 1.0 : -1.0) / len) : random;
+        break;
+      }
+      case 1: {  // off an edge
+        const int k = static_cast<int>(rng.next() % 3);
+        const Vec3d e0 = mesh.corner(t, k), e1 = mesh.corner(t, (k + 1) % 3);
+        on = e0 + (e1 - e0) * rng.uniform();
+        const Vec3d e = e1 - e0;
+        const double e2 = dot(e, e);
+        dir = e2 > 0 ? random - e * (dot(random, e) / e2) : random;  // perpendicular to the edge
+        dir = dir * (1.0 / std::max(1e-12, length(dir)));
+        break;
+      }
+      default:  // off a vertex
+        on = mesh.corner(t, static_cast<int>(rng.next() % 3));
+        dir = random;
+    }
+    const Vec3d centre = on + dir * (r * (1 + s));
+    p.x[i] = centre.x, p.y[i] = centre.y, p.z[i] = centre.z, p.r[i] = r;
+  }
+  return p;
+}
+
 }  // namespace collido::sim

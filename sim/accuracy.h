@@ -25,4 +25,11 @@ ContactDiff compare_contacts(const TriangleMesh& mesh, const Particles& p, const
 Particles particles_near_surface(const TriangleMesh& mesh, size_t n, double r_lo, double r_hi, double near_fraction,
                                  double band, uint64_t seed);
 
+// Adversarial particles: each centred at r (1 + s) from a surface point, s
+// uniform in [-rel, rel], so every one is within rel r of touching. A third
+// sit off faces along the normal (either side), a third off edges and a third
+// off vertices (random directions), where several triangles meet.
+Particles particles_touching(const TriangleMesh& mesh, size_t n, double r_lo, double r_hi, double rel,
+                             uint64_t seed);
+
 }  // namespace collido::sim

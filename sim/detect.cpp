@@ -6,6 +6,7 @@
 #include "sim/backend_cpu.h"
 #include "sim/detect_cuda.h"
 #include "sim/detect_pipeline.h"
+#include "sim/exact_distance.h"
 
 namespace collido::sim {
 
@@ -21,6 +22,7 @@ const char* to_string(Method m) {
 }
 const char* to_string(Traversal t) { return t == Traversal::kWall ? "wall" : "particle"; }
 const char* to_string(Backend b) { return b == Backend::kCuda ? "cuda" : "cpu"; }
+const char* to_string(Precision p) { return p == Precision::kFloat ? "float" : "exact"; }
 
 bool parse_method(const std::string& s, Method* out) {
   for (Method m : {Method::kGravity, Method::kCircumcircle, Method::kMidpoint4, Method::kBin, Method::kReference})
@@ -30,6 +32,11 @@ bool parse_method(const std::string& s, Method* out) {
 bool parse_traversal(const std::string& s, Traversal* out) {
   if (s == "wall") return *out = Traversal::kWall, true;
   if (s == "particle") return *out = Traversal::kParticle, true;
+  return false;
+}
+bool parse_precision(const std::string& s, Precision* out) {
+  if (s == "exact") return *out = Precision::kExact, true;
+  if (s == "float") return *out = Precision::kFloat, true;
   return false;
 }
 bool parse_backend(const std::string& s, Backend* out) {
@@ -57,9 +64,18 @@ class ReferenceDetector final : public Detector {
     const auto t0 = std::chrono::steady_clock::now();
     info_.triangles_original = info_.triangles_used = mesh.triangles.size();
     for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+      const TriangleD tri{mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2)};
       Bounds3d b;
-      for (int k = 0; k < 3; ++k) b.grow(mesh.corner(t, k));
+      for (const Vec3d& v : {tri.a, tri.b, tri.c}) b.grow(v);
+      // Grown by far more than the rounding of the rejection test below, so
+      // the box only ever rejects pairs the exact predicate also rejects.
+      const double slack = 1e-9 * (length(b.extent()) + std::fabs(b.lo.x) + std::fabs(b.lo.y) +
+                                   std::fabs(b.lo.z) + std::fabs(b.hi.x) + std::fabs(b.hi.y) +
+                                   std::fabs(b.hi.z));
+      b.lo = b.lo - Vec3d{slack, slack, slack};
+      b.hi = b.hi + Vec3d{slack, slack, slack};
       boxes_.push_back(b);
+      tris_.push_back(tri);
     }
     info_.prepare_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   }
@@ -77,15 +93,15 @@ class ReferenceDetector final : public Detector {
     std::vector<std::vector<Contact>> per(n);
     out->counts.assign(n, 0);
     cpu_parallel_for(cfg_.pool ? *cfg_.pool : default_pool(), n, [&](uint32_t i) {
-      const Vec3d p{particles_.x[i], particles_.y[i], particles_.z[i]};
-      const double r = particles_.r[i];
-      for (size_t t = 0; t < mesh_.triangles.size(); ++t) {
+      const ParticleD q{particles_.x[i], particles_.y[i], particles_.z[i], particles_.r[i]};
+      const double r = q.r * (1 + 1e-9);
+      for (size_t t = 0; t < tris_.size(); ++t) {
         const Bounds3d& b = boxes_[t];
-        if (p.x < b.lo.x - r || p.x > b.hi.x + r || p.y < b.lo.y - r || p.y > b.hi.y + r ||
-            p.z < b.lo.z - r || p.z > b.hi.z + r)
+        if (q.x < b.lo.x - r || q.x > b.hi.x + r || q.y < b.lo.y - r || q.y > b.hi.y + r ||
+            q.z < b.lo.z - r || q.z > b.hi.z + r)
           continue;
-        const double d2 = point_triangle_dist2(p, mesh_.corner(t, 0), mesh_.corner(t, 1), mesh_.corner(t, 2));
-        if (d2 < r * r) per[i].push_back({i, mesh_.source_ids[t], std::sqrt(d2)});
+        double d2 = 0;
+        if (exact_touch(q, tris_[t], &d2)) per[i].push_back({i, mesh_.source_ids[t], std::sqrt(d2)});
       }
       std::sort(per[i].begin(), per[i].end(),
                 [](const Contact& a, const Contact& b) { return a.triangle < b.triangle; });
@@ -104,6 +120,7 @@ class ReferenceDetector final : public Detector {
  private:
   const TriangleMesh mesh_;
   std::vector<Bounds3d> boxes_;
+  std::vector<TriangleD> tris_;
   Particles particles_;
 };
 

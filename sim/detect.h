@@ -24,13 +24,19 @@ enum class Method {
 };
 enum class Traversal { kParticle, kWall };
 enum class Backend { kCpu, kCuda };
+// How a float method decides a pair: `exact` re-decides in double every pair
+// whose float distance lies inside float's error band of the radius (the
+// reference's contact set, bit for bit); `float` takes the float answer.
+enum class Precision { kExact, kFloat };
 
 const char* to_string(Method m);
 const char* to_string(Traversal t);
 const char* to_string(Backend b);
+const char* to_string(Precision p);
 bool parse_method(const std::string& s, Method* out);
 bool parse_traversal(const std::string& s, Traversal* out);
 bool parse_backend(const std::string& s, Backend* out);
+bool parse_precision(const std::string& s, Precision* out);
 
 // Particles in world coordinates (as given by the user), structure of arrays.
 struct Particles {
@@ -43,6 +49,7 @@ struct DetectConfig {
   Method method = Method::kBin;
   Traversal traversal = Traversal::kParticle;  // the paper's two traversals; bin reads its own cell
   Backend backend = Backend::kCpu;
+  Precision precision = Precision::kExact;
   double r_max = 0;              // largest particle radius of the run, world units (> 0)
   double grid_length = 0;        // cell edge, world units; 0 = method default (2 r_max)
   bool collect_contacts = true;  // false: only counts per particle (benchmarks)
@@ -72,6 +79,10 @@ struct DetectResult {
   std::vector<uint32_t> counts;   // contacts per particle
   uint64_t contact_count = 0;
   uint64_t colliding_particles = 0;
+  // Pairs whose float distance fell inside float's error band of the radius:
+  // re-decided in double (precision exact), or decided in float and possibly
+  // wrong (precision float: a warning counter).
+  uint64_t band_pairs = 0;
   StageTimes times;
 };
 

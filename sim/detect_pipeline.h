@@ -18,6 +18,7 @@
 
 #include "sim/cell_ranges.h"
 #include "sim/detect.h"
+#include "sim/exact_distance.h"
 #include "sim/wall_index.h"
 
 namespace collido::sim {
@@ -58,6 +59,12 @@ class GridDetector final : public Detector {
     }
     n_ = n;
     if (n) backend_.to_device(particles_.data(), host.data(), n * sizeof(PackedParticle));
+    if (exact() && n) {
+      std::vector<ParticleD>& hd = staging_d_;
+      hd.resize(n);
+      for (size_t i = 0; i < n; ++i) hd[i] = {p.x[i], p.y[i], p.z[i], p.r[i]};
+      backend_.to_device(particles_d_.data(), hd.data(), n * sizeof(ParticleD));
+    }
     return Status::ok();
   }
 
@@ -74,6 +81,7 @@ class GridDetector final : public Detector {
           bin_particle_traversal(true);
         }
       } else {
+        reset_pairs();
         bin_particle_traversal(false);
       }
       lap(out->times.traverse_ms);
@@ -104,6 +112,9 @@ class GridDetector final : public Detector {
     if (Status e = backend_.status(); !e) return e;
     // Results for the caller: outside the frame's time.
     const auto t = clock();
+    uint32_t band = 0;
+    backend_.to_host(&band, pair_counter_.data() + 1, sizeof band);
+    out->band_pairs = band;
     download(unique, out);
     out->times.download_ms = ms(t, clock());
     return backend_.status();
@@ -173,14 +184,62 @@ class GridDetector final : public Detector {
         backend_.resize(p_cell_end_, wall_.grid.buckets);
       }
     }
+    if (exact()) prepare_exact(mesh);
     grow_pairs(std::max<size_t>(capacity_ / 4, 4096));
-    backend_.resize(pair_counter_, 1);
+    backend_.resize(pair_counter_, 2);
     backend_.sync();
     if (Status e = backend_.status(); !e) return e;
     info_.prepare_ms = ms(t0, clock());
     info_.device_bytes = backend_.bytes_held();
     return Status::ok();
   }
+
+  // The exact filter's data: every original triangle in world double, and the
+  // scale of the wall's local coordinates that sizes the float error band.
+  void prepare_exact(const TriangleMesh& mesh) {
+    std::vector<TriangleD> host(mesh.triangles.size());
+    for (size_t t = 0; t < host.size(); ++t)
+      host[t] = {mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2)};
+    wall_scale_ = wall_band_scale(mesh, wall_.origin);
+    WallIndex<B>::upload(backend_, tris_exact_, host);
+    backend_.resize(particles_d_, std::max<size_t>(capacity_, 1));
+  }
+  bool exact() const { return cfg_.precision == Precision::kExact; }
+
+  // Decides a float candidate pair (particle i at p, the candidate's original
+  // triangle `orig`, float squared distance d2): outside float's error band
+  // the float answer stands; inside it, precision exact asks the contract's
+  // double predicate. Returns the contact and its distance in *dist.
+  struct Narrow {
+    const ParticleD* pd;
+    const TriangleD* td;
+    float wall_scale;
+    bool exact;
+    COLLIDO_HD COLLIDO_FORCEINLINE bool decide(const PackedParticle& p, float d2, uint32_t i,
+                                               uint32_t orig, float* dist, uint32_t* band) const {
+      const float delta = float_band(p.x, p.y, p.z, p.r, wall_scale);
+      const float hi = p.r + delta;
+      if (!(d2 < hi * hi)) return false;
+      const float lo = p.r - delta;
+      if (lo > 0.f && d2 < lo * lo) {
+        *dist = sqrtf(d2);
+        return true;
+      }
+      ++*band;
+      if (!exact) {
+        *dist = sqrtf(d2);
+        return d2 < p.r * p.r;
+      }
+      double e2 = 0;
+      if (!exact_touch(pd[i], td[orig], &e2)) return false;
+      *dist = static_cast<float>(sqrt(e2));
+      return true;
+    }
+  };
+  Narrow narrow() {
+    return {particles_d_.data(), tris_exact_.data(), wall_scale_, exact()};
+  }
+  uint32_t* band_counter() { return pair_counter_.data() + 1; }
 
   // --- frame stages -------------------------------------------------------------------------
   // Public only because nvcc's extended (host/device) lambdas may not live in
@@ -210,7 +269,7 @@ class GridDetector final : public Detector {
     }
   }
 
-  void reset_pairs() { backend_.fill(pair_counter_.data(), 1, 0u); }
+  void reset_pairs() { backend_.fill(pair_counter_.data(), 2, 0u); }
   bool pairs_fit() {
     uint32_t c = 0;
     backend_.to_host(&c, pair_counter_.data(), sizeof c);
@@ -256,25 +315,27 @@ class GridDetector final : public Detector {
     const uint64_t* cellk = wall_.bin_cell.data();
     uint32_t* counts = counts_.data();
     const PairSink out = sink();
+    const Narrow nw = narrow();
+    uint32_t* band_total = band_counter();
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
       const PackedParticle p = P[i];
       int x = 0, y = 0, z = 0;
-      uint32_t n = 0;
+      uint32_t n = 0, band = 0;
       if (g.cell_of(position(p), x, y, z)) {
         const uint64_t l = g.linear(x, y, z);
         const uint32_t b = g.bucket(l);
-        const float r2 = p.r * p.r;
         for (uint32_t k = start[b], e = start[b + 1]; k < e; ++k) {
           if (g.hashed && cellk[k] != l) continue;
           const uint32_t t = tri[k];
-          const float d2 = point_triangle_dist2(position(p), T[t]);
-          if (d2 < r2) {
+          float d = 0;
+          if (nw.decide(p, point_triangle_dist2(position(p), T[t]), i, t, &d, &band)) {
             ++n;
-            if (collect) out.push(i, t, sqrtf(d2));
+            if (collect) out.push(i, t, d);
           }
         }
       }
       counts[i] = n;
+      if (band) atomic_add_u32(band_total, band);
     });
   }
 
@@ -290,17 +351,22 @@ class GridDetector final : public Detector {
     const uint32_t* pstart = p_cell_start_.data();
     const uint32_t* pend = p_cell_end_.data();
     const PairSink out = sink();
+    const Narrow nw = narrow();
+    uint32_t* band_total = band_counter();
     backend_.parallel_for(info_.bin_entries, [=] COLLIDO_HD(uint32_t k) {
       const uint64_t l = cellk[k];
       const uint32_t b = g.bucket(l);
       const uint32_t t = tri[k];
       const PlanarTriangle tr = T[t];
+      uint32_t band = 0;
       for (uint32_t j = pstart[b], e = pend[b]; j < e; ++j) {
         const PackedParticle p = SP[j];
         if (g.hashed && !g.holds(position(p), l)) continue;
-        const float d2 = point_triangle_dist2(position(p), tr);
-        if (d2 < p.r * p.r) out.push(sidx[j], t, sqrtf(d2));
+        float d = 0;
+        if (nw.decide(p, point_triangle_dist2(position(p), tr), sidx[j], t, &d, &band))
+          out.push(sidx[j], t, d);
       }
+      if (band) atomic_add_u32(band_total, band);
     });
   }
 
@@ -321,21 +387,25 @@ class GridDetector final : public Detector {
     const uint32_t* tstart = wall_.tri_start.data();
     const uint32_t* tend = wall_.tri_end.data();
     const PairSink out = sink();
+    const Narrow nw = narrow();
+    uint32_t* band_total = band_counter();
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t j) {
       if (skey[j] == kInvalidBucket) return;
       const uint32_t i = sidx[j];
       const PackedParticle p = SP[j];
       const Vec3f c = position(p);
-      const float r2 = p.r * p.r;
+      uint32_t band = 0;
       int cx = 0, cy = 0, cz = 0;
       g.cell_of(c, cx, cy, cz);
       g.for_each_neighbour(cx, cy, cz, reach, [&](uint64_t l, uint32_t b) {
         for (uint32_t k = tstart[b], e = tend[b]; k < e; ++k) {
           if (g.hashed && tcell[k] != l) continue;
-          const float d2 = point_triangle_dist2(c, T[k]);
-          if (d2 < r2) out.push(i, orig[k], sqrtf(d2));
+          float d = 0;
+          if (nw.decide(p, point_triangle_dist2(c, T[k]), i, orig[k], &d, &band))
+            out.push(i, orig[k], d);
         }
       });
+      if (band) atomic_add_u32(band_total, band);
     });
   }
 
@@ -353,19 +423,24 @@ class GridDetector final : public Detector {
     const uint32_t* pstart = p_cell_start_.data();
     const uint32_t* pend = p_cell_end_.data();
     const PairSink out = sink();
+    const Narrow nw = narrow();
+    uint32_t* band_total = band_counter();
     backend_.parallel_for(info_.triangles_used, [=] COLLIDO_HD(uint32_t k) {
       const PlanarTriangle& tr = T[k];
       const uint32_t o = orig[k];
+      uint32_t band = 0;
       int cx = 0, cy = 0, cz = 0;
       g.unlinear(tcell[k], cx, cy, cz);
       g.for_each_neighbour(cx, cy, cz, reach, [&](uint64_t l, uint32_t b) {
         for (uint32_t j = pstart[b], e = pend[b]; j < e; ++j) {
           const PackedParticle p = SP[j];
           if (g.hashed && !g.holds(position(p), l)) continue;
-          const float d2 = point_triangle_dist2(position(p), tr);
-          if (d2 < p.r * p.r) out.push(sidx[j], o, sqrtf(d2));
+          float d = 0;
+          if (nw.decide(p, point_triangle_dist2(position(p), tr), sidx[j], o, &d, &band))
+            out.push(sidx[j], o, d);
         }
       });
+      if (band) atomic_add_u32(band_total, band);
     });
   }
 
@@ -406,6 +481,10 @@ class GridDetector final : public Detector {
   size_t capacity_ = 0, n_ = 0;
   std::vector<uint32_t> source_ids_;
   std::vector<PackedParticle> staging_;  // host copy of a frame's particles, reused
+  std::vector<ParticleD> staging_d_;     // the same in world double (precision exact)
+  float wall_scale_ = 0;                 // sizes the float error band (prepare_exact)
+  Buf<ParticleD> particles_d_;
+  Buf<TriangleD> tris_exact_;            // original triangles, world double, mesh order
 
   WallIndex<B> wall_;
 
