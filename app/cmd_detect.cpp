@@ -24,6 +24,7 @@ const std::vector<FlagSpec> kFlags = {
     {"radius-range", true, "A:B radii uniform in [A, B] (overrides --radius)"},
     {"method", true, "gravity | circumcircle | midpoint4 | bin | reference (default bin)"},
     {"traversal", true, "particle | wall (default particle)"},
+    {"precision", true, "exact (float, pairs near touching re-decided in double) | float (default exact)"},
     {"backend", true, "cpu | cuda (default cpu; cuda falls back to cpu with a note)"},
     {"grid-length", true, "cell edge in world units (default 2 r_max)"},
     {"threads", true, "CPU threads (default: all cores)"},

@@ -32,6 +32,8 @@ int build_detect_setup(const ParsedArgs& args, const std::string& command, Detec
                                     "' (gravity, circumcircle, midpoint4, bin, reference)");
   if (args.has("traversal") && !sim::parse_traversal(args.get("traversal"), &cfg.traversal))
     return usage_error(command, "unknown --traversal '" + args.get("traversal") + "' (particle, wall)");
+  if (args.has("precision") && !sim::parse_precision(args.get("precision"), &cfg.precision))
+    return usage_error(command, "unknown --precision '" + args.get("precision") + "' (exact, float)");
   sim::Backend wanted = sim::Backend::kCpu;
   if (args.has("backend") && !sim::parse_backend(args.get("backend"), &wanted))
     return usage_error(command, "unknown --backend '" + args.get("backend") + "' (cpu, cuda)");
@@ -106,10 +108,12 @@ std::string detect_summary_json(const DetectSetup& s, const sim::PrepareInfo& in
     << ",\"triangles_before_division\":" << info.triangles_original
     << ",\"triangles_after_division\":" << info.triangles_used << ",\"particles\":" << s.particles.size()
     << ",\"r_max\":" << s.config.r_max << ",\"method\":\"" << sim::to_string(s.config.method)
-    << "\",\"traversal\":\"" << sim::to_string(s.config.traversal) << "\",\"backend\":\""
+    << "\",\"traversal\":\"" << sim::to_string(s.config.traversal) << "\",\"precision\":\""
+    << sim::to_string(s.config.precision) << "\",\"backend\":\""
     << sim::to_string(s.config.backend) << "\",\"grid_length\":" << info.grid_length
     << ",\"cells\":" << info.cells << ",\"hashed_grid\":" << (info.hashed ? "true" : "false")
     << ",\"contacts\":" << r.contact_count << ",\"colliding_particles\":" << r.colliding_particles
+    << ",\"band_pairs\":" << r.band_pairs
     << ",\"area_error\":" << info.area_error << ",\"time_ms\":{\"prepare\":" << info.prepare_ms
     << ",\"hash\":" << t.hash_ms << ",\"sort\":" << t.sort_ms << ",\"cells\":" << t.cells_ms
     << ",\"traverse\":" << t.traverse_ms << ",\"finalize\":" << t.finalize_ms << ",\"frame\":" << t.frame_ms
@@ -127,17 +131,21 @@ std::string detect_summary_text(const DetectSetup& s, const sim::PrepareInfo& in
   o << line;
   if (s.wall_report.dropped_zero_area) o << ", " << s.wall_report.dropped_zero_area << " zero-area dropped";
   o << "\n";
-  std::snprintf(line, sizeof line, "method      %s, %s traversal, %s; %zu triangles after division\n",
+  std::snprintf(line, sizeof line, "method      %s, %s traversal, %s precision, %s; %zu triangles after division\n",
                 sim::to_string(s.config.method), sim::to_string(s.config.traversal),
-                sim::to_string(s.config.backend), info.triangles_used);
+                sim::to_string(s.config.precision), sim::to_string(s.config.backend), info.triangles_used);
   o << line;
   std::snprintf(line, sizeof line, "particles   %zu, r_max %g; grid length %g, %llu cells%s\n", s.particles.size(),
                 s.config.r_max, info.grid_length, static_cast<unsigned long long>(info.cells),
                 info.hashed ? " (hashed)" : "");
   o << line;
-  std::snprintf(line, sizeof line, "contacts    %llu, colliding particles %llu\n",
+  std::snprintf(line, sizeof line, "contacts    %llu, colliding particles %llu; %llu pairs %s\n",
                 static_cast<unsigned long long>(r.contact_count),
-                static_cast<unsigned long long>(r.colliding_particles));
+                static_cast<unsigned long long>(r.colliding_particles),
+                static_cast<unsigned long long>(r.band_pairs),
+                s.config.precision == sim::Precision::kExact
+                    ? "within float's error band of touching, re-decided in double"
+                    : "decided in float within its error band (may be wrong: use --precision exact)");
   o << line;
   const auto& t = r.times;
   std::snprintf(line, sizeof line,
