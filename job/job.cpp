@@ -118,6 +118,7 @@ json manifest(const JobResult& r, const scene::Scene* scene) {
   }
   j["escaped"] = r.escaped;
   j["invalid"] = r.invalid;
+  j["warnings"] = {{"blow_up_frames", r.blow_up_frames}, {"tunnel_risk_frames", r.tunnel_risk_frames}};
   j["resumed_from_frame"] = r.resumed_from_frame;
   const sim::TimeStepInfo& ts = r.time_step;
   j["time_step"] = {{"stiffness_N_m", ts.stiffness},       {"damping_ratio", ts.damping_ratio},
@@ -324,6 +325,13 @@ class JobRunner {
              " non-finite (frozen, not written)");
         lost_ = last_.escaped + last_.invalid;
       }
+      // Say the first time each kind of failure shows, and count every frame it shows in.
+      const sim::FrameWarnings w = sim::frame_warnings(last_, sim_->time_step_info());
+      if ((w.blow_up && result_.blow_up_frames == 0) ||
+          (w.tunnel_risk && result_.tunnel_risk_frames == 0))
+        note("frame " + std::to_string(f) + ": " + w.message);
+      result_.blow_up_frames += w.blow_up;
+      result_.tunnel_risk_frames += w.tunnel_risk;
       // The state after this frame, so a kill loses at most the frames since.
       if (f == frames || seconds_since(last_save) >= spec_.checkpoint_interval_s) {
         Checkpoint ck;

@@ -118,6 +118,8 @@ struct JobResult {
   int threads = 0;
   uint64_t particles = 0, triangles = 0;
   uint64_t escaped = 0, invalid = 0;  // at the last frame
+  // Frames whose steps showed a failing setting (sim::frame_warnings).
+  uint64_t blow_up_frames = 0, tunnel_risk_frames = 0;
   sim::TimeStepInfo time_step;
   uint64_t resumed_from_frame = 0;  // > 0 when the job continued a checkpoint
 };

@@ -1,6 +1,8 @@
 // Validation, the physics of the time step, and the CPU instantiation of the dynamics.
 #include "sim/dynamics.h"
 
+#include <cstdio>
+
 #include <algorithm>
 #include <cmath>
 
@@ -161,7 +163,36 @@ TimeStepInfo contact_time_step(const DynamicsConfig& c, double r_min, double r_m
   ts.spring_step = c.step_fraction * ts.critical_step;
   ts.explicit_step = c.time_step;
   ts.beyond_stable = c.time_step > ts.critical_step;
+  ts.expected_speed = impact_speed(c, v_max, wall_extent);
   return ts;
+}
+
+FrameWarnings frame_warnings(const FrameStats& st, const TimeStepInfo& ts) {
+  FrameWarnings w;
+  char line[256];
+  if (st.invalid > 0 || !std::isfinite(st.total_energy())) {
+    w.blow_up = true;
+    std::snprintf(line, sizeof line, "%llu particles non-finite: the run blew up",
+                  static_cast<unsigned long long>(st.invalid));
+    w.message = line;
+  } else if (const double v = std::max(st.max_speed, st.peak_speed);
+             ts.expected_speed > 0 && v > kRunawaySpeedFactor * ts.expected_speed) {
+    w.blow_up = true;
+    std::snprintf(line, sizeof line,
+                  "a particle moved at %.3g m/s, %.1f x the fastest impact the scene allows (%.3g m/s): "
+                  "the step is unstable",
+                  v, v / ts.expected_speed, ts.expected_speed);
+    w.message = line;
+  }
+  if (st.peak_travel > kTunnelRiskShare || st.peak_wall_overlap > kTunnelRiskShare) {
+    w.tunnel_risk = true;
+    std::snprintf(line, sizeof line,
+                  "%sa particle moved %.2f radii in one step and went %.2f radii into the wall: "
+                  "it may pass through (use the automatic step, or a stiffer contact / impact_speed)",
+                  w.message.empty() ? "" : "; ", st.peak_travel, st.peak_wall_overlap);
+    w.message += line;
+  }
+  return w;
 }
 
 StepPlan plan_steps(const DynamicsConfig& c, double r_min, double r_max, double r_mean,

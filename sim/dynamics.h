@@ -85,6 +85,7 @@ struct TimeStepInfo {
   double explicit_step = 0;    // s: the scene's fixed step (0 = automatic)
   bool beyond_stable = false;  // the fixed step exceeds the critical one
   double r_min = 0, r_max = 0, m_min = 0;
+  double expected_speed = 0;   // m/s: the fastest impact the scene expects (sizes the stiffness)
 };
 
 // What one frame ended with, for the stats file and the progress line.
@@ -104,6 +105,12 @@ struct FrameStats {
   double max_overlap = 0;          // deepest overlap as a share of that particle's radius
   uint64_t history_overflow =
       0;  // friction contacts beyond the per-particle slots (no memory kept)
+  // Over every step of the frame (not only its end), the two precursors of
+  // tunnelling: the longest move of one step, in smallest radii (read at each
+  // speed check), and the deepest wall overlap, as a share of the radius.
+  double peak_travel = 0;
+  double peak_wall_overlap = 0;
+  double peak_speed = 0;  // m/s, the fastest speed read during the frame (a particle may leave after)
   double total_energy() const { return kinetic + potential + elastic; }
 };
 
@@ -161,6 +168,20 @@ class Simulation {
   virtual uint64_t steps_taken() const = 0;
   virtual uint64_t device_bytes() const = 0;  // memory held by the backend
 };
+
+// What a frame says about the run's health: the three ways a setting fails.
+struct FrameWarnings {
+  bool blow_up = false;      // non-finite values, or speeds beyond what the scene's energy allows
+  bool tunnel_risk = false;  // a step or an overlap deep enough for a centre to cross a wall
+  std::string message;       // one line naming what was seen, empty when healthy
+};
+// Speeds above this multiple of the expected impact speed mean energy was created:
+// the expected speed (initial speed plus a fall across the wall's box) already
+// bounds what gravity can give, and contacts only take energy away.
+inline constexpr double kRunawaySpeedFactor = 1.25;
+// A move or a wall overlap beyond this share of a radius can carry a centre through a thin wall.
+inline constexpr double kTunnelRiskShare = 0.5;
+FrameWarnings frame_warnings(const FrameStats& stats, const TimeStepInfo& ts);
 
 // Linear spring-dashpot damping ratio for a restitution e in (0, 1].
 double damping_ratio(double restitution);

@@ -89,14 +89,17 @@ class DynamicsPipeline final : public Simulation {
       return invalid_argument("frame duration must be positive, got " + std::to_string(duration));
     const double end = time_ + duration;
     uint64_t substeps = 0;
-    double dt_min = 1e300, dt_max = 0, dt = 0;
+    double dt_min = 1e300, dt_max = 0, dt = 0, travel = 0, fastest = 0;
     int since_check = kSpeedCheckInterval;
     while (time_ < end * (1 - 1e-15) && end - time_ > 1e-300) {
       const double remaining = end - time_;
-      if (ts_.explicit_step > 0) {
-        dt = ts_.explicit_step;
-      } else if (since_check >= kSpeedCheckInterval) {
-        dt = automatic_step();
+      if (since_check >= kSpeedCheckInterval) {
+        // The fastest speed, read every few steps: it sizes the automatic step
+        // and, with a fixed one, tells how far a step carries a particle.
+        const double vmax = fastest_speed();
+        dt = ts_.explicit_step > 0 ? ts_.explicit_step : automatic_step(vmax);
+        if (ts_.r_min > 0) travel = std::max(travel, vmax * dt / ts_.r_min);
+        fastest = std::max(fastest, vmax);
         since_check = 0;
       }
       // Land exactly on the frame's end: split what remains into equal steps.
@@ -112,6 +115,8 @@ class DynamicsPipeline final : public Simulation {
     stats->substeps = substeps;
     stats->dt_min = substeps ? dt_min : 0;
     stats->dt_max = dt_max;
+    stats->peak_travel = travel;
+    stats->peak_speed = std::max(fastest, stats->max_speed);
     return Status::ok();
   }
 
@@ -144,6 +149,10 @@ class DynamicsPipeline final : public Simulation {
     st->invalid = static_cast<uint64_t>(col[kStatInvalid] + 0.5);
     st->history_overflow =
         static_cast<uint64_t>(col[kStatOverflowWall] + col[kStatOverflowPair] + 0.5);
+    // The deepest wall overlap of any step since the last measure, then a fresh start.
+    st->peak_wall_overlap =
+        std::max(col[kStatOverlapWall], backend_.reduce_max(peak_overlap_.data(), n_));
+    backend_.fill(peak_overlap_.data(), n_, 0.0);
     return backend_.status();
   }
 
@@ -250,6 +259,8 @@ class DynamicsPipeline final : public Simulation {
     backend_.resize(acc_, std::max<size_t>(n_, 1));
     backend_.fill(acc_.data(), n_, Vec3d{0, 0, 0});
     backend_.resize(speed_, std::max<size_t>(n_, 1));
+    backend_.resize(peak_overlap_, std::max<size_t>(n_, 1));
+    backend_.fill(peak_overlap_.data(), std::max<size_t>(n_, 1), 0.0);
     backend_.resize(scratch_, std::max<size_t>(n_ * kStatColumns, 1));
     backend_.fill(scratch_.data(), n_ * kStatColumns,
                   0.0);  // pair columns stay 0 without pair contacts
@@ -360,8 +371,8 @@ class DynamicsPipeline final : public Simulation {
     lap_ = now;
   }
 
-  double automatic_step() {
-    const double vmax = backend_.reduce_max(speed_.data(), n_);
+  double fastest_speed() { return n_ ? backend_.reduce_max(speed_.data(), n_) : 0.0; }
+  double automatic_step(double vmax) {
     // Speed may grow under gravity before the next check (bounded inside); a
     // runaway speed must not stall the run (never below a thousandth of the spring step).
     return automatic_step_size(ts_.spring_step, cfg_.motion_fraction, ts_.r_min, vmax,
@@ -596,6 +607,7 @@ class DynamicsPipeline final : public Simulation {
     const FrictionSlot* hin = wall_hist_[hist_in_].data();
     FrictionSlot* hout = wall_hist_[hist_in_ ^ 1].data();
     double* stats = scratch_.data();
+    double* peak = peak_overlap_.data();
     const size_t n = n_;
     const bool friction = law.mu > 0;
     backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
@@ -665,6 +677,7 @@ class DynamicsPipeline final : public Simulation {
         stats[kStatOverflowWall * n + i] = set.dropped;
         return;
       }
+      if (overlap_max > peak[i]) peak[i] = overlap_max;
       const Vec3d a = f * (1.0 / m);
       P.acc[i] = add ? P.acc[i] + a : a + grav;
       if (friction) {
@@ -724,6 +737,7 @@ class DynamicsPipeline final : public Simulation {
 
   Buf<Vec3d> pos_, vel_, acc_, omega_, alpha_;
   Buf<double> radius_, inv_mass_, release_, speed_, scratch_;
+  Buf<double> peak_overlap_;  // deepest wall overlap per particle since the last measure
   Buf<uint8_t> state_, flags_;
   // Friction springs as terminated lists: last step's (hist_in_) and this step's.
   Buf<FrictionSlot> wall_hist_[2], pair_hist_[2];
