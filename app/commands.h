@@ -32,6 +32,10 @@ int bench_render(const Args& args);      // app/cmd_render.cpp
 // --video's "mp4,webm,gif" or "none" into *rs; false with *error otherwise (app/cmd_render.cpp).
 bool parse_video_list(const std::string& list, collido::job::RenderSettings* rs, std::string* error);
 
+#ifdef COLLIDO_HAVE_STUDY
+int cmd_study(const Args& args);         // app/cmd_study.cpp
+#endif
+
 #ifdef COLLIDO_HAVE_SERVICE
 int cmd_serve(const Args& args);         // app/cmd_serve.cpp
 int cmd_admin(const Args& args);         // app/cmd_serve.cpp: `admin create NAME`

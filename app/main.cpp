@@ -26,6 +26,9 @@ const std::vector<Command>& commands() {
       {"job-exec", cmd_job_exec, "run one job from its spec (what the service starts)"},
 #endif
       {"bench", cmd_bench, "benchmarks: bench detect | bench run | bench render"},
+#ifdef COLLIDO_HAVE_STUDY
+      {"study", cmd_study, "speed against accuracy, and where each method fails (docs/study.md)"},
+#endif
 #ifdef COLLIDO_HAVE_RENDER
       {"render", cmd_render, "render snapshots into PNG frames and video"},
 #endif

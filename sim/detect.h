@@ -120,12 +120,23 @@ class Detector {
     cfg_.collect_contacts = collect_contacts;
     cfg_.time_stages = time_stages;
   }
+  // Switches between exact and float decisions without preparing again. A
+  // detector created exact holds the double data and may go either way; one
+  // created float cannot become exact (an error says so).
+  Status set_precision(Precision p) {
+    if (p == Precision::kExact && created_precision_ != Precision::kExact)
+      return invalid_argument("this detector was prepared for float precision; create it exact");
+    cfg_.precision = p;
+    return Status::ok();
+  }
   const PrepareInfo& info() const { return info_; }
   const DetectConfig& config() const { return cfg_; }
 
  protected:
-  explicit Detector(const DetectConfig& config) : cfg_(config) {}
+  explicit Detector(const DetectConfig& config)
+      : cfg_(config), created_precision_(config.precision) {}
   DetectConfig cfg_;  // as created, with the frame options last set
+  Precision created_precision_;
   PrepareInfo info_;  // filled by the implementation's preparation
 };
 

@@ -59,7 +59,7 @@ class GridDetector final : public Detector {
     }
     n_ = n;
     if (n) backend_.to_device(particles_.data(), host.data(), n * sizeof(PackedParticle));
-    if (exact() && n) {
+    if (created_precision_ == Precision::kExact && n) {
       std::vector<ParticleD>& hd = staging_d_;
       hd.resize(n);
       for (size_t i = 0; i < n; ++i) hd[i] = {p.x[i], p.y[i], p.z[i], p.r[i]};
@@ -184,7 +184,7 @@ class GridDetector final : public Detector {
         backend_.resize(p_cell_end_, wall_.grid.buckets);
       }
     }
-    if (exact()) prepare_exact(mesh);
+    if (created_precision_ == Precision::kExact) prepare_exact(mesh);
     grow_pairs(std::max<size_t>(capacity_ / 4, 4096));
     backend_.resize(pair_counter_, 2);
     backend_.sync();

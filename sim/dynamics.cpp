@@ -163,25 +163,34 @@ TimeStepInfo contact_time_step(const DynamicsConfig& c, double r_min, double r_m
   ts.spring_step = c.step_fraction * ts.critical_step;
   ts.explicit_step = c.time_step;
   ts.beyond_stable = c.time_step > ts.critical_step;
-  ts.expected_speed = impact_speed(c, v_max, wall_extent);
+  ts.speed_bound = v_max + fall_speed(c, wall_extent);
   return ts;
 }
 
 FrameWarnings frame_warnings(const FrameStats& st, const TimeStepInfo& ts) {
   FrameWarnings w;
   char line[256];
-  if (st.invalid > 0 || !std::isfinite(st.total_energy())) {
+  if (ts.explicit_step > kUnstableStepShare * ts.critical_step) {
+    // Known before any contact: an explicit step this close to the bound adds
+    // energy in every contact, however slowly the scene moves.
+    w.blow_up = true;
+    std::snprintf(line, sizeof line,
+                  "the fixed step %.3g s is %.0f %% of the contact spring's stability bound %.3g s: "
+                  "energy grows in every contact",
+                  ts.explicit_step, 100 * ts.explicit_step / ts.critical_step, ts.critical_step);
+    w.message = line;
+  } else if (st.invalid > 0 || !std::isfinite(st.total_energy())) {
     w.blow_up = true;
     std::snprintf(line, sizeof line, "%llu particles non-finite: the run blew up",
                   static_cast<unsigned long long>(st.invalid));
     w.message = line;
   } else if (const double v = std::max(st.max_speed, st.peak_speed);
-             ts.expected_speed > 0 && v > kRunawaySpeedFactor * ts.expected_speed) {
+             ts.speed_bound > 0 && v > kRunawaySpeedFactor * ts.speed_bound) {
     w.blow_up = true;
     std::snprintf(line, sizeof line,
-                  "a particle moved at %.3g m/s, %.1f x the fastest impact the scene allows (%.3g m/s): "
+                  "a particle moved at %.3g m/s; %.1f x what the scene's energy allows (%.3g m/s): "
                   "the step is unstable",
-                  v, v / ts.expected_speed, ts.expected_speed);
+                  v, v / ts.speed_bound, ts.speed_bound);
     w.message = line;
   }
   if (st.peak_travel > kTunnelRiskShare || st.peak_wall_overlap > kTunnelRiskShare) {

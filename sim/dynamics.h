@@ -85,7 +85,9 @@ struct TimeStepInfo {
   double explicit_step = 0;    // s: the scene's fixed step (0 = automatic)
   bool beyond_stable = false;  // the fixed step exceeds the critical one
   double r_min = 0, r_max = 0, m_min = 0;
-  double expected_speed = 0;   // m/s: the fastest impact the scene expects (sizes the stiffness)
+  // m/s: the fastest speed the scene's energy allows (the fastest initial speed
+  // plus a fall across the wall's box); contacts only take energy away.
+  double speed_bound = 0;
 };
 
 // What one frame ended with, for the stats file and the progress line.
@@ -175,10 +177,10 @@ struct FrameWarnings {
   bool tunnel_risk = false;  // a step or an overlap deep enough for a centre to cross a wall
   std::string message;       // one line naming what was seen, empty when healthy
 };
-// Speeds above this multiple of the expected impact speed mean energy was created:
-// the expected speed (initial speed plus a fall across the wall's box) already
-// bounds what gravity can give, and contacts only take energy away.
+// Speeds above this multiple of TimeStepInfo::speed_bound mean energy was created.
 inline constexpr double kRunawaySpeedFactor = 1.25;
+// A fixed step above this share of the critical step is flagged as a blow-up risk.
+inline constexpr double kUnstableStepShare = 0.95;
 // A move or a wall overlap beyond this share of a radius can carry a centre through a thin wall.
 inline constexpr double kTunnelRiskShare = 0.5;
 FrameWarnings frame_warnings(const FrameStats& stats, const TimeStepInfo& ts);

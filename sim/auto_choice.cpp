@@ -1,0 +1,114 @@
+#include "sim/auto_choice.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+
+#include "sim/particles.h"
+
+namespace collido::sim {
+
+std::vector<Method> auto_method_candidates(const TriangleMesh& mesh, double r_max, Backend backend) {
+  std::vector<Method> out{Method::kBin};
+  if (backend != Backend::kCuda || mesh.triangles.empty() || !(r_max > 0)) return out;
+  const double cell = 2 * r_max;
+  const double mean_area = mesh_area(mesh) / static_cast<double>(mesh.triangles.size());
+  if (mean_area > 16 * cell * cell) out.push_back(Method::kCircumcircle);
+  return out;
+}
+
+namespace {
+
+// A seeded subset of at most n particles (all of them when there are fewer).
+Particles sample_of(const Particles& p, size_t n) {
+  if (p.size() <= n) return p;
+  Particles s;
+  s.resize(n);
+  SplitMix64 rng(0x5eed);
+  for (size_t i = 0; i < n; ++i) {
+    const size_t k = rng.next() % p.size();
+    s.x[i] = p.x[k], s.y[i] = p.y[k], s.z[i] = p.z[k], s.r[i] = p.r[k];
+  }
+  return s;
+}
+
+void time_candidate(const TriangleMesh& mesh, const Particles& sample, const DetectConfig& base,
+                    int repeats, AutoCandidate* c) {
+  DetectConfig cfg = base;
+  cfg.method = c->method, cfg.traversal = c->traversal, cfg.grid_length = c->grid_length;
+  cfg.collect_contacts = false, cfg.time_stages = false;
+  auto det = Detector::create(mesh, cfg, std::max<size_t>(sample.size(), 1));
+  if (!det) {
+    c->error = det.status().message();
+    return;
+  }
+  c->prepare_ms = (*det)->info().prepare_ms;
+  if (Status s = (*det)->set_particles(sample); !s) {
+    c->error = s.message();
+    return;
+  }
+  DetectResult r;
+  std::vector<double> times;
+  for (int k = 0; k <= repeats; ++k) {  // the first frame warms up
+    if (Status s = (*det)->detect(&r); !s) {
+      c->error = s.message();
+      return;
+    }
+    if (k) times.push_back(r.times.frame_ms);
+  }
+  std::sort(times.begin(), times.end());
+  c->frame_ms = times[times.size() / 2];
+}
+
+}  // namespace
+
+Expected<AutoChoice> choose_detection(const TriangleMesh& mesh, const Particles& particles,
+                                      const DetectConfig& base, const AutoRequest& req) {
+  if (!(base.r_max > 0)) return invalid_argument("automatic choice: r_max must be positive");
+  const Particles sample = sample_of(particles, std::max<size_t>(req.max_sample, 1));
+  std::vector<Method> methods =
+      req.method ? auto_method_candidates(mesh, base.r_max, base.backend) : std::vector<Method>{base.method};
+  std::vector<double> grids;
+  if (req.grid_length)
+    for (double f : kAutoGridFactors) grids.push_back(f * base.r_max);
+  else
+    grids.push_back(base.grid_length);
+  AutoChoice choice;
+  for (Method m : methods) {
+    // bin reads its own cell (particle traversal); the paper's pieces are timed both ways.
+    std::vector<Traversal> traversals{Traversal::kParticle};
+    if (m != Method::kBin && req.method) traversals.push_back(Traversal::kWall);
+    if (!req.method) traversals = {base.traversal};
+    for (Traversal t : traversals)
+      for (double g : grids) {
+        AutoCandidate c{m, t, g, 0, 0, {}};
+        time_candidate(mesh, sample, base, std::max(req.repeats, 1), &c);
+        choice.candidates.push_back(c);
+      }
+  }
+  const AutoCandidate* best = nullptr;
+  for (const auto& c : choice.candidates)
+    if (c.error.empty() && (!best || c.frame_ms < best->frame_ms)) best = &c;
+  if (!best)
+    return invalid_argument("automatic choice: no candidate could be prepared (" +
+                            choice.candidates.front().error + ")");
+  choice.method = best->method, choice.traversal = best->traversal, choice.grid_length = best->grid_length;
+  char line[160];
+  std::snprintf(line, sizeof line, "%s/%s with grid %.3g r_max (%.3g ms a frame on %zu particles); tried:",
+                to_string(best->method), to_string(best->traversal), best->grid_length / base.r_max,
+                best->frame_ms, sample.size());
+  choice.reason = line;
+  for (const auto& c : choice.candidates) {
+    if (!c.error.empty()) {
+      choice.reason += std::string(" ") + to_string(c.method) + " refused;";
+      continue;
+    }
+    std::snprintf(line, sizeof line, " %s/%s %.3g r_max %.3g ms;", to_string(c.method), to_string(c.traversal),
+                  c.grid_length / base.r_max, c.frame_ms);
+    choice.reason += line;
+  }
+  choice.reason.pop_back();
+  return choice;
+}
+
+}  // namespace collido::sim

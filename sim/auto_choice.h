@@ -1,0 +1,60 @@
+// `method: auto` and `grid_length: auto`: the detection setting a scene needs,
+// chosen on the scene itself. The study (docs/study.md) found no rule of thumb
+// that orders the candidates on every wall: which grid length wins depends on
+// the triangle sizes against the radius, how the particles crowd the surface
+// and the backend. So the choice measures, as FFTW's planner and cuDNN's
+// benchmark mode do: each candidate is prepared and timed on (a sample of) the
+// scene's own particles on the run's backend, and the fastest is kept. Every
+// candidate is exact (sim/exact_distance.h), so the fastest is also the
+// setting on the speed/accuracy front.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "sim/detect.h"
+#include "sim/mesh.h"
+#include "sim/status.h"
+
+namespace collido::sim {
+
+struct AutoRequest {
+  bool method = true;       // choose the method (else keep base.method)
+  bool grid_length = true;  // choose the grid length (else keep base.grid_length)
+  size_t max_sample = 200000;  // particles timed per candidate (a seeded subset beyond)
+  int repeats = 3;             // timed frames per candidate; the median counts
+};
+
+struct AutoCandidate {
+  Method method;
+  Traversal traversal;
+  double grid_length;  // world units
+  double frame_ms = 0;
+  double prepare_ms = 0;
+  std::string error;  // why it could not be prepared (then not chosen)
+};
+
+struct AutoChoice {
+  Method method = Method::kBin;
+  Traversal traversal = Traversal::kParticle;
+  double grid_length = 0;  // world units
+  std::vector<AutoCandidate> candidates;  // as measured, the chosen one among them
+  std::string reason;                     // one line: what was chosen, among what, and why
+};
+
+// The grid lengths tried, in units of r_max (the study's grid).
+inline constexpr double kAutoGridFactors[] = {1.0, 1.5, 2.0, 3.0};
+
+// The methods worth timing for `mesh`, r_max and the backend: `bin` always
+// (no division: the wall as it is); on the GPU also `circumcircle` where
+// binning copies the average triangle into more than 16 cells (triangles large
+// against the radius), the one case where the paper's pieces have been seen to
+// win. On the CPU bin was 30x ahead of every division method in every study scene.
+std::vector<Method> auto_method_candidates(const TriangleMesh& mesh, double r_max, Backend backend);
+
+// Times the candidates on `particles` with base's backend, precision and pool
+// and returns the fastest. base.r_max must be set.
+Expected<AutoChoice> choose_detection(const TriangleMesh& mesh, const Particles& particles,
+                                      const DetectConfig& base, const AutoRequest& request);
+
+}  // namespace collido::sim
