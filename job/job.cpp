@@ -1,5 +1,7 @@
 #include "job/job.h"
 
+#include "sim/auto_choice.h"
+
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -121,6 +123,7 @@ json manifest(const JobResult& r, const scene::Scene* scene) {
   j["warnings"] = {{"blow_up_frames", r.blow_up_frames}, {"tunnel_risk_frames", r.tunnel_risk_frames}};
   j["resumed_from_frame"] = r.resumed_from_frame;
   const sim::TimeStepInfo& ts = r.time_step;
+  j["method"] = {{"method", r.method}, {"grid_length_m", r.grid_length}, {"automatic_choice", r.choice}};
   j["time_step"] = {{"stiffness_N_m", ts.stiffness},       {"damping_ratio", ts.damping_ratio},
                     {"critical_step_s", ts.critical_step}, {"spring_step_s", ts.spring_step},
                     {"fixed_step_s", ts.explicit_step},    {"beyond_stable", ts.beyond_stable}};
@@ -240,6 +243,7 @@ class JobRunner {
                                           scene_.dynamics.gravity, scene_.seed);
     if (!particles) return particles.status();
     result_.particles = particles->size();
+    if (Status st = choose_wall_representation(*particles); !st) return st;
     auto sim_or = sim::Simulation::create(wall_, scene_.dynamics, *particles);
     if (!sim_or) return sim_or.status();
     sim_ = std::move(*sim_or);
@@ -250,6 +254,33 @@ class JobRunner {
       note("time_step " + std::to_string(ts.explicit_step) + " s is beyond the stable bound " +
            std::to_string(ts.critical_step) +
            " s of the contact spring; expect energy to blow up and particles to tunnel");
+    return Status::ok();
+  }
+
+  // method / grid_length "auto": time the candidates on the placed particles
+  // and run the fastest; the choice and the times behind it are noted and kept.
+  Status choose_wall_representation(const sim::ParticleSet& placed) {
+    sim::DynamicsConfig& d = scene_.dynamics;
+    if (scene_.method_auto || scene_.grid_auto) {
+      sim::Particles p;
+      p.resize(placed.size());
+      for (size_t i = 0; i < placed.size(); ++i)
+        p.x[i] = placed.x[i], p.y[i] = placed.y[i], p.z[i] = placed.z[i], p.r[i] = placed.r[i];
+      sim::DetectConfig base;
+      base.backend = d.backend, base.pool = d.pool, base.r_max = scene_.particles.r_max;
+      base.method = d.method, base.grid_length = d.grid_length;
+      sim::AutoRequest req;
+      req.method = scene_.method_auto, req.grid_length = scene_.grid_auto;
+      req.particle_traversal_only = true;
+      auto choice = sim::choose_detection(wall_, p, base, req);
+      if (!choice) return choice.status();
+      d.method = choice->method;
+      if (scene_.grid_auto) d.grid_length = choice->grid_length;
+      result_.choice = choice->reason;
+      note("automatic choice: " + choice->reason);
+    }
+    result_.method = sim::to_string(d.method);
+    result_.grid_length = d.grid_length > 0 ? d.grid_length : 2 * scene_.particles.r_max;
     return Status::ok();
   }
 

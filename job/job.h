@@ -121,6 +121,10 @@ struct JobResult {
   // Frames whose steps showed a failing setting (sim::frame_warnings).
   uint64_t blow_up_frames = 0, tunnel_risk_frames = 0;
   sim::TimeStepInfo time_step;
+  // The wall representation as run, and why: "method" / "grid_length" "auto" record the candidates' times.
+  std::string method;
+  double grid_length = 0;  // m, the wall grid's cell edge as run
+  std::string choice;      // the automatic choice's reason (empty when the scene fixed both)
   uint64_t resumed_from_frame = 0;  // > 0 when the job continued a checkpoint
 };
 

@@ -19,6 +19,10 @@ struct Scene {
   sim::PlacementSpec placement;
   sim::DynamicsConfig dynamics;
   bool backend_auto = true;  // "auto": the GPU when one is usable, else the CPU
+  // "method": "auto" / "grid_length": "auto": chosen by timing the candidates
+  // on the placed particles (sim/auto_choice.h) when the job starts.
+  bool method_auto = false;
+  bool grid_auto = false;
   double duration = 2;       // simulated seconds
   double fps = 30;           // output frames per simulated second
   uint64_t seed = 1;

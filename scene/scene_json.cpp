@@ -220,6 +220,7 @@ void scale_lengths(Scene* s, double k) {
   pl.inlet_radius *= k;
   pl.velocity = pl.velocity * k;
   s->dynamics.impact_speed *= k;
+  s->dynamics.grid_length *= k;
 }
 
 }  // namespace
@@ -232,7 +233,7 @@ Expected<Scene> parse_scene(const std::string& text) {
   COLLIDO_TRY(
       r.only({"wall", "particles", "placement", "gravity", "material", "duration", "fps", "method",
               "backend", "particle_contacts", "integrator", "time_step", "seed", "output",
-              "length_unit"}));
+              "length_unit", "grid_length"}));
   COLLIDO_TRY(r.string("length_unit", &s.length_unit));
   if (s.length_unit != "m" && s.length_unit != "cm" && s.length_unit != "mm")
     return invalid_argument("length_unit: \"" + s.length_unit + "\" is not m, cm or mm");
@@ -249,10 +250,19 @@ Expected<Scene> parse_scene(const std::string& text) {
   std::string method = sim::to_string(s.dynamics.method), backend = "auto",
               integrator = sim::to_string(s.dynamics.integrator);
   COLLIDO_TRY(r.string("method", &method));
-  if (!sim::parse_method(method, &s.dynamics.method) ||
-      s.dynamics.method == sim::Method::kReference)
+  s.method_auto = method == "auto";
+  if (!s.method_auto && (!sim::parse_method(method, &s.dynamics.method) ||
+                         s.dynamics.method == sim::Method::kReference))
     return invalid_argument("method: \"" + method +
-                            "\" is not bin, gravity, circumcircle or midpoint4");
+                            "\" is not auto, bin, gravity, circumcircle or midpoint4");
+  // The wall grid's cell edge: a length (in the scene's unit), or "auto"; absent = 2 r_max.
+  if (r.has("grid_length") && r.at("grid_length").is_string()) {
+    if (r.at("grid_length").get<std::string>() != "auto")
+      return invalid_argument("grid_length: expected a length or \"auto\"");
+    s.grid_auto = true;
+  } else {
+    COLLIDO_TRY(r.number("grid_length", &s.dynamics.grid_length, 1e-9, 1e9));
+  }
   COLLIDO_TRY(r.string("backend", &backend));
   s.backend_auto = backend == "auto";
   if (!s.backend_auto && !sim::parse_backend(backend, &s.dynamics.backend))
@@ -324,7 +334,11 @@ std::string to_json(const Scene& si) {
   j["gravity"] = v3(s.dynamics.gravity);
   j["duration"] = s.duration;
   j["fps"] = s.fps;
-  j["method"] = sim::to_string(s.dynamics.method);
+  j["method"] = s.method_auto ? "auto" : sim::to_string(s.dynamics.method);
+  if (s.grid_auto)
+    j["grid_length"] = "auto";
+  else if (s.dynamics.grid_length > 0)
+    j["grid_length"] = s.dynamics.grid_length;
   j["backend"] = s.backend_auto ? "auto" : sim::to_string(s.dynamics.backend);
   j["particle_contacts"] = s.dynamics.particle_contacts;
   j["integrator"] = sim::to_string(s.dynamics.integrator);

@@ -77,7 +77,7 @@ Expected<AutoChoice> choose_detection(const TriangleMesh& mesh, const Particles&
   for (Method m : methods) {
     // bin reads its own cell (particle traversal); the paper's pieces are timed both ways.
     std::vector<Traversal> traversals{Traversal::kParticle};
-    if (m != Method::kBin && req.method) traversals.push_back(Traversal::kWall);
+    if (m != Method::kBin && req.method && !req.particle_traversal_only) traversals.push_back(Traversal::kWall);
     if (!req.method) traversals = {base.traversal};
     for (Traversal t : traversals)
       for (double g : grids) {

@@ -23,6 +23,8 @@ struct AutoRequest {
   bool grid_length = true;  // choose the grid length (else keep base.grid_length)
   size_t max_sample = 200000;  // particles timed per candidate (a seeded subset beyond)
   int repeats = 3;             // timed frames per candidate; the median counts
+  // Dynamics walks the wall per particle: time only the particle traversal.
+  bool particle_traversal_only = false;
 };
 
 struct AutoCandidate {

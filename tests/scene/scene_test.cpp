@@ -79,6 +79,22 @@ void expect_error(const std::string& doc, const std::string& key) {
       << "message '" << s.status().message() << "' should start with " << key;
 }
 
+// "auto" for the method and the grid length: chosen when the job starts,
+// kept as "auto" through a round trip; a fixed grid length follows the unit.
+TEST(Scene, MethodAndGridLengthMayBeAutomatic) {
+  auto s = parse_scene(R"({"wall": "wall1", "method": "auto", "grid_length": "auto"})");
+  ASSERT_TRUE(s) << s.status().message();
+  EXPECT_TRUE(s->method_auto);
+  EXPECT_TRUE(s->grid_auto);
+  auto back = parse_scene(to_json(*s));
+  ASSERT_TRUE(back) << back.status().message();
+  EXPECT_TRUE(back->method_auto && back->grid_auto);
+  auto mm = parse_scene(R"({"wall": "wall1", "grid_length": 3, "length_unit": "mm"})");
+  ASSERT_TRUE(mm) << mm.status().message();
+  EXPECT_FALSE(mm->grid_auto);
+  EXPECT_DOUBLE_EQ(mm->dynamics.grid_length, 0.003);
+}
+
 TEST(Scene, ErrorsNameTheKey) {
   expect_error(R"({"wall": "wall1", "colour": "red"})", "colour: unknown key");
   expect_error(R"({"wall": "wall1", "particles": {"radus": 1}})", "particles.radus: unknown key");
@@ -99,6 +115,8 @@ TEST(Scene, ErrorsNameTheKey) {
   expect_error(R"({"wall": "wall1", "duration": 1e5, "fps": 1e4})", "fps");
   expect_error(R"({"wall": "wall1", "method": "magic"})", "method");
   expect_error(R"({"wall": "wall1", "method": "reference"})", "method");
+  expect_error(R"({"wall": "wall1", "grid_length": "big"})", "grid_length");
+  expect_error(R"({"wall": "wall1", "grid_length": -1})", "grid_length");
   expect_error(R"({"wall": "wall1", "backend": "tpu"})", "backend");
   expect_error(R"({"wall": "wall1", "integrator": "rk4"})", "integrator");
   expect_error(R"({"wall": "wall1", "particle_contacts": "yes"})", "particle_contacts");

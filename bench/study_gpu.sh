@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# The full study and the GPU test suites on the GPU machine, as docs/study.md
+# reports them. Usage (repo root, with the carried prefix of gtest/nlohmann):
+#   bash bench/study_gpu.sh OUT_DIR [tests|study-detect|study-dynamics|bench]...
+set -uo pipefail
+out=${1:?OUT_DIR}; shift
+cmake -S . -B build-dev -DCMAKE_BUILD_TYPE=Release -DCMAKE_PREFIX_PATH="$PWD/gpu-carry/prefix" \
+  -DCOLLIDO_CUDA=ON -DCMAKE_CUDA_ARCHITECTURES=90 -DCOLLIDO_WITH_RENDER=OFF \
+  -DCOLLIDO_WITH_MESH_IMPORT=OFF -DCOLLIDO_WITH_SERVICE=OFF >"$out/cmake.log" 2>&1 || { tail -20 "$out/cmake.log"; exit 1; }
+targets=(collidoscope)
+for step in "$@"; do [ "$step" = tests ] && targets+=(detect_test dynamics_test); done
+cmake --build build-dev -j16 --target "${targets[@]}" >"$out/build.log" 2>&1 || { grep -m20 error "$out/build.log"; exit 1; }
+for step in "$@"; do
+  case $step in
+    tests)
+      (build-dev/tests/sim/detect_test; build-dev/tests/sim/dynamics_test) >"$out/gpu_tests.log" 2>&1
+      grep -E "PASSED|FAILED|^\[  FAILED" "$out/gpu_tests.log" ;;
+    study-detect)
+      build-dev/app/collidoscope study --backend cuda --only detect --out "$out/detect" >"$out/study_detect.log" 2>&1
+      tail -4 "$out/study_detect.log" ;;
+    study-dynamics)
+      build-dev/app/collidoscope study --backend cpu --only dynamics --out "$out/dynamics" >"$out/study_dynamics.log" 2>&1
+      tail -4 "$out/study_dynamics.log" ;;
+    bench)
+      for w in wall1 tests/data/meshes/teapot_trimesh.stl; do
+        build-dev/app/collidoscope bench detect --backend cuda --wall "$w" --min 1000000 --max 1000000 \
+          --methods bin,circumcircle --near-surface 0.5 --repeats 20 --check-max 1000000
+      done >"$out/bench_detect_filter.txt" 2>&1
+      grep -E "^\| (bin|circumcircle)" "$out/bench_detect_filter.txt" ;;
+  esac
+done

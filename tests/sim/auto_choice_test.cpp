@@ -1,0 +1,77 @@
+// method/grid_length auto: the fastest of the measured candidates, and exact.
+#include "sim/auto_choice.h"
+
+#include <gtest/gtest.h>
+
+#include "sim/accuracy.h"
+#include "sim/particles.h"
+#include "sim/shapes.h"
+
+namespace collido::sim {
+namespace {
+
+TEST(AutoChoice, PicksTheFastestCandidateAndSaysWhy) {
+  const TriangleMesh wall = make_cylinder(50, 100, 40);
+  const Particles p = particles_near_surface(wall, 20000, 0.5, 1, 0.5, 1.5, 3);
+  DetectConfig base;
+  base.r_max = 1;
+  auto c = choose_detection(wall, p, base, AutoRequest{});
+  ASSERT_TRUE(c) << c.status().message();
+  // The CPU times bin at the four grid lengths (division never won there).
+  ASSERT_EQ(c->candidates.size(), 4u);
+  for (const auto& k : c->candidates) {
+    EXPECT_EQ(k.method, Method::kBin);
+    EXPECT_TRUE(k.error.empty()) << k.error;
+    EXPECT_GE(k.frame_ms, 0);
+  }
+  double best = 1e300;
+  for (const auto& k : c->candidates) best = std::min(best, k.frame_ms);
+  bool chosen_is_best = false;
+  for (const auto& k : c->candidates)
+    chosen_is_best |= k.grid_length == c->grid_length && k.method == c->method && k.frame_ms == best;
+  EXPECT_TRUE(chosen_is_best);
+  EXPECT_NE(c->reason.find("bin/particle"), std::string::npos) << c->reason;
+  EXPECT_NE(c->reason.find("tried"), std::string::npos) << c->reason;
+  // What it picked gives the reference's contacts.
+  DetectConfig cfg = base;
+  cfg.method = c->method, cfg.traversal = c->traversal, cfg.grid_length = c->grid_length;
+  DetectConfig rc = base;
+  rc.method = Method::kReference;
+  DetectResult got, ref;
+  auto d = Detector::create(wall, cfg, p.size());
+  auto r = Detector::create(wall, rc, p.size());
+  ASSERT_TRUE(d && r);
+  ASSERT_TRUE((*d)->set_particles(p) && (*d)->detect(&got));
+  ASSERT_TRUE((*r)->set_particles(p) && (*r)->detect(&ref));
+  const ContactDiff diff = compare_contacts(wall, p, ref.contacts, got.contacts, 0.0);
+  EXPECT_EQ(diff.missed + diff.invented + diff.borderline, 0u);
+}
+
+TEST(AutoChoice, AFixedMethodOrGridIsKept) {
+  const TriangleMesh wall = make_box(10, 10, 10);
+  const Particles p = random_particles(2000, mesh_bounds(wall), 0.5, 1, 4);
+  DetectConfig base;
+  base.r_max = 1, base.method = Method::kCircumcircle, base.grid_length = 3;
+  AutoRequest only_grid;
+  only_grid.method = false;
+  auto c = choose_detection(wall, p, base, only_grid);
+  ASSERT_TRUE(c);
+  EXPECT_EQ(c->method, Method::kCircumcircle);
+  AutoRequest only_method;
+  only_method.grid_length = false;
+  c = choose_detection(wall, p, base, only_method);
+  ASSERT_TRUE(c);
+  EXPECT_DOUBLE_EQ(c->grid_length, 3);
+  EXPECT_EQ(c->candidates.size(), 1u);  // CPU: bin only, at the given grid
+}
+
+// Division is worth timing only on the GPU and for triangles large against the radius.
+TEST(AutoChoice, DivisionIsACandidateOnlyWhereItCanWin) {
+  const TriangleMesh wall = make_cylinder(50, 100, 40);
+  EXPECT_EQ(auto_method_candidates(wall, 1, Backend::kCpu).size(), 1u);
+  EXPECT_EQ(auto_method_candidates(wall, 1, Backend::kCuda).size(), 2u);
+  EXPECT_EQ(auto_method_candidates(make_sphere(1, 4), 1, Backend::kCuda).size(), 1u);
+}
+
+}  // namespace
+}  // namespace collido::sim
