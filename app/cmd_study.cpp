@@ -18,6 +18,8 @@ const std::vector<FlagSpec> kFlags = {
     {"backend", true, "cpu | cuda (default cpu; cuda falls back to cpu with a note)"},
     {"meshes", true, "folder of third-party STL files (default tests/data/meshes)"},
     {"only", true, "detect | dynamics: run one half (default both)"},
+    {"scenes", true, "comma list of detection scenes (wall1, wall2, mesh file names without .stl; default all)"},
+    {"max-particles", true, "largest particle count (default 1e5 on the CPU, 1e6 on the GPU)"},
     {"threads", true, "CPU threads (default all cores)"},
     {"help", false, "show this help"},
 };
@@ -49,6 +51,15 @@ int cmd_study(const Args& args) {
   o.backend = sim::usable_backend(wanted, &note);
   if (!note.empty()) std::fprintf(stderr, "collidoscope study: note: %s\n", note.c_str());
   o.mesh_dir = parsed->get("meshes", "tests/data/meshes");
+  for (size_t a = 0, b; parsed->has("scenes") && a <= parsed->get("scenes").size(); a = b + 1) {
+    const std::string list = parsed->get("scenes");
+    b = list.find(',', a);
+    if (b == std::string::npos) b = list.size();
+    if (b > a) o.scenes.push_back(list.substr(a, b - a));
+  }
+  const int64_t max_particles = parsed->get_int("max-particles", 0, &err);
+  if (!err.empty() || max_particles < 0) return usage_error("study", "--max-particles must be a count");
+  o.max_particles = static_cast<size_t>(max_particles);
   o.pool = &pool;
   const auto t0 = std::chrono::steady_clock::now();
   auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The full study and the GPU test suites on the GPU machine, as docs/study.md
 # reports them. Usage (repo root, with the carried prefix of gtest/nlohmann):
-#   bash bench/study_gpu.sh OUT_DIR [tests|study-detect|study-dynamics|bench]...
+#   bash bench/study_gpu.sh OUT_DIR [tests|study-walls|study-meshes|study-dynamics|bench]...
 set -uo pipefail
 out=${1:?OUT_DIR}; shift
 cmake -S . -B build-dev -DCMAKE_BUILD_TYPE=Release -DCMAKE_PREFIX_PATH="$PWD/gpu-carry/prefix" \
@@ -15,9 +15,15 @@ for step in "$@"; do
     tests)
       (build-dev/tests/sim/detect_test; build-dev/tests/sim/dynamics_test) >"$out/gpu_tests.log" 2>&1
       grep -E "PASSED|FAILED|^\[  FAILED" "$out/gpu_tests.log" ;;
-    study-detect)
-      build-dev/app/collidoscope study --backend cuda --only detect --out "$out/detect" >"$out/study_detect.log" 2>&1
-      tail -4 "$out/study_detect.log" ;;
+    study-walls)  # the paper's walls up to 10^6 particles
+      build-dev/app/collidoscope study --backend cuda --only detect --scenes wall1,wall2 --out "$out/walls" \
+        >"$out/study_walls.log" 2>&1
+      tail -4 "$out/study_walls.log" ;;
+    study-meshes)  # the third-party meshes up to 10^5
+      build-dev/app/collidoscope study --backend cuda --only detect --max-particles 100000 \
+        --scenes 3dsmax_export_assimp,plate_holes_trimesh_binary_solid_header,sphere_with_hole_assimp,teapot_trimesh,triangle_with_two_solids_assimp,wuson_assimp \
+        --out "$out/meshes" >"$out/study_meshes.log" 2>&1
+      tail -4 "$out/study_meshes.log" ;;
     study-dynamics)
       build-dev/app/collidoscope study --backend cpu --only dynamics --out "$out/dynamics" >"$out/study_dynamics.log" 2>&1
       tail -4 "$out/study_dynamics.log" ;;

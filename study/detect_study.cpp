@@ -84,10 +84,16 @@ Status run_detect_study(const StudyOptions& o, std::vector<DetectRow>* rows) {
   std::vector<size_t> counts = o.quick ? std::vector<size_t>{10000}
                                        : std::vector<size_t>{1000, 10000, 100000};
   if (!o.quick && cuda) counts.push_back(1000000);
+  if (o.max_particles > 0) {
+    counts.erase(std::remove_if(counts.begin(), counts.end(), [&](size_t n) { return n > o.max_particles; }),
+                 counts.end());
+    if (counts.empty()) counts.push_back(o.max_particles);
+  }
   const int repeats = o.quick ? 2 : 5;
   const sim::Method methods[] = {sim::Method::kBin, sim::Method::kGravity, sim::Method::kCircumcircle,
                                  sim::Method::kMidpoint4};
   for (const Scene& sc : *scenes) {
+    if (!o.scenes.empty() && std::find(o.scenes.begin(), o.scenes.end(), sc.name) == o.scenes.end()) continue;
     // The particle sets and the reference's contacts, once per scene.
     struct Set {
       std::string placement;

@@ -21,6 +21,8 @@ struct StudyOptions {
   bool quick = false;                    // the matrix that runs in minutes on 2 cores
   sim::Backend backend = sim::Backend::kCpu;
   std::string mesh_dir = "tests/data/meshes";  // third-party meshes (all .stl files in it)
+  std::vector<std::string> scenes;       // detection scenes to run (names); empty = all
+  size_t max_particles = 0;              // largest particle count (0 = 10^5 on the CPU, 10^6 on the GPU)
   sim::ThreadPool* pool = nullptr;       // CPU threads; nullptr = default pool
   std::function<void(const std::string&)> progress;  // one line per finished group
 };
