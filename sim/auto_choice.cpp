@@ -65,7 +65,10 @@ void time_candidate(const TriangleMesh& mesh, const Particles& sample, const Det
 Expected<AutoChoice> choose_detection(const TriangleMesh& mesh, const Particles& particles,
                                       const DetectConfig& base, const AutoRequest& req) {
   if (!(base.r_max > 0)) return invalid_argument("automatic choice: r_max must be positive");
-  const Particles sample = sample_of(particles, std::max<size_t>(req.max_sample, 1));
+  const bool gpu = base.backend == Backend::kCuda;
+  const size_t max_sample = req.max_sample ? req.max_sample : (gpu ? 4000000 : 200000);
+  const int repeats = req.repeats > 0 ? req.repeats : (gpu ? 9 : 3);
+  const Particles sample = sample_of(particles, max_sample);
   std::vector<Method> methods =
       req.method ? auto_method_candidates(mesh, base.r_max, base.backend) : std::vector<Method>{base.method};
   std::vector<double> grids;
@@ -82,7 +85,7 @@ Expected<AutoChoice> choose_detection(const TriangleMesh& mesh, const Particles&
     for (Traversal t : traversals)
       for (double g : grids) {
         AutoCandidate c{m, t, g, 0, 0, {}};
-        time_candidate(mesh, sample, base, std::max(req.repeats, 1), &c);
+        time_candidate(mesh, sample, base, repeats, &c);
         choice.candidates.push_back(c);
       }
   }
