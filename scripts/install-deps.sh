@@ -21,6 +21,7 @@ packages=(
   libcurl4-openssl-dev                 # the service tests' HTTP client
   chromium                             # browser tests of the web UI (headless)
   wrk                                  # HTTP load benchmark (bench/)
+  python3-matplotlib                   # the study's charts (bench/study_charts.py)
 )
 # The web UI's packages (scripts/install-web.sh) need node and npm: Debian's,
 # unless a node with npm is already installed (e.g. from NodeSource).

@@ -37,4 +37,12 @@ for f in loaders/STLLoader.js controls/OrbitControls.js; do
   fi
 done
 cp "$nm/uplot/dist/uPlot.esm.js" "$nm/uplot/dist/uPlot.min.css" "$nm/uplot/LICENSE" "$vendor/uplot/"
-echo "install-web: $(cd "$vendor" && find . -type f | wc -l) files in web/$vendor"
+# The study's charts (committed under docs/img/study/) for the methods page.
+rm -rf static/study
+for set in cpu gpu; do
+  if [ -d "$root/docs/img/study/$set" ]; then
+    mkdir -p "static/study/$set"
+    cp "$root/docs/img/study/$set/"*.png "$root/docs/img/study/$set/summary.json" "static/study/$set/"
+  fi
+done
+echo "install-web: $(cd "$vendor" && find . -type f | wc -l) files in web/$vendor, study charts: $(find static/study -name '*.png' 2>/dev/null | wc -l)"

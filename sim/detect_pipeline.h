@@ -184,6 +184,8 @@ class GridDetector final : public Detector {
         backend_.resize(p_cell_end_, wall_.grid.buckets);
       }
     }
+    // Both precisions size the error band (float counts the pairs it decides in it).
+    wall_scale_ = wall_band_scale(mesh, wall_.origin);
     if (created_precision_ == Precision::kExact) prepare_exact(mesh);
     grow_pairs(std::max<size_t>(capacity_ / 4, 4096));
     backend_.resize(pair_counter_, 2);
@@ -200,7 +202,6 @@ class GridDetector final : public Detector {
     std::vector<TriangleD> host(mesh.triangles.size());
     for (size_t t = 0; t < host.size(); ++t)
       host[t] = {mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2)};
-    wall_scale_ = wall_band_scale(mesh, wall_.origin);
     WallIndex<B>::upload(backend_, tris_exact_, host);
     backend_.resize(particles_d_, std::max<size_t>(capacity_, 1));
   }
@@ -482,7 +483,7 @@ class GridDetector final : public Detector {
   std::vector<uint32_t> source_ids_;
   std::vector<PackedParticle> staging_;  // host copy of a frame's particles, reused
   std::vector<ParticleD> staging_d_;     // the same in world double (precision exact)
-  float wall_scale_ = 0;                 // sizes the float error band (prepare_exact)
+  float wall_scale_ = 0;                 // sizes the float error band (wall_band_scale)
   Buf<ParticleD> particles_d_;
   Buf<TriangleD> tris_exact_;            // original triangles, world double, mesh order
 

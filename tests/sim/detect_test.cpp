@@ -292,6 +292,7 @@ void float_precision_flags_its_doubts() {
     mc.precision = Precision::kExact;
     const DetectResult ex = run(wall, p, mc);
     EXPECT_GT(ex.band_pairs, 0u);
+    EXPECT_EQ(ex.band_pairs, fl.band_pairs) << "both precisions see the same band";
     const ContactDiff none = compare_contacts(wall, p, ref.contacts, ex.contacts, 0.0);
     EXPECT_EQ(none.missed + none.invented + none.borderline, 0u) << to_string(c.method);
   }

@@ -518,7 +518,13 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     await page.click('nav >> text=Methods');
     await page.getByRole('heading', { name: 'Methods', level: 1 }).waitFor();
     await page.getByRole('row', { name: /midpoint4/ }).waitFor();
-    await page.getByText('Not available yet.').waitFor();
+    // The study's charts (installed from docs/img/study/): a Pareto chart that loads, and the paper's Table 4.
+    await page.getByRole('heading', { name: 'Full study, NVIDIA H200' }).waitFor();
+    const pareto = page.locator('img[src*="/ui/study/gpu/pareto_"]').first();
+    await pareto.waitFor();
+    await page.waitForFunction((el) => el.complete && el.naturalWidth > 0, await pareto.elementHandle());
+    await page.locator('img[src="/ui/study/gpu/paper_table4.png"]').waitFor();
+    await page.getByText(/method auto picked bin\/particle/).first().waitFor();
     await checkA11y(page, 'methods');
     await shot(page, '13-methods');
   });

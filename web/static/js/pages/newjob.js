@@ -77,7 +77,10 @@ export async function render(main, ctx, modelParam) {
   const duration = num({ min: '0.001', step: 'any', value: '2' });
   const fps = num({ min: '0.001', step: 'any', value: '24' });
   // "reference" is the engine's test oracle: scenes may not name it.
-  const methods = (algorithms.methods || []).filter((m) => m.name !== 'reference');
+  // "auto" times the candidates on the job's particles and keeps the fastest (all are exact).
+  const methods = [{ name: 'auto', description: 'Measured on your particles when the job starts: the fastest exact '
+    + 'method and grid length for this wall (the result page says what was picked and why).' },
+  ...(algorithms.methods || []).filter((m) => m.name !== 'reference')];
   const method = select(methods.map((m) => [m.name, m.name]), 'bin');
   const methodHint = h('p', { class: 'hint', id: 'method-hint', 'aria-live': 'polite' });
   method.setAttribute('aria-describedby', 'method-hint');
@@ -114,6 +117,7 @@ export async function render(main, ctx, modelParam) {
       duration: n(duration, 'Duration'),
       fps: n(fps, 'Frames per second'),
       method: method.value,
+      ...(method.value === 'auto' ? { grid_length: 'auto' } : {}),
       backend: backend.value,
     };
     if (vtp.checked) scene.output = { vtp: true };
