@@ -171,7 +171,7 @@ def pareto_chart(out, key, n, rs):
     ax.set_ylim(-0.4, max(top * 2.5, 3))  # headroom: symlog autoscale clips the top row
     ax.grid(True, which="major", alpha=0.3)
     plain_log(ax, "x")
-    ax.set_xlabel("time per frame (ms, median)")
+    ax.set_xlabel("time per frame (ms, fastest of the timed frames)")
     ax.set_ylabel("contact error: missed + invented (+ float's unchecked\nband pairs) per $10^5$ reference contacts")
     ax.set_title(f"{scene}, {placement} placement, {n:,.0f} particles, {backend}")
     present = {r["method"] for r in rs}

@@ -56,8 +56,7 @@ void time_candidate(const TriangleMesh& mesh, const Particles& sample, const Det
     }
     if (k) times.push_back(r.times.frame_ms);
   }
-  std::sort(times.begin(), times.end());
-  c->frame_ms = times[times.size() / 2];
+  c->frame_ms = *std::min_element(times.begin(), times.end());
 }
 
 }  // namespace
@@ -67,7 +66,7 @@ Expected<AutoChoice> choose_detection(const TriangleMesh& mesh, const Particles&
   if (!(base.r_max > 0)) return invalid_argument("automatic choice: r_max must be positive");
   const bool gpu = base.backend == Backend::kCuda;
   const size_t max_sample = req.max_sample ? req.max_sample : (gpu ? 4000000 : 200000);
-  const int repeats = req.repeats > 0 ? req.repeats : (gpu ? 9 : 3);
+  const int repeats = req.repeats > 0 ? req.repeats : (gpu ? 9 : 5);
   const Particles sample = sample_of(particles, max_sample);
   std::vector<Method> methods =
       req.method ? auto_method_candidates(mesh, base.r_max, base.backend) : std::vector<Method>{base.method};

@@ -26,7 +26,10 @@ struct AutoRequest {
   // under a millisecond and a subset's fixed costs would weigh differently, and
   // 2e5 on the CPU).
   size_t max_sample = 0;
-  int repeats = 0;  // timed frames per candidate, the median counts (0 = 9 on the GPU, 3 on the CPU)
+  // Timed frames per candidate (0 = 9 on the GPU, 5 on the CPU). The fastest
+  // frame counts: the work is deterministic, so anything slower is interference
+  // (other processes, clocks), which the minimum filters best.
+  int repeats = 0;
   // Dynamics walks the wall per particle: time only the particle traversal.
   bool particle_traversal_only = false;
 };

@@ -34,7 +34,7 @@ struct DetectRow {
   std::string method, traversal, precision;  // precision: exact | float | double (reference)
   double grid_factor = 0, grid_length = 0;  // grid length / r_max, and in world units
   size_t triangles_used = 0;
-  double prepare_ms = 0, frame_ms = 0, extra_bytes_per_particle = 0;
+  double prepare_ms = 0, frame_ms = 0, extra_bytes_per_particle = 0;  // frame: the fastest of 5 (quick) or 9
   uint64_t contacts = 0, missed = 0, invented = 0, band_pairs = 0;
   double max_distance_error = 0;  // over shared pairs, in r_max
   std::string verdict;            // exact | loses_contacts | invents_contacts | failed

@@ -61,6 +61,9 @@ function paretoPicker(set, groups) {
         `Time per frame against contact error: ${label(g)}`),
       h('p', { class: 'hint' }, verdict));
   };
+  // Open on the paper's wall1 with particles at the surface, where the methods differ most.
+  const first = groups.findIndex((g) => g.scene === 'wall1' && g.placement === 'near');
+  if (first >= 0) pick.value = String(first);
   pick.addEventListener('change', show);
   show();
   return h('div', { class: 'stack' }, h('label', { for: `pareto-${set}` }, 'Scene'), pick, slot);
