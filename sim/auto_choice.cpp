@@ -17,6 +17,20 @@ std::vector<Method> auto_method_candidates(const TriangleMesh& mesh, double r_ma
   return out;
 }
 
+Status fastest_frame_ms(Detector& det, int min_frames, double* ms, DetectResult* last) {
+  DetectResult r;
+  if (Status s = det.detect(&r); !s) return s;  // warm-up
+  double best = 1e300, spent = 0;
+  for (int k = 0; k < kAutoMaxFrames && (k < min_frames || spent < kAutoTimingBudgetMs); ++k) {
+    if (Status s = det.detect(&r); !s) return s;
+    best = std::min(best, r.times.frame_ms);
+    spent += r.times.frame_ms;
+  }
+  *ms = best;
+  if (last) *last = std::move(r);
+  return Status::ok();
+}
+
 namespace {
 
 // A seeded subset of at most n particles (all of them when there are fewer).
@@ -47,16 +61,7 @@ void time_candidate(const TriangleMesh& mesh, const Particles& sample, const Det
     c->error = s.message();
     return;
   }
-  DetectResult r;
-  std::vector<double> times;
-  for (int k = 0; k <= repeats; ++k) {  // the first frame warms up
-    if (Status s = (*det)->detect(&r); !s) {
-      c->error = s.message();
-      return;
-    }
-    if (k) times.push_back(r.times.frame_ms);
-  }
-  c->frame_ms = *std::min_element(times.begin(), times.end());
+  if (Status s = fastest_frame_ms(**det, repeats, &c->frame_ms); !s) c->error = s.message();
 }
 
 }  // namespace

@@ -26,9 +26,11 @@ struct AutoRequest {
   // under a millisecond and a subset's fixed costs would weigh differently, and
   // 2e5 on the CPU).
   size_t max_sample = 0;
-  // Timed frames per candidate (0 = 9 on the GPU, 5 on the CPU). The fastest
-  // frame counts: the work is deterministic, so anything slower is interference
-  // (other processes, clocks), which the minimum filters best.
+  // Timed frames per candidate: at least this many (0 = 9 on the GPU, 5 on the
+  // CPU) and at least kAutoTimingBudgetMs of frames, at most kAutoMaxFrames.
+  // The fastest frame counts: the work is deterministic, so anything slower is
+  // interference (other processes, clocks), which the minimum filters best,
+  // given enough frames that one ran undisturbed.
   int repeats = 0;
   // Dynamics walks the wall per particle: time only the particle traversal.
   bool particle_traversal_only = false;
@@ -50,6 +52,14 @@ struct AutoChoice {
   std::vector<AutoCandidate> candidates;  // as measured, the chosen one among them
   std::string reason;                     // one line: what was chosen, among what, and why
 };
+
+inline constexpr double kAutoTimingBudgetMs = 20;
+inline constexpr int kAutoMaxFrames = 200;
+
+// The fastest of at least `min_frames` frames of `det` (after one warm-up),
+// timing for at least kAutoTimingBudgetMs and at most kAutoMaxFrames frames:
+// how the automatic choice and the study time a setting.
+Status fastest_frame_ms(Detector& det, int min_frames, double* ms, DetectResult* last = nullptr);
 
 // The grid lengths tried, in units of r_max (the study's grid).
 inline constexpr double kAutoGridFactors[] = {1.0, 1.5, 2.0, 3.0};

@@ -49,18 +49,12 @@ Expected<std::vector<Scene>> study_scenes(const StudyOptions& o) {
   return out;
 }
 
-// Times `repeats` frames (after one warm-up) and returns the fastest in ms: the
-// work is deterministic, so a slower frame only measures interference, and the
-// automatic choice (sim/auto_choice.h) counts the same way.
+// Times a setting as the automatic choice does (sim::fastest_frame_ms), so the
+// two measure alike: the fastest of at least `repeats` frames and 20 ms.
 Status time_frames(sim::Detector& det, int repeats, double* ms, uint64_t* band) {
-  sim::DetectResult r;
   det.set_frame_options(false, false);
-  std::vector<double> t;
-  for (int k = 0; k <= repeats; ++k) {
-    if (Status s = det.detect(&r); !s) return s;
-    if (k) t.push_back(r.times.frame_ms);
-  }
-  *ms = *std::min_element(t.begin(), t.end());
+  sim::DetectResult r;
+  if (Status s = sim::fastest_frame_ms(det, repeats, ms, &r); !s) return s;
   *band = r.band_pairs;
   return Status::ok();
 }
