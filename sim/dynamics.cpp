@@ -84,12 +84,18 @@ TimeStepInfo time_step_physics(const DynamicsConfig& c, const ParticleSet& p,
                                const Bounds3d& wall_box) {
   const double r_min = *std::min_element(p.r.begin(), p.r.end());
   const double r_max = *std::max_element(p.r.begin(), p.r.end());
-  double r_sum = 0, v_max = 0;
+  double r_sum = 0, v_max = 0, r3_sum = 0;
   for (size_t i = 0; i < p.size(); ++i) {
     r_sum += p.r[i];
+    r3_sum += p.r[i] * p.r[i] * p.r[i];
     v_max = std::max(v_max, std::sqrt(p.vx[i] * p.vx[i] + p.vy[i] * p.vy[i] + p.vz[i] * p.vz[i]));
   }
-  return contact_time_step(c, r_min, r_max, r_sum / double(p.size()), v_max, wall_box.extent());
+  TimeStepInfo ts = contact_time_step(c, r_min, r_max, r_sum / double(p.size()), v_max, wall_box.extent());
+  // With particle contacts one particle may gather its neighbours' energy, so
+  // only the total is bounded: every particle at the speed bound at most.
+  const double mass = c.material.density * 4.0 / 3.0 * M_PI * r3_sum;
+  ts.kinetic_bound = 0.5 * mass * ts.speed_bound * ts.speed_bound;
+  return ts;
 }
 
 // The fall across the wall's box along gravity (m/s) and the speed the automatic
@@ -164,6 +170,7 @@ TimeStepInfo contact_time_step(const DynamicsConfig& c, double r_min, double r_m
   ts.explicit_step = c.time_step;
   ts.beyond_stable = c.time_step > ts.critical_step;
   ts.speed_bound = v_max + fall_speed(c, wall_extent);
+  ts.particle_contacts = c.particle_contacts;
   return ts;
 }
 
@@ -184,8 +191,16 @@ FrameWarnings frame_warnings(const FrameStats& st, const TimeStepInfo& ts) {
     std::snprintf(line, sizeof line, "%llu particles non-finite: the run blew up",
                   static_cast<unsigned long long>(st.invalid));
     w.message = line;
+  } else if (ts.particle_contacts && ts.kinetic_bound > 0 &&
+             st.kinetic > kRunawaySpeedFactor * kRunawaySpeedFactor * ts.kinetic_bound) {
+    w.blow_up = true;
+    std::snprintf(line, sizeof line,
+                  "the particles hold %.3g J of kinetic energy, %.1f x what the scene's energy allows "
+                  "(%.3g J): the step is unstable",
+                  st.kinetic, st.kinetic / ts.kinetic_bound, ts.kinetic_bound);
+    w.message = line;
   } else if (const double v = std::max(st.max_speed, st.peak_speed);
-             ts.speed_bound > 0 && v > kRunawaySpeedFactor * ts.speed_bound) {
+             !ts.particle_contacts && ts.speed_bound > 0 && v > kRunawaySpeedFactor * ts.speed_bound) {
     w.blow_up = true;
     std::snprintf(line, sizeof line,
                   "a particle moved at %.3g m/s; %.1f x what the scene's energy allows (%.3g m/s): "

@@ -88,6 +88,10 @@ struct TimeStepInfo {
   // m/s: the fastest speed the scene's energy allows (the fastest initial speed
   // plus a fall across the wall's box); contacts only take energy away.
   double speed_bound = 0;
+  // J: the most kinetic energy all particles together may hold (each at
+  // speed_bound); with particle contacts only the total is bounded. 0 = unknown.
+  double kinetic_bound = 0;
+  bool particle_contacts = false;
 };
 
 // What one frame ended with, for the stats file and the progress line.
@@ -177,7 +181,9 @@ struct FrameWarnings {
   bool tunnel_risk = false;  // a step or an overlap deep enough for a centre to cross a wall
   std::string message;       // one line naming what was seen, empty when healthy
 };
-// Speeds above this multiple of TimeStepInfo::speed_bound mean energy was created.
+// Speeds above this multiple of TimeStepInfo::speed_bound (without particle
+// contacts; with them, kinetic energy above its square times kinetic_bound)
+// mean energy was created.
 inline constexpr double kRunawaySpeedFactor = 1.25;
 // A fixed step above this share of the critical step is flagged as a blow-up risk.
 inline constexpr double kUnstableStepShare = 0.95;
