@@ -40,18 +40,6 @@ const std::vector<FlagSpec> kFlags = {
     {"help", false, "show this help"},
 };
 
-std::vector<std::string> split(const std::string& s) {
-  std::vector<std::string> out;
-  size_t pos = 0;
-  while (pos <= s.size()) {
-    size_t c = s.find(',', pos);
-    out.push_back(s.substr(pos, c == std::string::npos ? std::string::npos : c - pos));
-    if (c == std::string::npos) break;
-    pos = c + 1;
-  }
-  return out;
-}
-
 double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   return v.empty() ? 0 : v[v.size() / 2];
@@ -140,19 +128,19 @@ int bench_detect(const Args& args) {
   if (!(r_lo > 0 && r_hi >= r_lo)) return usage_error("bench detect", "radii must satisfy 0 < A <= B");
 
   std::vector<sim::Method> methods;
-  for (const auto& m : split(parsed->get("methods", "gravity,circumcircle,midpoint4,bin"))) {
+  for (const auto& m : split_list(parsed->get("methods", "gravity,circumcircle,midpoint4,bin"))) {
     sim::Method mm;
     if (!sim::parse_method(m, &mm)) return usage_error("bench detect", "unknown method '" + m + "'");
     methods.push_back(mm);
   }
   std::vector<sim::Traversal> traversals;
-  for (const auto& t : split(parsed->get("traversals", "particle,wall"))) {
+  for (const auto& t : split_list(parsed->get("traversals", "particle,wall"))) {
     sim::Traversal tt;
     if (!sim::parse_traversal(t, &tt)) return usage_error("bench detect", "unknown traversal '" + t + "'");
     traversals.push_back(tt);
   }
   std::vector<sim::Precision> precisions;
-  for (const auto& p : split(parsed->get("precisions", "exact,float"))) {
+  for (const auto& p : split_list(parsed->get("precisions", "exact,float"))) {
     sim::Precision pp;
     if (!sim::parse_precision(p, &pp)) return usage_error("bench detect", "unknown precision '" + p + "'");
     precisions.push_back(pp);
@@ -163,7 +151,7 @@ int bench_detect(const Args& args) {
     const std::string kind = parsed->get("sweep");
     if (kind != "grid" && kind != "triangles") return usage_error("bench detect", "--sweep is grid or triangles");
     std::vector<double> factors;
-    for (const auto& f : split(parsed->get("grid-lengths", "2,3,4,5,6,7"))) factors.push_back(std::atof(f.c_str()));
+    for (const auto& f : split_list(parsed->get("grid-lengths", "2,3,4,5,6,7"))) factors.push_back(std::atof(f.c_str()));
     for (double f : factors)
       if (!(f > 0)) return usage_error("bench detect", "--grid-lengths must be positive numbers");
     return run_sweep(kind, base, methods, traversals, static_cast<size_t>(nmax), r_lo, r_hi, repeats,

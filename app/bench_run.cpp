@@ -86,9 +86,7 @@ int bench_run(const Args& args) {
     return usage_error("bench run", "--pairs must be on, off or both");
   std::vector<uint64_t> counts;
   {
-    std::stringstream ss(p->get("counts", "1e4,1e5,1e6"));
-    std::string item;
-    while (std::getline(ss, item, ',')) {
+    for (const std::string& item : split_list(p->get("counts", "1e4,1e5,1e6"))) {
       char* end = nullptr;
       const double v = std::strtod(item.c_str(), &end);
       if (end == item.c_str() || *end || !(v >= 1 && v <= 2e8))

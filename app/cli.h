@@ -57,6 +57,10 @@ void print_help(const std::string& usage, const std::vector<FlagSpec>& specs);
 // Prints "collidoscope <command>: <message>" to stderr and returns kExitUsage.
 int usage_error(const std::string& command, const std::string& message);
 
+// A flag's comma-separated list ("a,b,c"); empty items are kept, so a
+// stray comma reaches the caller's check as "".
+std::vector<std::string> split_list(const std::string& s);
+
 // Bytes for people: "512 B", "86.9 MiB", "1.4 GiB".
 std::string human_bytes(double bytes);
 

@@ -51,12 +51,7 @@ int cmd_study(const Args& args) {
   o.backend = sim::usable_backend(wanted, &note);
   if (!note.empty()) std::fprintf(stderr, "collidoscope study: note: %s\n", note.c_str());
   o.mesh_dir = parsed->get("meshes", "tests/data/meshes");
-  for (size_t a = 0, b; parsed->has("scenes") && a <= parsed->get("scenes").size(); a = b + 1) {
-    const std::string list = parsed->get("scenes");
-    b = list.find(',', a);
-    if (b == std::string::npos) b = list.size();
-    if (b > a) o.scenes.push_back(list.substr(a, b - a));
-  }
+  if (parsed->has("scenes")) o.scenes = split_list(parsed->get("scenes"));
   const int64_t max_particles = parsed->get_int("max-particles", 0, &err);
   if (!err.empty() || max_particles < 0) return usage_error("study", "--max-particles must be a count");
   o.max_particles = static_cast<size_t>(max_particles);

@@ -247,6 +247,7 @@ class JobRunner {
     auto sim_or = sim::Simulation::create(wall_, scene_.dynamics, *particles);
     if (!sim_or) return sim_or.status();
     sim_ = std::move(*sim_or);
+    result_.grid_length = sim_->wall_info().grid_length;  // as the engine prepared it
     particles->resize(0);
     const sim::TimeStepInfo& ts = sim_->time_step_info();
     result_.time_step = ts;
@@ -280,7 +281,6 @@ class JobRunner {
       note("automatic choice: " + choice->reason);
     }
     result_.method = sim::to_string(d.method);
-    result_.grid_length = d.grid_length > 0 ? d.grid_length : 2 * scene_.particles.r_max;
     return Status::ok();
   }
 

@@ -4,7 +4,7 @@
 // with the double-precision reference at zero tolerance.
 #include <algorithm>
 #include <cmath>
-#include <dirent.h>
+#include <filesystem>
 
 #include "sim/accuracy.h"
 #include "sim/auto_choice.h"
@@ -27,15 +27,10 @@ Expected<std::vector<Scene>> study_scenes(const StudyOptions& o) {
   out.push_back({"wall1", sim::make_cylinder(50, 100, 40), 0.5, 1.0});
   out.push_back({"wall2", sim::make_wall2(), 0.5, 1.0});
   std::vector<std::string> files;
-  if (DIR* d = opendir(o.mesh_dir.c_str())) {
-    while (dirent* e = readdir(d)) {
-      const std::string n = e->d_name;
-      if (n.size() > 4 && n.substr(n.size() - 4) == ".stl") files.push_back(n);
-    }
-    closedir(d);
-  } else {
-    return invalid_argument("study: cannot read the mesh folder " + o.mesh_dir);
-  }
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator(o.mesh_dir, ec))
+    if (e.path().extension() == ".stl") files.push_back(e.path().filename().string());
+  if (ec) return invalid_argument("study: cannot read the mesh folder " + o.mesh_dir + " (" + ec.message() + ")");
   std::sort(files.begin(), files.end());
   for (const auto& f : files) {
     if (o.quick && f != "teapot_trimesh.stl") continue;  // one third-party mesh is enough for a quick look

@@ -130,7 +130,6 @@ Status run(const Setup& s, double dt, Outcome* out) {
   }
   out->e_end = st.total_energy();
   out->escaped = st.escaped, out->invalid = st.invalid, out->steps = simu.steps_taken();
-  std::replace(out->warnings.begin(), out->warnings.end(), ',', ' ');  // one CSV field
   return simu.download(&out->end, &out->flags);
 }
 

@@ -54,15 +54,17 @@ struct DynamicsRow {
   double restitution_error = -1; // relative, bounce scene (-1: not measured)
   double friction_error = -1;    // relative, bounce scene (-1: not measured)
   uint64_t escaped = 0, tunnelled = 0, invalid = 0;
-  std::string warnings;          // what the engine reported (sim::frame_warnings), ';'-joined
+  std::string warnings;          // what the engine reported (sim::frame_warnings), '; '-joined
   std::string verdict;           // stable | blows_up | tunnels | loses_contacts
 };
 
 Status run_detect_study(const StudyOptions& options, std::vector<DetectRow>* rows);
 Status run_dynamics_study(const StudyOptions& options, std::vector<DynamicsRow>* rows);
 
-// Writes DIR/study_detect.csv, DIR/study_dynamics.csv and DIR/study.json
-// (both tables plus the machine), each through a temporary name.
+// Writes DIR/study_detect.csv, DIR/study_dynamics.csv (RFC 4180 quoting;
+// measurements with no value, such as a blown-up run's trajectory error, left
+// empty) and DIR/study.json (both tables plus the machine, the same rows),
+// each through a temporary name.
 Status write_study(const std::string& dir, const std::vector<DetectRow>& detect,
                    const std::vector<DynamicsRow>& dynamics, const std::string& machine);
 

@@ -49,6 +49,20 @@ std::string read_file(const std::string& path) {
   return s.str();
 }
 
+// A raw TCP connection to the server, for what libcurl will not send; -1 on failure.
+int connect_loopback(uint16_t port) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_port = htons(port);
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  if (fd < 0 || ::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) {
+    if (fd >= 0) ::close(fd);
+    return -1;
+  }
+  return fd;
+}
+
 // A scene that runs in about a second on one thread, rendered small.
 json tiny_job(const json& wall, int particles = 40, double duration = 0.3) {
   return {{"scene",
@@ -456,12 +470,8 @@ TEST_F(ServiceTest, ClientClosingMidVideoLeavesTheServerRunning) {
   }
   ASSERT_EQ(c.call("PUT", stl, bin).status, 200);
   for (int round = 0; round < 5; ++round) {
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_port = htons(server_->port());
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    ASSERT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+    const int fd = connect_loopback(server_->port());
+    ASSERT_GE(fd, 0);
     const std::string req = "GET " + stl + " HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " + c.token + "\r\n\r\n";
     ASSERT_EQ(::send(fd, req.data(), req.size(), 0), ssize_t(req.size()));
     char buf[512];
@@ -477,12 +487,8 @@ TEST_F(ServiceTest, ClientClosingMidVideoLeavesTheServerRunning) {
 // Pistache 0.0.5 answers a request without a Connection header "Connection: Close";
 // HTTP/1.1 keeps it open, and so does the server: two requests on one connection.
 TEST_F(ServiceTest, AnHttp11ConnectionWithoutAConnectionHeaderStaysOpen) {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_port = htons(server_->port());
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  ASSERT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+  const int fd = connect_loopback(server_->port());
+  ASSERT_GE(fd, 0);
   timeval tv{10, 0};  // bounded: a server that closed or never answers fails, not hangs
   ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
   const std::string req = "GET /api/v1/health HTTP/1.1\r\nHost: x\r\n\r\n";

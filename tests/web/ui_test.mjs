@@ -502,7 +502,7 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
   await step('phone width: every page fits', async () => {
     await page.setViewportSize(PHONE);
     for (const [hash, heading, name] of [['#/jobs/' + jobId, 'test cup: 40 particles', '10-phone-result'],
-      ['#/new', 'New job', '11-phone-new-job'], ['#/models', 'Models', '12-phone-models'], ['#/jobs', 'Jobs', null]]) {
+      ['#/new', 'New job', '11-phone-new-job'], ['#/models', 'Models', '12-phone-models'], ['#/jobs', 'Jobs', null], ['#/methods', 'Methods', '14-phone-methods']]) {
       await page.goto(`${base}/${hash}`);
       await page.getByRole('heading', { name: heading, level: 1 }).waitFor();
       await page.waitForLoadState('networkidle');
