@@ -2,20 +2,25 @@
 // line: flags into a job spec, the job's progress into a bar or plain lines.
 // `collidoscope job-exec SPEC.json`: the same job in a child process, as the
 // service and cluster nodes start it (job/child.h speaks its protocol).
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <sys/prctl.h>
 
+#include <cerrno>
 #include <csignal>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 
 #include "app/cli.h"
 #include "app/commands.h"
+#include "common/process_memory.h"
 #include "job/child.h"
 #include "job/job.h"
+#include "job/run_dir.h"
 
 namespace collido::app {
 
@@ -208,6 +213,11 @@ namespace {
 
 const std::vector<FlagSpec> kExecFlags = {
     {"progress-fd", true, "file descriptor for JSON progress lines (job/child.h)"},
+    {"progress-file", true,
+     "append the progress lines to this file instead (a cluster job: the service reads it)"},
+    {"resume", false,
+     "continue the run in the spec's directory when it holds one (a requeued or preempted "
+     "cluster job); else start as the spec says"},
     {"threads", true, "CPU threads (overrides the spec)"},
     {"help", false, "this help"},
 };
@@ -234,14 +244,24 @@ int cmd_job_exec(const Args& args) {
   auto p = parse_args(args, kExecFlags, &err);
   if (!p) return usage_error("job-exec", err);
   if (p->has("help")) {
-    print_help("usage: collidoscope job-exec SPEC.json [--progress-fd N]\n\n"
+    print_help("usage: collidoscope job-exec SPEC.json [--progress-fd N | --progress-file PATH] "
+               "[--resume]\n\n"
                "Runs one job from its spec (job/job.h; the service and cluster nodes start this).",
                kExecFlags);
     return kExitOk;
   }
   if (p->positional().size() != 1) return usage_error("job-exec", "one spec file expected");
-  const int fd = int(p->get_int("progress-fd", -1, &err));
+  int fd = int(p->get_int("progress-fd", -1, &err));
   if (!err.empty()) return usage_error("job-exec", err);
+  const std::string progress_file = p->get("progress-file", "");
+  if (fd >= 0 && !progress_file.empty())
+    return usage_error("job-exec", "--progress-fd and --progress-file: choose one");
+  if (!progress_file.empty()) {
+    // Appended: a requeued job's lines follow its first attempt's.
+    fd = ::open(progress_file.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+    if (fd < 0)
+      return usage_error("job-exec", progress_file + ": " + std::strerror(errno));
+  }
   auto report = [&](const Status& st) {
     write_all(fd, job::status_line(st));
     if (!st) std::fprintf(stderr, "collidoscope job-exec: %s\n", st.message().c_str());
@@ -254,10 +274,12 @@ int cmd_job_exec(const Args& args) {
                                                             spec.status().message()));
   if (p->has("threads")) spec->threads = int(p->get_int("threads", 0, &err));
   if (!err.empty()) return usage_error("job-exec", err);
+  if (p->has("resume") && job::holds_a_run(spec->out_dir)) spec->dir_policy = job::DirPolicy::kResume;
   // A job whose parent (a service worker) is gone must not run on beside the
   // one the restarted service resumes in the same directory: it dies with its
-  // parent, leaving its last checkpoint. Started by no one (a shell), no matter.
-  if (fd >= 0) {
+  // parent, leaving its last checkpoint. Started by no one (a shell), no matter;
+  // on a cluster the scheduler owns the process.
+  if (fd >= 0 && progress_file.empty()) {
     const pid_t parent = getppid();
     prctl(PR_SET_PDEATHSIG, SIGKILL);
     if (getppid() != parent) return kExitFailure;  // the parent died before prctl
@@ -267,7 +289,11 @@ int cmd_job_exec(const Args& args) {
   std::signal(SIGTERM, on_terminate);
   job::Hooks hooks;
   hooks.cancel = &g_cancel;
-  hooks.progress = [&](const job::Progress& pr) { write_all(fd, job::progress_line(pr)); };
+  // Each report carries the job's peak memory so far: what a scheduler's kill
+  // (time limit, out of memory) leaves the service to record.
+  hooks.progress = [&](const job::Progress& pr) {
+    write_all(fd, job::progress_line(pr, uint64_t(own_process_memory().peak_resident_bytes)));
+  };
   hooks.note = [&](const std::string& line) { write_all(fd, job::note_line(line)); };
   const job::JobResult r = job::run_job(*spec, hooks);
   return report(r.status);

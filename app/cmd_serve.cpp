@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
+#include <sstream>
 #include <string>
 #include <thread>
 
@@ -52,6 +53,22 @@ const std::vector<FlagSpec>& serve_flags() {
       {"retrain-every", true,
        "finished jobs of a backend after which the cost model retrains (default 25; 0 = only "
        "when an administrator asks)"},
+      {"executor", true,
+       "where jobs run: local (worker processes here, the default) or slurm (sbatch to a "
+       "cluster; docs/deploy.md)"},
+      {"slurm-partition", true, "sbatch --partition of the jobs (default: the cluster's)"},
+      {"slurm-account", true, "sbatch --account of the jobs"},
+      {"slurm-gpus", false, "the nodes have GPUs: backend \"auto\" jobs run on CUDA"},
+      {"slurm-gres", true, "sbatch --gres of a CUDA job (default gpu:1)"},
+      {"slurm-cpus", true, "CPUs per job: --cpus-per-task and the job's threads (default 4)"},
+      {"slurm-time-limit", true,
+       "time limit of a job whose time is not predicted, minutes (default 60); a predicted one "
+       "gets 2 x its 90th percentile + 5 min"},
+      {"slurm-args", true, "more sbatch flags, space-separated (e.g. \"--qos=normal\")"},
+      {"slurm-poll", true, "seconds between squeue calls (default 2)"},
+      {"slurm-binary", true,
+       "the collidoscope binary on the nodes (default: this one's path; the data folder must "
+       "be at the same path there)"},
       {"demo", false, "start with the demo account and a demo job (make run)"},
       {"help", false, "this help"},
   };
@@ -86,7 +103,18 @@ int cmd_serve(const Args& args) {
   const int64_t max_queued = parsed->get_int("max-queued", 8, &error);
   const double memory_gb = parsed->get_double("memory-gb", 0, &error);
   const int64_t retrain_every = parsed->get_int("retrain-every", 25, &error);
+  const int64_t slurm_cpus = parsed->get_int("slurm-cpus", 4, &error);
+  const double slurm_minutes = parsed->get_double("slurm-time-limit", 60, &error);
+  const double slurm_poll = parsed->get_double("slurm-poll", 2, &error);
   if (!error.empty()) return usage_error(cmd, error);
+  const std::string executor = parsed->get("executor", "local");
+  if (executor != "local" && executor != "slurm")
+    return usage_error(cmd, "--executor must be local or slurm");
+  if (slurm_cpus < 1 || slurm_cpus > 4096) return usage_error(cmd, "--slurm-cpus must be in 1..4096");
+  if (!(slurm_minutes >= 1 && slurm_minutes <= 525600))
+    return usage_error(cmd, "--slurm-time-limit must be in 1..525600 minutes");
+  if (!(slurm_poll >= 0.1 && slurm_poll <= 3600))
+    return usage_error(cmd, "--slurm-poll must be in 0.1..3600 seconds");
   if (retrain_every < 0 || retrain_every > 1000000)
     return usage_error(cmd, "--retrain-every must be in 0..1000000");
   if (port < 0 || port > 65535) return usage_error(cmd, "--port must be in 0..65535");
@@ -106,6 +134,20 @@ int cmd_serve(const Args& args) {
   config.max_queued_per_user = int(max_queued);
   config.host_bytes = uint64_t(memory_gb * double(1ull << 30));
   config.retrain_every = int(retrain_every);
+  config.executor = executor;
+  config.slurm.partition = parsed->get("slurm-partition", "");
+  config.slurm.account = parsed->get("slurm-account", "");
+  config.slurm.gpus = parsed->has("slurm-gpus");
+  config.slurm.gres = parsed->get("slurm-gres", "gpu:1");
+  config.slurm.cpus = int(slurm_cpus);
+  config.slurm.default_time_limit_s = slurm_minutes * 60;
+  config.slurm.poll_s = slurm_poll;
+  if (parsed->has("slurm-binary")) config.job_executable = parsed->get("slurm-binary", "");
+  {
+    std::istringstream words(parsed->get("slurm-args", ""));
+    for (std::string w; words >> w;) config.slurm.extra_args.push_back(w);
+  }
+  if (executor == "slurm" && config.job_threads == 0) config.job_threads = config.slurm.cpus;
   auto file_list = [&](const char* flag) {
     std::vector<std::string> files;
     const std::string list = parsed->get(flag, "");
@@ -155,9 +197,17 @@ int cmd_serve(const Args& args) {
   sa.sa_handler = on_signal;
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
-  (*svc)->start_workers();
+  if (Status st = (*svc)->start_workers(); !st) {
+    std::fprintf(stderr, "collidoscope serve: %s\n", st.message().c_str());
+    (*server)->stop();
+    return exit_code(st);
+  }
   std::printf("collidoscope: serving on %s  (API %s/api/v1, data in %s)\n", url.c_str(), url.c_str(),
               config.data_dir.c_str());
+  if (executor == "slurm")
+    std::printf("collidoscope: jobs go to Slurm (sbatch%s%s), %d CPUs each\n",
+                config.slurm.partition.empty() ? "" : " --partition=",
+                config.slurm.partition.c_str(), config.slurm.cpus);
   if (config.cost_models.empty())
     std::printf("collidoscope: no job cost model: time is not predicted (see --cost-model)\n");
   for (const std::string& m : config.cost_models)

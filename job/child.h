@@ -20,10 +20,23 @@
 
 namespace collido::job {
 
-// One line of the progress protocol, as the child writes it.
-std::string progress_line(const Progress& p);
+// One line of the progress protocol, as the child writes it; peak_host_bytes
+// (the child's own peak so far) is left out when 0.
+std::string progress_line(const Progress& p, uint64_t peak_host_bytes = 0);
 std::string note_line(const std::string& note);
 std::string status_line(const Status& s);
+
+// One line read back: what the parent (a worker, or the Slurm executor reading
+// a cluster job's progress file) learns from it. Lines that are not the
+// protocol's are kNone, ignored rather than trusted.
+struct ReportLine {
+  enum class Kind { kNone, kProgress, kNote, kStatus } kind = Kind::kNone;
+  Progress progress;
+  uint64_t peak_host_bytes = 0;  // with a progress line, when the child sent it
+  std::string note;
+  Status status;
+};
+ReportLine parse_report_line(const std::string& line);
 
 struct ChildResult {
   Status status;                 // the job's own status, or why the child failed

@@ -20,14 +20,15 @@ void remove_temporaries(const fs::path& dir) {
       fs::remove(it->path(), ec);
 }
 
-bool holds_a_run(const fs::path& dir) {
+}  // namespace
+
+bool holds_a_run(const std::string& dir_name) {
+  const fs::path dir(dir_name);
   std::error_code ec;
   for (const char* marker : {"job.json", "result.json", "scene.json", "stats.csv.partial"})
     if (fs::exists(dir / marker, ec)) return true;
   return fs::is_directory(dir / "frames", ec);
 }
-
-}  // namespace
 
 Status claim_run_dir(const std::string& dir_name, DirPolicy policy) {
   if (dir_name.empty()) return invalid_argument("out: the run directory is empty");
@@ -39,13 +40,13 @@ Status claim_run_dir(const std::string& dir_name, DirPolicy policy) {
     remove_temporaries(dir);
     const bool empty = fs::is_empty(dir, ec);
     if (policy == DirPolicy::kResume) {
-      if (!holds_a_run(dir)) return not_found(dir_name + ": holds no run to resume");
+      if (!holds_a_run(dir.string())) return not_found(dir_name + ": holds no run to resume");
     } else if (!empty) {
       if (policy == DirPolicy::kRefuse)
         return invalid_argument(dir_name +
                                 ": already holds files; choose another directory, replace the "
                                 "run (--force) or continue it (--resume)");
-      if (!holds_a_run(dir))
+      if (!holds_a_run(dir.string()))
         return invalid_argument(dir_name + ": holds files but no run; not replacing it");
       for (const auto& entry : fs::directory_iterator(dir, ec)) fs::remove_all(entry.path(), ec);
       if (ec) return io_error(dir_name + ": cannot empty it: " + ec.message());

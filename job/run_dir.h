@@ -42,6 +42,9 @@ struct RunPaths {
 // temporary files (common/atomic_file.h) are removed in every case.
 Status claim_run_dir(const std::string& dir, DirPolicy policy);
 
+// Whether `dir` holds a run (started or finished) that kResume can continue.
+bool holds_a_run(const std::string& dir);
+
 // Every file of the run, relative to the directory, with size, MIME type and
 // role; a folder of many frames is one entry with its total size and count.
 std::vector<Artifact> list_artifacts(const RunPaths& paths, uint64_t* frame_files);

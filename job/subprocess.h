@@ -64,4 +64,19 @@ class Subprocess {
   bool reaped_ = false;
 };
 
+// A short command's outcome (a scheduler's client: sbatch, squeue, ...).
+struct CommandOutput {
+  ExitInfo exit;
+  std::string out, err;    // its stdout and stderr, each up to 1 MiB
+  bool timed_out = false;  // killed at the time limit
+  bool ok() const { return !timed_out && exit.exit_code == 0; }
+  // "exit code N: <stderr's last line>" (or timed out), for messages.
+  std::string describe_failure() const;
+};
+
+// Runs argv (argv[0] found in PATH when it has no slash) with stdin from
+// /dev/null, to its end or until timeout_s passes (then SIGKILL). Posix_spawn,
+// as above: safe from a threaded server. Fails only when it cannot start.
+Expected<CommandOutput> run_command(const std::vector<std::string>& argv, double timeout_s);
+
 }  // namespace collido::job

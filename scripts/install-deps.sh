@@ -22,6 +22,7 @@ packages=(
   chromium                             # browser tests of the web UI (headless)
   wrk                                  # HTTP load benchmark (bench/)
   python3-matplotlib                   # the study's charts (bench/study_charts.py)
+  slurmctld slurmd slurm-client munge  # the Slurm executor and its single-node test
 )
 # The web UI's packages (scripts/install-web.sh) need node and npm: Debian's,
 # unless a node with npm is already installed (e.g. from NodeSource).

@@ -191,8 +191,14 @@ Expected<std::unique_ptr<JobService>> JobService::open(const ServiceConfig& conf
   svc->cost_->trainer = std::make_unique<CostTrainer>(tc, *svc->store_, svc->cost_->set);
 #endif
   if (Status st = svc->seed(); !st) return st;
-  auto requeued = svc->store_->requeue_running_jobs();
-  if (!requeued) return requeued.status();
+  if (config.executor != "local" && config.executor != "slurm")
+    return invalid_argument("executor: '" + config.executor + "' (local or slurm)");
+  // Local jobs a stopped server left running start again; cluster jobs run on
+  // under the scheduler, and the Slurm executor follows them again.
+  if (config.executor == "local") {
+    auto requeued = svc->store_->requeue_running_jobs();
+    if (!requeued) return requeued.status();
+  }
   return svc;
 }
 
@@ -242,14 +248,21 @@ Status JobService::seed() {
   return Status::ok();
 }
 
-void JobService::start_workers() {
-  if (workers_) return;
+Status JobService::start_workers() {
+  if (workers_) return Status::ok();
+  if (config_.executor == "slurm") {
+    auto slurm = SlurmExecutor::start(this, config_.slurm);
+    if (!slurm) return slurm.status();
+    workers_ = std::move(*slurm);
+    return Status::ok();
+  }
   // One worker per visible GPU (a GPU is driven by one job at a time), else
   // one on the CPU (a job takes every core); --workers sets the number.
   const std::vector<std::string> gpus = visible_gpus();
   int n = config_.workers;
   if (n < 0) n = gpus.empty() ? 1 : int(gpus.size());
   workers_ = std::make_unique<WorkerPool>(this, n, gpus);
+  return Status::ok();
 }
 
 void JobService::stop_workers() {
@@ -643,8 +656,10 @@ json JobService::price(const job::JobAssessment& a, const json& assessment,
             {"inputs", assessment}};
   const scene::Scene& sc = a.resolved.scene;
   // The backend a worker runs it on: the scene's, "auto" = the GPU when one is visible.
+  // With Slurm, "auto" means the GPU where the cluster's nodes have one.
+  const bool gpus = config_.executor == "slurm" ? config_.slurm.gpus : !visible_gpus().empty();
   const std::string backend =
-      sc.backend_auto ? (visible_gpus().empty() ? "cpu" : "cuda") : sim::to_string(sc.dynamics.backend);
+      sc.backend_auto ? (gpus ? "cuda" : "cpu") : sim::to_string(sc.dynamics.backend);
   p["backend"] = backend;
 #ifdef COLLIDO_HAVE_JOB_COST
   if (const auto model = cost_->set.for_backend(backend)) {
@@ -732,6 +747,7 @@ json JobService::job_json(const Job& j) {
   out["links"]["self"] = "/api/v1/jobs/" + j.id;
   if (!j.error.empty()) out["error"] = j.error;
   if (!j.reused_from.empty()) out["reused_from"] = j.reused_from;
+  if (!j.executor_ref.empty()) out["scheduler"] = {{"kind", "slurm"}, {"job_id", j.executor_ref}};
   return out;
 }
 
@@ -875,7 +891,10 @@ Reply JobService::cancel_job(const User& u, const std::string& id) {
     auto was = store_->cancel_queued_job(id, unix_now());
     if (!was) return status_reply(was.status());
   } else if (j->state == "running") {
-    cancel_flag(id)->store(true);
+    if (workers_)
+      workers_->cancel(*j);
+    else
+      cancel_flag(id)->store(true);  // no executor now: its next start sees the flag
   } else {
     return error_reply(409, "job '" + id + "' has ended (" + j->state + ")");
   }
@@ -1093,6 +1112,7 @@ Reply JobService::health() {
   auto users = store_->count_users();
   r.body = {{"status", users ? "ok" : "degraded"},
             {"schema_version", store_schema_version()},
+            {"executor", config_.executor},
             {"workers", workers_ ? workers_->size() : 0}};
   if (!users) r.status = 503;
   return r;
@@ -1159,6 +1179,35 @@ void JobService::forget_cancel_flag(const std::string& id) {
   cancel_flags_.erase(id);
 }
 
+Expected<job::JobSpec> JobService::read_spec(const Job& j) {
+  const std::string path = (fs::path(job_dir(j.id)) / "spec.json").string();
+  std::ifstream in(path);
+  if (!in) return not_found(path + ": cannot read");
+  std::stringstream text;
+  text << in.rdbuf();
+  auto spec = job::spec_from_json(text.str());
+  if (!spec) return Status(spec.status().code(), "the job's spec.json: " + spec.status().message());
+  return spec;
+}
+
+Expected<job::JobSpec> JobService::write_run_spec(const Job& j, int threads) {
+  auto spec = read_spec(j);
+  if (!spec) return spec;
+  if (j.attempts > 1) spec->dir_policy = job::DirPolicy::kResume;
+  if (threads > 0) spec->threads = threads;
+  const std::string path = (fs::path(job_dir(j.id)) / "spec.run.json").string();
+  if (Status st = write_file_atomic(path, job::spec_to_json(*spec) + "\n"); !st) return st;
+  return spec;
+}
+
+json JobService::run_manifest(const Job& j) {
+  std::ifstream in((fs::path(j.run_dir) / "result.json").string());
+  std::stringstream text;
+  text << in.rdbuf();
+  const json m = json::parse(text.str(), nullptr, false);
+  return m.is_object() ? m : json::object();
+}
+
 void JobService::job_started(const Job& j) { store_->set_job_progress(j.id, "prepare", j.progress); }
 
 void JobService::job_progress(const std::string& id, const std::string& stage, double progress) {
@@ -1166,14 +1215,34 @@ void JobService::job_progress(const std::string& id, const std::string& stage, d
 }
 
 void JobService::job_finished(const Job& j, const std::string& state, const std::string& error,
-                              const json& manifest, uint64_t peak_host_bytes) {
+                              const json& manifest, uint64_t peak_host_bytes, const json& partial) {
   json cost = manifest.is_object() && manifest.contains("cost") ? manifest["cost"] : json::object();
   // The job's own peak (VmHWM) as it reported it; wait4()'s figure, which
   // carries the server's own peak into the child, only when it did not.
   if (!cost.contains("peak_host_bytes") && peak_host_bytes > 0) cost["peak_host_bytes"] = peak_host_bytes;
-  store_->finish_job(j.id, state, cost.dump(), error, unix_now());
+  auto ended = store_->finish_job(j.id, state, cost.dump(), error, unix_now());
   forget_cancel_flag(j.id);
-  if (state != "done") return;
+  if (!ended || !*ended) return;  // ended already (another replica): logged there
+  if (state != "done") {
+    if (!partial.is_object()) return;
+    // A run the scheduler (or a failure) ended: what was measured of it, kept
+    // in the log beside the finished jobs. No total time (it did not finish),
+    // so the prediction-error metrics and the retraining leave it out.
+    LogRow row;
+    row.job_id = j.id;
+    const json pred = json::parse(j.prediction_json, nullptr, false);
+    row.inputs_json = pred.is_object() && pred.contains("inputs") ? pred["inputs"].dump() : "{}";
+    json measured = partial;
+    measured["outcome"] = state;
+    measured["error"] = error;
+    row.measured_json = measured.dump();
+    row.predicted_json = j.prediction_json;
+    row.peak_host_bytes = partial.value("peak_host_bytes", uint64_t(0));
+    row.predicted_host_bytes = j.predicted_host_bytes;
+    row.created_at = unix_now();
+    store_->insert_log(row);
+    return;
+  }
   // The run log row: the inputs the cost model prices by, what it cost, and
   // what was predicted at submission.
   const json pred = json::parse(j.prediction_json, nullptr, false);

@@ -21,6 +21,8 @@
 #include "job/assess.h"
 #include "job/job.h"
 #include "service/auth.h"
+#include "service/executor.h"
+#include "service/slurm_executor.h"
 #include "service/store.h"
 
 namespace collido::service {
@@ -50,6 +52,12 @@ struct ServiceConfig {
   std::vector<std::string> training_logs;
   int retrain_every = 25;
   int retrain_epochs = 1500;  // per machine (fewer in tests)
+  // Where jobs run: "local" (worker threads and job-exec children on this
+  // machine) or "slurm" (each job an sbatch submission; slurm_executor.h). With
+  // Slurm, data_dir must be on a filesystem the nodes share, at the same path,
+  // and job_executable must run there.
+  std::string executor = "local";
+  SlurmConfig slurm;
 };
 
 // An answer: the HTTP status, a JSON body, extra headers.
@@ -67,8 +75,6 @@ Reply error_reply(int status, const std::string& message);
 // The HTTP status of a library error (400, 404, 409, 422, 500, ...).
 int http_status_of(const Status& st);
 
-class WorkerPool;
-
 class JobService {
  public:
   // Opens (or creates) the store under config.data_dir, adds the preset models
@@ -76,9 +82,11 @@ class JobService {
   static Expected<std::unique_ptr<JobService>> open(const ServiceConfig& config);
   ~JobService();
 
-  // Starts the workers (config.workers of them); stop() cancels nothing: a job
-  // running then is left for the next start to resume from its checkpoint.
-  void start_workers();
+  // Starts the executor: config.workers local workers, or the Slurm executor
+  // (an error when the scheduler does not answer). stop_workers() cancels
+  // nothing: a local job running then is left for the next start to resume from
+  // its checkpoint; a cluster job runs on, and the next start follows it again.
+  Status start_workers();
   void stop_workers();
   // Wakes a worker: a job was queued.
   void notify_queued();
@@ -152,11 +160,22 @@ class JobService {
   // Prometheus text: queue length, jobs by state, prediction error of finished jobs.
   std::string metrics();
 
-  // Used by the workers.
+  // Used by the executors.
   void job_started(const Job& j);
   void job_progress(const std::string& id, const std::string& stage, double progress);
+  // Ends the job (unless another replica ended it first) and logs it: a done job
+  // with its measured cost; one that did not finish with `partial`, what was
+  // measured of it (how far it got, the scheduler's reason), when given.
   void job_finished(const Job& j, const std::string& state, const std::string& error,
-                    const json& manifest, uint64_t peak_host_bytes);
+                    const json& manifest, uint64_t peak_host_bytes, const json& partial = nullptr);
+  // The job's spec as submitted (spec.json in its folder).
+  Expected<job::JobSpec> read_spec(const Job& j);
+  // Writes spec.run.json, what job-exec runs: the submitted spec, continuing
+  // the run a stopped server left when the job started before; threads > 0
+  // sets the job's CPU threads.
+  Expected<job::JobSpec> write_run_spec(const Job& j, int threads = 0);
+  // The job's result.json (an empty object when it wrote none).
+  json run_manifest(const Job& j);
   std::shared_ptr<std::atomic<bool>> cancel_flag(const std::string& id);
   void forget_cancel_flag(const std::string& id);
   std::string job_dir(const std::string& id) const;
@@ -193,7 +212,7 @@ class JobService {
   struct CostModels;  // the loaded job cost models (none where the gvm module is left out)
   std::unique_ptr<CostModels> cost_;
   LoginThrottle throttle_;
-  std::unique_ptr<WorkerPool> workers_;
+  std::unique_ptr<Executor> workers_;
   mutable std::mutex url_mu_;
   std::mutex cancel_mu_;
   // What a job status poll needs without parsing and printing three JSON

@@ -100,6 +100,9 @@ CREATE TABLE logs (
     // 3: a user's queued jobs counted from an index alone (every submission counts
     // them; without it the count read every row of theirs, documents and all).
     "CREATE INDEX jobs_owner_state ON jobs(owner_id, state);",
+    // 4: where a job runs outside the service (a Slurm job id), so a restarted
+    // service finds its cluster jobs again instead of running them twice.
+    "ALTER TABLE jobs ADD COLUMN executor_ref TEXT NOT NULL DEFAULT '';",
 };
 
 constexpr int kSchemaVersion = int(sizeof kMigrations / sizeof kMigrations[0]);
@@ -107,7 +110,7 @@ constexpr int kSchemaVersion = int(sizeof kMigrations / sizeof kMigrations[0]);
 const char* const kJobColumns =
     "id, owner_id, state, stage, progress, scene_json, scene_key, run_dir, prediction_json, "
     "cost_json, error, predicted_host_bytes, reused_from, created_at, started_at, finished_at, "
-    "attempts";
+    "attempts, executor_ref";
 const char* const kModelColumns =
     "id, owner_id, name, kind, spec, params_json, stl_sha256, stl_bytes, triangles, created_at";
 const char* const kLogColumns =
@@ -316,12 +319,12 @@ class SqliteStore final : public Store {
   Status insert_job(const Job& j) override {
     std::lock_guard lock(mu_);
     Stmt s = stmt(std::string("INSERT INTO jobs(") + kJobColumns +
-                  ") VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)");
+                  ") VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)");
     s.bind(1, j.id).bind(2, j.owner_id).bind(3, j.state).bind(4, j.stage).bind(5, j.progress);
     s.bind(6, j.scene_json).bind(7, j.scene_key).bind(8, j.run_dir).bind(9, j.prediction_json);
     s.bind(10, j.cost_json).bind(11, j.error).bind(12, j.predicted_host_bytes);
     s.bind(13, j.reused_from).bind(14, j.created_at).bind(15, j.started_at);
-    s.bind(16, j.finished_at).bind(17, j.attempts);
+    s.bind(16, j.finished_at).bind(17, j.attempts).bind(18, j.executor_ref);
     return s.step() == SQLITE_DONE ? Status::ok() : error("insert_job");
   }
 
@@ -411,16 +414,36 @@ class SqliteStore final : public Store {
     return s.step() == SQLITE_DONE ? Status::ok() : error("set_job_progress");
   }
 
-  Status finish_job(const std::string& id, const std::string& state, const std::string& cost,
-                    const std::string& err, double now) override {
+  Expected<bool> finish_job(const std::string& id, const std::string& state,
+                            const std::string& cost, const std::string& err, double now) override {
     std::lock_guard lock(mu_);
     Stmt s = stmt(
         "UPDATE jobs SET state = ?, cost_json = ?, error = ?, finished_at = ?, "
         "progress = CASE WHEN ? = 'done' THEN 1.0 ELSE progress END, "
-        "stage = CASE WHEN ? = 'done' THEN 'done' ELSE stage END WHERE id = ?");
+        "stage = CASE WHEN ? = 'done' THEN 'done' ELSE stage END "
+        "WHERE id = ? AND state IN ('queued', 'running')");
     s.bind(1, state).bind(2, cost).bind(3, err).bind(4, now).bind(5, state).bind(6, state);
     s.bind(7, id);
-    return s.step() == SQLITE_DONE ? Status::ok() : error("finish_job");
+    if (s.step() != SQLITE_DONE) return error("finish_job");
+    return sqlite3_changes(db_) > 0;
+  }
+
+  Status set_job_executor_ref(const std::string& id, const std::string& ref) override {
+    std::lock_guard lock(mu_);
+    Stmt s = stmt("UPDATE jobs SET executor_ref = ? WHERE id = ?");
+    s.bind(1, ref).bind(2, id);
+    return s.step() == SQLITE_DONE ? Status::ok() : error("set_job_executor_ref");
+  }
+
+  Expected<std::vector<Job>> running_jobs() override {
+    std::lock_guard lock(mu_);
+    Stmt s = stmt(std::string("SELECT ") + kJobColumns +
+                  " FROM jobs WHERE state = 'running' ORDER BY started_at, rowid");
+    std::vector<Job> out;
+    int rc;
+    while ((rc = s.step()) == SQLITE_ROW) out.push_back(job_of(s));
+    if (rc != SQLITE_DONE) return error("running_jobs");
+    return out;
   }
 
   Expected<bool> cancel_queued_job(const std::string& id, double now) override {
@@ -647,6 +670,7 @@ class SqliteStore final : public Store {
     j.started_at = s.real(14);
     j.finished_at = s.real(15);
     j.attempts = int(s.i64(16));
+    j.executor_ref = s.text(17);
     return j;
   }
 

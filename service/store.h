@@ -55,6 +55,8 @@ struct Job {
   std::string reused_from;  // the job whose result this one is, when reused
   double created_at = 0, started_at = 0, finished_at = 0;
   int attempts = 0;
+  // Where it runs outside the service ("" for the local workers): the Slurm job id.
+  std::string executor_ref;
 };
 
 // What of a job changes after submission, read without its documents (a status
@@ -143,10 +145,15 @@ class Store {
   virtual Expected<std::optional<Job>> claim_next_job(uint64_t host_bytes_free, double now) = 0;
   virtual Status set_job_progress(const std::string& id, const std::string& stage,
                                   double progress) = 0;
-  // Ends a running (or queued) job: state done | failed | cancelled.
-  virtual Status finish_job(const std::string& id, const std::string& state,
-                            const std::string& cost_json, const std::string& error,
-                            double now) = 0;
+  // Ends a running (or queued) job: state done | failed | cancelled. False when
+  // it had ended already (another service replica ended it first).
+  virtual Expected<bool> finish_job(const std::string& id, const std::string& state,
+                                    const std::string& cost_json, const std::string& error,
+                                    double now) = 0;
+  // Records where a job runs outside the service (its Slurm job id).
+  virtual Status set_job_executor_ref(const std::string& id, const std::string& ref) = 0;
+  // The jobs running now (the Slurm executor follows them), oldest first.
+  virtual Expected<std::vector<Job>> running_jobs() = 0;
   // A queued job becomes cancelled at once; true when it was queued.
   virtual Expected<bool> cancel_queued_job(const std::string& id, double now) = 0;
   // Jobs left running by a server that stopped: queued again, in order.

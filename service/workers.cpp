@@ -66,6 +66,8 @@ void WorkerPool::notify() {
   wake_.notify_one();
 }
 
+void WorkerPool::cancel(const Job& job) { service_->cancel_flag(job.id)->store(true); }
+
 void WorkerPool::stop() {
   {
     std::lock_guard lock(mu_);
@@ -121,20 +123,12 @@ void WorkerPool::run_one(const Job& j, int worker) {
   const std::string dir = service_->job_dir(j.id);
   // The spec as submitted; a job started before (the server stopped under it)
   // continues from its checkpoint.
-  std::ifstream in((fs::path(dir) / "spec.json").string());
-  std::stringstream text;
-  text << in.rdbuf();
-  auto spec = job::spec_from_json(text.str());
+  auto spec = service_->write_run_spec(j);
   if (!spec) {
-    service_->job_finished(j, "failed", "the job's spec.json: " + spec.status().message(), {}, 0);
+    service_->job_finished(j, "failed", spec.status().message(), {}, 0);
     return;
   }
-  if (j.attempts > 1) spec->dir_policy = job::DirPolicy::kResume;
   const std::string run_spec = (fs::path(dir) / "spec.run.json").string();
-  if (Status st = write_file_atomic(run_spec, job::spec_to_json(*spec) + "\n"); !st) {
-    service_->job_finished(j, "failed", st.message(), {}, 0);
-    return;
-  }
   service_->job_started(j);
   std::vector<std::string> env;
   if (size_t(worker) < gpus_.size()) env.push_back("CUDA_VISIBLE_DEVICES=" + gpus_[worker]);
@@ -156,17 +150,12 @@ void WorkerPool::run_one(const Job& j, int worker) {
   auto cancel = service_->cancel_flag(j.id);
   job::ChildResult result = (*child)->wait(
       [&](const job::Progress& p) {
-        // Progress of the whole job: the simulation is most of it, rendering the rest.
-        const double f = p.total ? double(p.done) / double(p.total) : 0.0;
-        double progress = 0;
-        if (p.stage == job::Stage::kSimulate) progress = render ? 0.8 * f : f;
-        if (p.stage == job::Stage::kRender) progress = 0.8 + 0.2 * f;
-        if (p.stage == job::Stage::kDone) progress = 1;
+        const double progress = job_fraction(p, render);
         const std::string stage = job::to_string(p.stage);
         const auto now = std::chrono::steady_clock::now();
         // At most a few writes a second, and every change of stage.
         if (stage != last_stage || now - last_write > std::chrono::milliseconds(250)) {
-          service_->job_progress(j.id, stage, std::min(1.0, std::max(0.0, progress)));
+          service_->job_progress(j.id, stage, progress);
           last_write = now;
           last_stage = stage;
         }
@@ -179,10 +168,7 @@ void WorkerPool::run_one(const Job& j, int worker) {
     stopping = stopping_;
   }
   if (stopping && result.signal == SIGKILL) return;  // left running: resumed at the next start
-  std::ifstream mf((fs::path(j.run_dir) / "result.json").string());
-  std::stringstream mtext;
-  mtext << mf.rdbuf();
-  const json manifest = json::parse(mtext.str(), nullptr, false);
+  const json manifest = service_->run_manifest(j);
   std::string state = "failed", error;
   if (result.status) {
     state = "done";
@@ -193,8 +179,7 @@ void WorkerPool::run_one(const Job& j, int worker) {
     error = result.status.message();
     if (result.signal) error += " (the job process ended by signal " + std::to_string(result.signal) + ")";
   }
-  service_->job_finished(j, state, error, manifest.is_discarded() ? json::object() : manifest,
-                         result.peak_host_bytes);
+  service_->job_finished(j, state, error, manifest, result.peak_host_bytes);
 }
 
 }  // namespace collido::service

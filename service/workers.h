@@ -15,6 +15,7 @@
 #include <thread>
 #include <vector>
 
+#include "service/executor.h"
 #include "service/store.h"
 
 namespace collido::service {
@@ -29,19 +30,21 @@ uint64_t available_memory_bytes();
 // without loading CUDA into the server.
 std::vector<std::string> visible_gpus();
 
-class WorkerPool {
+class WorkerPool final : public Executor {
  public:
   // `workers` threads; worker i runs its jobs on gpus[i] (CUDA_VISIBLE_DEVICES
   // of its children) when there is one, else as the server's environment says.
   WorkerPool(JobService* service, int workers, std::vector<std::string> gpus = {});
-  ~WorkerPool();
+  ~WorkerPool() override;
   // A job was queued: wake a waiting worker.
-  void notify();
+  void notify() override;
+  // Sets the job's cancellation flag, which its worker passes to the child.
+  void cancel(const Job& job) override;
   // Stops every worker. A job running now is killed, not ended: it stays
   // "running" in the store, and the next start queues it again to resume from
   // its checkpoint (what a crash would leave, on purpose).
-  void stop();
-  int size() const { return int(threads_.size()); }
+  void stop() override;
+  int size() const override { return int(threads_.size()); }
 
  private:
   void loop(int worker);

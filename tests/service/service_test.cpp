@@ -25,6 +25,7 @@
 #include "service/job_service.h"
 #include "service/store.h"
 #include "tests/service/http_client.h"
+#include "tests/service/service_client.h"
 
 extern char** environ;
 
@@ -32,22 +33,12 @@ namespace collido::service {
 namespace {
 
 namespace fs = std::filesystem;
+using collido::test::Client;
 using collido::test::http;
 using collido::test::HttpResponse;
-
-std::string temp_dir(const std::string& name) {
-  const fs::path p = fs::temp_directory_path() / (name + "_" + std::to_string(::getpid()));
-  fs::remove_all(p);
-  fs::create_directories(p);
-  return p.string();
-}
-
-std::string read_file(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using collido::test::read_file;
+using collido::test::temp_dir;
+using collido::test::tiny_job;
 
 // A raw TCP connection to the server, for what libcurl will not send; -1 on failure.
 int connect_loopback(uint16_t port) {
@@ -62,56 +53,6 @@ int connect_loopback(uint16_t port) {
   }
   return fd;
 }
-
-// A scene that runs in about a second on one thread, rendered small.
-json tiny_job(const json& wall, int particles = 40, double duration = 0.3) {
-  return {{"scene",
-           {{"wall", wall},
-            {"particles", {{"count", particles}, {"radius", 0.5}}},
-            {"placement", {{"kind", "pour"}}},
-            {"duration", duration},
-            {"fps", 10}}},
-          {"render", {{"width", 160}, {"height", 96}, {"formats", {"mp4", "gif"}}}}};
-}
-
-class Client {
- public:
-  explicit Client(std::string base) : base_(std::move(base)) {}
-  HttpResponse call(const std::string& method, const std::string& path, const std::string& body = "",
-                    std::vector<std::string> headers = {}) const {
-    if (!token.empty()) headers.push_back("Authorization: Bearer " + token);
-    return http(method, base_ + path, body, headers);
-  }
-  json call_json(const std::string& method, const std::string& path, const json& body = nullptr,
-                 long expect = 200) const {
-    auto r = call(method, path, body.is_null() ? "" : body.dump());
-    EXPECT_EQ(r.status, expect) << method << " " << path << ": " << r.body;
-    return json::parse(r.body, nullptr, false);
-  }
-  // Makes an account and signs in with it.
-  void sign_up(const std::string& name, const std::string& password = "correct horse") {
-    call_json("POST", "/api/v1/accounts", {{"name", name}, {"password", password}}, 201);
-    token = call_json("POST", "/api/v1/sessions", {{"name", name}, {"password", password}})["token"];
-  }
-  // Polls a job until it ends (or the bound passes); the last view of it.
-  json wait_job(const std::string& id, double bound_s = 180) const {
-    const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(bound_s);
-    json j;
-    while (std::chrono::steady_clock::now() < end) {
-      j = call_json("GET", "/api/v1/jobs/" + id);
-      const std::string s = j.value("state", "");
-      if (s == "done" || s == "failed" || s == "cancelled") return j;
-      std::this_thread::sleep_for(std::chrono::milliseconds(200));
-    }
-    ADD_FAILURE() << "job " << id << " did not end in " << bound_s << " s: " << j.dump();
-    return j;
-  }
-  std::string token;
-  const std::string& base() const { return base_; }
-
- private:
-  std::string base_;
-};
 
 class ServiceTest : public ::testing::Test {
  protected:
@@ -143,7 +84,7 @@ class ServiceTest : public ::testing::Test {
     server_ = std::move(*server);
     base_ = "http://127.0.0.1:" + std::to_string(server_->port());
     svc_->set_public_url(base_);
-    svc_->start_workers();
+    ASSERT_TRUE(svc_->start_workers());
   }
   Client client() const { return Client(base_); }
 
