@@ -163,8 +163,12 @@ struct JobService::CostModels {
 struct JobService::CostModels {};
 #endif
 
-Expected<std::unique_ptr<JobService>> JobService::open(const ServiceConfig& config) {
+Expected<std::unique_ptr<JobService>> JobService::open(const ServiceConfig& given) {
   if (!init_crypto()) return backend_error("libsodium did not start (no entropy source)");
+  ServiceConfig config = given;
+  // Cluster nodes find a job's files by the paths the service writes into its
+  // spec and batch script: absolute ones (the same on every node, docs/deploy.md).
+  if (config.executor == "slurm") config.data_dir = fs::absolute(config.data_dir).string();
   std::unique_ptr<JobService> svc(new JobService(config));
   std::error_code ec;
   for (const char* sub : {"", "models", "jobs"}) {

@@ -214,8 +214,8 @@ void SlurmExecutor::submit(const Job& j) {
     service_->job_finished(j, "failed", spec.status().message(), {}, 0);
     return;
   }
-  // The batch script: the same command a local worker runs, on a node, in the
-  // service's working directory (relative paths of the spec resolve alike).
+  // The batch script: the same command a local worker runs, on a node; every
+  // path in it and in the spec is absolute (JobService::open).
   const std::string script_path = (dir / "slurm.sh").string();
   const std::string script =
       "#!/bin/sh\n"
@@ -236,7 +236,7 @@ void SlurmExecutor::submit(const Job& j) {
   const bool cuda = pred.is_object() && pred.value("backend", "") == "cuda";
   std::vector<std::string> args = {
       "sbatch", "--parsable", "--job-name=" + std::string(kNamePrefix) + j.id,
-      "--chdir=" + fs::current_path().string(), "--output=" + (dir / "job.log").string(),
+      "--chdir=" + dir.string(), "--output=" + (dir / "job.log").string(),
       "--open-mode=append", "--time=" + std::to_string(req.time_limit_min),
       "--mem=" + std::to_string(req.mem_mib), "--cpus-per-task=" + std::to_string(config_.cpus),
       config_.requeue ? "--requeue" : "--no-requeue"};
