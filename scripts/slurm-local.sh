@@ -134,7 +134,12 @@ InactiveLimit=0
 JobRequeue=1
 PlugStackConfig=$dir/plugstack.conf
 NodeName=$node NodeHostname=$host NodeAddr=127.0.0.1 CPUs=$cpus RealMemory=$mem_mb State=UNKNOWN
-PartitionName=debug Nodes=$node Default=YES MaxTime=INFINITE State=UP
+# Jobs in "urgent" preempt jobs in "debug", which go back to the queue (what a
+# cluster's preemption does to the service's jobs; the requeue test uses it).
+PreemptType=preempt/partition_prio
+PreemptMode=REQUEUE
+PartitionName=debug Nodes=$node Default=YES MaxTime=INFINITE State=UP PriorityTier=1
+PartitionName=urgent Nodes=$node MaxTime=INFINITE State=UP PriorityTier=2 PreemptMode=OFF
 EOF
 : >"$dir/plugstack.conf"
 export SLURM_CONF="$dir/slurm.conf"

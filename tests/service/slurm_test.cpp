@@ -209,7 +209,7 @@ TEST_F(SlurmServiceTest, AJobOverItsTimeLimitFailsWithTheSchedulersReason) {
   EXPECT_EQ(logs->front().total_s, 0.0);  // it did not finish: no total to learn from
 }
 
-TEST_F(SlurmServiceTest, ARequeuedJobResumesFromItsCheckpointToTheSameResult) {
+TEST_F(SlurmServiceTest, APreemptedJobResumesFromItsCheckpointToTheSameResult) {
   Client c = client();
   c.sign_up("cy");
   // About ten seconds on one thread; a checkpoint every second.
@@ -221,9 +221,12 @@ TEST_F(SlurmServiceTest, ARequeuedJobResumesFromItsCheckpointToTheSameResult) {
   ASSERT_EQ(j["state"], "running") << j.dump();
   ASSERT_TRUE(fs::exists(run_dir + "/checkpoint.bin"));
   const std::string sid = j["scheduler"]["job_id"];
-  // What preemption with PreemptMode=REQUEUE does: the job is stopped and queued again.
-  auto requeue = job::run_command({"scontrol", "requeue", sid}, 30);
-  ASSERT_TRUE(requeue && requeue->ok()) << (requeue ? requeue->describe_failure() : "");
+  // A job in a higher partition wants the whole node: the scheduler preempts
+  // ours (PreemptMode=REQUEUE), which stops and goes back to the queue.
+  auto urgent = job::run_command({"sbatch", "--parsable", "--partition=urgent", "--exclusive",
+                                  "--output=/dev/null", "--wrap", "sleep 2"},
+                                 30);
+  ASSERT_TRUE(urgent && urgent->ok()) << (urgent ? urgent->describe_failure() : "");
   // Slurm holds a requeued job back for two minutes (reason BeginTime); this
   // test lets it go after two seconds. Not at once: slurmd refuses a launch in
   // the same second as the first run's credential was revoked, and the job
