@@ -306,10 +306,14 @@ void SlurmExecutor::follow() {
   auto running = service_->store().running_jobs();
   if (!running) return;
   // Forget jobs that ended (here or in another replica).
-  for (auto it = followed_.begin(); it != followed_.end();) {
-    bool still = false;
-    for (const Job& j : *running) still = still || j.id == it->first;
-    it = still ? std::next(it) : followed_.erase(it);
+  std::set<std::string> running_ids;
+  for (const Job& j : *running) running_ids.insert(j.id);
+  for (auto it = followed_.begin(); it != followed_.end();)
+    it = running_ids.count(it->first) ? std::next(it) : followed_.erase(it);
+  {
+    std::lock_guard lock(mu_);
+    for (auto it = cancel_requested_.begin(); it != cancel_requested_.end();)
+      it = running_ids.count(*it) ? std::next(it) : cancel_requested_.erase(it);
   }
   if (running->empty()) return;
   auto q = job::run_command({"squeue", "--me", "--noheader", "--states=all", "--format=%i|%j|%T|%r"},

@@ -56,6 +56,7 @@ export async function render(main, ctx, id) {
         fact('Placement', s.placement?.kind ?? 'pour'),
         fact('Simulated', `${s.duration ?? '—'} s at ${s.fps ?? '—'} frames/s`),
         fact('Method', `${s.method ?? 'bin'}${s.backend && s.backend !== 'auto' ? `, ${s.backend}` : ''}`),
+        j.scheduler ? fact('Runs on', `the cluster (Slurm job ${j.scheduler.job_id})`) : null,
         fact('Submitted', fmtDate(j.created_at)),
         j.finished_at ? fact('Finished', fmtDate(j.finished_at)) : null),
       j.reused_from ? h('p', { class: 'alert note' }, `An identical scene ran before (job ${j.reused_from}): its result is shown, not run again.`) : null,
