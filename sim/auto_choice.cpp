@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <memory>
 
 #include "sim/particles.h"
 
@@ -46,22 +47,63 @@ Particles sample_of(const Particles& p, size_t n) {
   return s;
 }
 
-void time_candidate(const TriangleMesh& mesh, const Particles& sample, const DetectConfig& base,
-                    int repeats, AutoCandidate* c) {
+// A candidate's detector on the sample, ready to time (c->error says why not).
+std::unique_ptr<Detector> prepare_candidate(const TriangleMesh& mesh, const Particles& sample,
+                                            const DetectConfig& base, AutoCandidate* c) {
   DetectConfig cfg = base;
   cfg.method = c->method, cfg.traversal = c->traversal, cfg.grid_length = c->grid_length;
   cfg.collect_contacts = false, cfg.time_stages = false;
   auto det = Detector::create(mesh, cfg, std::max<size_t>(sample.size(), 1));
   if (!det) {
     c->error = det.status().message();
-    return;
+    return nullptr;
   }
   c->prepare_ms = (*det)->info().prepare_ms;
   if (Status s = (*det)->set_particles(sample); !s) {
     c->error = s.message();
-    return;
+    return nullptr;
   }
-  if (Status s = fastest_frame_ms(**det, repeats, &c->frame_ms); !s) c->error = s.message();
+  return std::move(*det);
+}
+
+// Times candidates [begin, end) in rounds, one frame of each per round, so a
+// slow spell of the machine (another process, a clock change) falls on all of
+// them alike rather than on whichever was being timed then; each keeps its
+// fastest frame (fastest_frame_ms's rule: at least min_frames rounds, until
+// each has kAutoTimingBudgetMs of frames, at most kAutoMaxFrames).
+void time_interleaved(const TriangleMesh& mesh, const Particles& sample, const DetectConfig& base,
+                      int min_frames, AutoCandidate* begin, AutoCandidate* end) {
+  std::vector<std::unique_ptr<Detector>> dets;
+  for (AutoCandidate* c = begin; c != end; ++c) dets.push_back(prepare_candidate(mesh, sample, base, c));
+  const size_t n = dets.size();
+  std::vector<double> spent(n, 0.0);
+  DetectResult r;
+  for (size_t i = 0; i < n; ++i) {
+    begin[i].frame_ms = 1e300;
+    if (!dets[i]) continue;
+    if (Status st = dets[i]->detect(&r); !st) {  // the warm-up frame
+      begin[i].error = st.message();
+      dets[i].reset();
+    }
+  }
+  for (int round = 0; round < kAutoMaxFrames; ++round) {
+    bool more = false;
+    for (size_t i = 0; i < n; ++i)
+      more = more || (dets[i] && (round < min_frames || spent[i] < kAutoTimingBudgetMs));
+    if (!more) break;
+    for (size_t i = 0; i < n; ++i) {
+      if (!dets[i]) continue;
+      if (Status st = dets[i]->detect(&r); !st) {
+        begin[i].error = st.message();
+        dets[i].reset();
+        continue;
+      }
+      begin[i].frame_ms = std::min(begin[i].frame_ms, r.times.frame_ms);
+      spent[i] += r.times.frame_ms;
+    }
+  }
+  for (size_t i = 0; i < n; ++i)
+    if (!begin[i].error.empty()) begin[i].frame_ms = 0;
 }
 
 }  // namespace
@@ -87,11 +129,17 @@ Expected<AutoChoice> choose_detection(const TriangleMesh& mesh, const Particles&
     if (m != Method::kBin && req.method && !req.particle_traversal_only) traversals.push_back(Traversal::kWall);
     if (!req.method) traversals = {base.traversal};
     for (Traversal t : traversals)
-      for (double g : grids) {
-        AutoCandidate c{m, t, g, 0, 0, {}};
-        time_candidate(mesh, sample, base, repeats, &c);
-        choice.candidates.push_back(c);
-      }
+      for (double g : grids) choice.candidates.push_back(AutoCandidate{m, t, g, 0, 0, {}});
+  }
+  // All candidates at once on the CPU, whose timings drift with the machine's
+  // other work; one at a time on the GPU, whose timings are steady and where
+  // a dozen detectors on four million particles would hold gigabytes.
+  AutoCandidate* all = choice.candidates.data();
+  const size_t n = choice.candidates.size();
+  if (gpu) {
+    for (size_t i = 0; i < n; ++i) time_interleaved(mesh, sample, base, repeats, all + i, all + i + 1);
+  } else {
+    time_interleaved(mesh, sample, base, repeats, all, all + n);
   }
   const AutoCandidate* best = nullptr;
   for (const auto& c : choice.candidates)
