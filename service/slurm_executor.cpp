@@ -415,10 +415,10 @@ void SlurmExecutor::end(const Job& j, const SlurmJobState& s) {
         break;
       }
   }
-  // What was measured of a run that did not finish: how far it got, in what
-  // time, with what memory (the job's own reports), and why it ended.
+  // What was measured of a run that failed: how far it got, in what time,
+  // with what memory (the job's own reports), and why it ended.
   json partial = nullptr;
-  if (o.state != "done") {
+  if (o.state == "failed") {
     partial = {{"stage", job::to_string(f.last.stage)},
                {"frames_done", f.last.done},
                {"frames_total", f.last.total},

@@ -76,7 +76,9 @@ class SlurmServiceTest : public ::testing::Test {
     run({"bash", kClusterScript, "stop", cluster_});
   }
 
-  void start_service() {
+  void start_service() { start_replica(&svc_, &server_); }
+  // A service process on this test's data folder and cluster (several may run at once).
+  void start_replica(std::unique_ptr<JobService>* svc_out, std::unique_ptr<Server>* server_out) {
     ServiceConfig c;
     c.data_dir = data_;
     c.job_executable = COLLIDO_BINARY;
@@ -88,16 +90,18 @@ class SlurmServiceTest : public ::testing::Test {
     c.slurm.poll_s = 0.3;
     auto svc = JobService::open(c);
     ASSERT_TRUE(svc) << svc.status().message();
-    svc_ = std::move(*svc);
+    *svc_out = std::move(*svc);
     ServerOptions o;
     o.port = 0;
-    auto server = Server::start(svc_.get(), o);
+    auto server = Server::start(svc_out->get(), o);
     ASSERT_TRUE(server) << server.status().message();
-    server_ = std::move(*server);
-    svc_->set_public_url("http://127.0.0.1:" + std::to_string(server_->port()));
-    ASSERT_TRUE(svc_->start_workers());
+    *server_out = std::move(*server);
+    (*svc_out)->set_public_url("http://127.0.0.1:" + std::to_string((*server_out)->port()));
+    ASSERT_TRUE((*svc_out)->start_workers());
   }
   void stop_service() {
+    server2_.reset();
+    svc2_.reset();
     server_.reset();
     svc_.reset();
   }
@@ -119,8 +123,8 @@ class SlurmServiceTest : public ::testing::Test {
 
   std::string cluster_, data_;
   bool started_ = false;
-  std::unique_ptr<JobService> svc_;
-  std::unique_ptr<Server> server_;
+  std::unique_ptr<JobService> svc_, svc2_;  // svc2_: a second replica, where a test starts one
+  std::unique_ptr<Server> server_, server2_;
 };
 
 bool ended(const json& v) {
@@ -189,6 +193,39 @@ TEST_F(SlurmServiceTest, ThreeJobsFinishTheirVideosAreServedAndAFourthIsCancelle
   EXPECT_EQ(slurm_state(sid).substr(0, 9), "CANCELLED");
   // A job that has ended cannot be cancelled again.
   c.call_json("POST", "/api/v1/jobs/" + long_id + "/cancel", nullptr, 409);
+}
+
+// Two service replicas on one store (as behind nginx, docs/deploy.md): each job
+// is submitted to Slurm once and ended and logged once, whichever replica
+// took it, and a cancel sent to either reaches the job.
+TEST_F(SlurmServiceTest, TwoReplicasSubmitEachJobOnceAndEndItOnce) {
+  start_replica(&svc2_, &server2_);
+  Client a = client();
+  a.sign_up("dee");
+  Client b("http://127.0.0.1:" + std::to_string(server2_->port()));
+  b.token = b.call_json("POST", "/api/v1/sessions", {{"name", "dee"}, {"password", "correct horse"}})["token"];
+  std::vector<std::string> ids;
+  for (int n : {43, 44, 45, 46})
+    ids.push_back((n % 2 ? a : b).call_json("POST", "/api/v1/jobs", tiny_job("wall1", n), 202)["id"]);
+  const std::string long_id = a.call_json("POST", "/api/v1/jobs", long_job(), 202)["id"];
+  for (const std::string& id : ids) {
+    const json j = (id == ids[0] ? b : a).wait_job(id, 120);
+    EXPECT_EQ(j["state"], "done") << j.dump();
+  }
+  const std::string names = run({"squeue", "--me", "--noheader", "--states=all", "--format=%j"});
+  for (const std::string& id : ids) {
+    size_t count = 0;
+    for (size_t at = names.find("collido-" + id); at != std::string::npos;
+         at = names.find("collido-" + id, at + 1))
+      ++count;
+    EXPECT_EQ(count, 1u) << id << " was submitted " << count << " times:\n" << names;
+  }
+  wait_for(b, long_id, [](const json& v) { return v.contains("scheduler") || ended(v); }, 30);
+  b.call_json("POST", "/api/v1/jobs/" + long_id + "/cancel", nullptr, 202);
+  EXPECT_EQ(a.wait_job(long_id, 60)["state"], "cancelled");
+  auto logs = svc_->store().logs(100, 0);
+  ASSERT_TRUE(logs);
+  EXPECT_EQ(logs->size(), ids.size());  // the done jobs, each once; a cancelled job is not logged
 }
 
 TEST_F(SlurmServiceTest, AJobOverItsTimeLimitFailsWithTheSchedulersReason) {
