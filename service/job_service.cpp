@@ -165,6 +165,8 @@ struct JobService::CostModels {};
 
 Expected<std::unique_ptr<JobService>> JobService::open(const ServiceConfig& given) {
   if (!init_crypto()) return backend_error("libsodium did not start (no entropy source)");
+  if (given.executor != "local" && given.executor != "slurm")
+    return invalid_argument("executor: '" + given.executor + "' (local or slurm)");
   ServiceConfig config = given;
   // Cluster nodes find a job's files by the paths the service writes into its
   // spec and batch script: absolute ones (the same on every node, docs/deploy.md).
@@ -195,8 +197,6 @@ Expected<std::unique_ptr<JobService>> JobService::open(const ServiceConfig& give
   svc->cost_->trainer = std::make_unique<CostTrainer>(tc, *svc->store_, svc->cost_->set);
 #endif
   if (Status st = svc->seed(); !st) return st;
-  if (config.executor != "local" && config.executor != "slurm")
-    return invalid_argument("executor: '" + config.executor + "' (local or slurm)");
   // Local jobs a stopped server left running start again; cluster jobs run on
   // under the scheduler, and the Slurm executor follows them again.
   if (config.executor == "local") {
