@@ -826,14 +826,14 @@ static std::string view_fingerprint(const JobStatus& j) {
   char numbers[112];
   std::snprintf(numbers, sizeof numbers, "%.17g|%d|%.17g|%.17g|%llu", j.progress, j.attempts,
                 j.started_at, j.finished_at, static_cast<unsigned long long>(j.cost_bytes));
-  return j.state + "|" + j.stage + "|" + numbers + "|" + j.error;
+  return j.state + "|" + j.stage + "|" + numbers + "|" + j.executor_ref + "|" + j.error;
 }
 
 static JobStatus status_of(const Job& j) {
   JobStatus s;
   s.id = j.id;
   s.owner_id = j.owner_id;
-  s.state = j.state, s.stage = j.stage, s.error = j.error;
+  s.state = j.state, s.stage = j.stage, s.error = j.error, s.executor_ref = j.executor_ref;
   s.progress = j.progress, s.started_at = j.started_at, s.finished_at = j.finished_at;
   s.attempts = j.attempts;
   s.cost_bytes = j.cost_json.size();

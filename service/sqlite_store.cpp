@@ -340,7 +340,7 @@ class SqliteStore final : public Store {
     std::lock_guard lock(mu_);
     Stmt s = stmt(
         "SELECT owner_id, state, stage, progress, started_at, finished_at, attempts, "
-        "length(CAST(cost_json AS BLOB)), error FROM jobs WHERE id = ?");
+        "length(CAST(cost_json AS BLOB)), error, executor_ref FROM jobs WHERE id = ?");
     s.bind(1, id);
     if (s.step() != SQLITE_ROW) return not_found("no job '" + id + "'");
     JobStatus j;
@@ -354,6 +354,7 @@ class SqliteStore final : public Store {
     j.attempts = int(s.i64(6));
     j.cost_bytes = uint64_t(s.i64(7));
     j.error = s.text(8);
+    j.executor_ref = s.text(9);
     return j;
   }
 
@@ -457,7 +458,8 @@ class SqliteStore final : public Store {
 
   Expected<std::vector<std::string>> requeue_running_jobs() override {
     std::lock_guard lock(mu_);
-    Stmt s = stmt("UPDATE jobs SET state = 'queued' WHERE state = 'running' RETURNING id");
+    Stmt s = stmt(
+        "UPDATE jobs SET state = 'queued' WHERE state = 'running' AND executor_ref = '' RETURNING id");
     std::vector<std::string> ids;
     int rc;
     while ((rc = s.step()) == SQLITE_ROW) ids.push_back(s.text(0));

@@ -68,6 +68,7 @@ struct JobStatus {
   double progress = 0, started_at = 0, finished_at = 0;
   int attempts = 0;
   uint64_t cost_bytes = 0;  // the size of cost_json
+  std::string executor_ref;
 };
 
 struct Share {
@@ -156,7 +157,9 @@ class Store {
   virtual Expected<std::vector<Job>> running_jobs() = 0;
   // A queued job becomes cancelled at once; true when it was queued.
   virtual Expected<bool> cancel_queued_job(const std::string& id, double now) = 0;
-  // Jobs left running by a server that stopped: queued again, in order.
+  // Local jobs left running by a server that stopped: queued again, in order.
+  // Cluster jobs (an executor_ref) are left alone: they run on under their
+  // scheduler, and the Slurm executor follows them.
   virtual Expected<std::vector<std::string>> requeue_running_jobs() = 0;
   virtual Status delete_job(const std::string& id) = 0;
   // Other jobs whose files are in run_dir (a reused result shares them).

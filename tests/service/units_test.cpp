@@ -1,8 +1,13 @@
 // The service's pieces without a server: the HTTP parts the server reads
-// itself (request heads, header cleaning, Range, paths) and GPU discovery.
+// itself (request heads, header cleaning, Range, paths), GPU discovery, and
+// what the store promises the executors.
 #include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
 
 #include "service/http_parse.h"
+#include "service/store.h"
 #include "service/workers.h"
 
 namespace collido::service {
@@ -88,6 +93,43 @@ TEST(Workers, VisibleGpusFollowCudaVisibleDevices) {
   ::setenv("CUDA_VISIBLE_DEVICES", "", 1);  // none: the CPU
   EXPECT_TRUE(visible_gpus().empty());
   ::unsetenv("CUDA_VISIBLE_DEVICES");
+}
+
+// A restart requeues only local jobs (cluster jobs run on under their
+// scheduler), and a job ends once however many executors end it.
+TEST(Store, RestartsRequeueLocalJobsOnlyAndJobsEndOnce) {
+  const auto dir = std::filesystem::temp_directory_path() / ("store_units_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  auto store = open_sqlite_store((dir / "db.sqlite").string());
+  ASSERT_TRUE(store) << store.status().message();
+  Store& st = **store;
+  for (const char* id : {"local", "cluster"}) {
+    Job j;
+    j.id = id;
+    j.owner_id = 1;
+    j.state = "running";
+    j.scene_json = j.prediction_json = j.cost_json = "{}";
+    ASSERT_TRUE(st.insert_job(j));
+  }
+  ASSERT_TRUE(st.set_job_executor_ref("cluster", "4711"));
+  auto running = st.running_jobs();
+  ASSERT_TRUE(running);
+  ASSERT_EQ(running->size(), 2u);
+  EXPECT_EQ(st.job_status("cluster")->executor_ref, "4711");
+  auto requeued = st.requeue_running_jobs();
+  ASSERT_TRUE(requeued);
+  EXPECT_EQ(*requeued, std::vector<std::string>{"local"});
+  EXPECT_EQ(st.job_by_id("cluster")->state, "running");
+  auto first = st.finish_job("cluster", "done", "{}", "", 1.0);
+  auto second = st.finish_job("cluster", "failed", "{}", "late", 2.0);
+  ASSERT_TRUE(first && second);
+  EXPECT_TRUE(*first);
+  EXPECT_FALSE(*second);  // another replica's end comes too late and changes nothing
+  EXPECT_EQ(st.job_by_id("cluster")->state, "done");
+  EXPECT_EQ(st.job_by_id("cluster")->error, "");
+  store->reset();
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace
