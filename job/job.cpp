@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <new>
 #include <nlohmann/json.hpp>
@@ -157,6 +158,13 @@ class JobRunner {
   JobResult run() {
     t_start_ = Clock::now();
     result_.out_dir = spec_.out_dir;
+    // Resuming a run that finished (a cluster job requeued or submitted again
+    // after its end) must not touch it: its manifest already says done.
+    if (spec_.dir_policy == DirPolicy::kResume && read_finished_run()) {
+      note("the run in " + spec_.out_dir + " is complete: nothing to resume");
+      report(Stage::kDone, 1, 1, 0);
+      return result_;
+    }
     // Everything the input decides is checked before the directory is touched,
     // so a bad scene leaves nothing behind.
     Status st = guarded([&] { return prepare(); });
@@ -176,6 +184,35 @@ class JobRunner {
     if (hooks_.note) hooks_.note(line);
   }
   bool cancel_requested() const { return hooks_.cancel && hooks_.cancel->load(); }
+  // A finished run's result.json (status done, complete) into result_; false
+  // when the directory holds no finished run.
+  bool read_finished_run() {
+    std::ifstream in(paths_.result());
+    const json m = json::parse(in, nullptr, false);
+    if (!m.is_object() || m.value("status", "") != "done" || !m.value("complete", false)) return false;
+    try {
+      result_.backend = m.value("backend", "");
+      result_.threads = m.value("threads", 0);
+      result_.particles = m.value("particles", uint64_t(0));
+      result_.triangles = m.value("triangles", uint64_t(0));
+      result_.escaped = m.value("escaped", uint64_t(0));
+      result_.invalid = m.value("invalid", uint64_t(0));
+      result_.resumed_from_frame = m.value("resumed_from_frame", uint64_t(0));
+      const json c = m.value("cost", json::object());
+      result_.cost.total_s = c.value("total_s", 0.0);
+      result_.cost.prepare_s = c.value("prepare_s", 0.0);
+      result_.cost.simulate_s = c.value("simulate_s", 0.0);
+      result_.cost.render_s = c.value("render_s", 0.0);
+      result_.cost.frames = c.value("frames", uint64_t(0));
+      result_.cost.steps = c.value("steps", uint64_t(0));
+      result_.cost.peak_host_bytes = c.value("peak_host_bytes", uint64_t(0));
+      result_.cost.peak_device_bytes = c.value("peak_device_bytes", uint64_t(0));
+    } catch (const json::exception&) {
+      return false;  // a field of the wrong type: not a manifest we wrote
+    }
+    result_.artifacts = list_artifacts(paths_, nullptr);
+    return true;
+  }
   void report(Stage stage, uint64_t done, uint64_t total, double eta) {
     if (!hooks_.progress) return;
     Progress p;

@@ -7,6 +7,8 @@
 
 #include "app/cli.h"
 #include "app/commands.h"
+#include "job/child.h"
+#include "job/job.h"
 #include "sim/snapshot.h"
 
 namespace collido::app {
@@ -119,6 +121,48 @@ TEST(CliRun, AFixedStepBeyondTheStableBoundIsWarnedAboutAndStillReported) {
   std::stringstream run;
   run << std::ifstream(dir + "/result.json").rdbuf();
   EXPECT_NE(run.str().find("\"beyond_stable\": true"), std::string::npos) << run.str();
+}
+
+// `job-exec` as a cluster node runs it: progress appended to a file (with the
+// job's peak memory), and --resume continuing the run a requeued job left.
+TEST(CliJobExec, ProgressFileAndResumeAsOnAClusterNode) {
+  const std::string dir = ::testing::TempDir() + "/job_exec_node";
+  fs::remove_all(dir);
+  job::JobSpec spec;
+  spec.scene_json = R"({"wall": "box:x=6,y=6,z=6", "particles": {"count": 8, "radius": 0.4},
+    "placement": {"kind": "fill"}, "duration": 0.3, "fps": 10, "backend": "cpu"})";
+  spec.out_dir = dir + "/run";
+  spec.threads = 1;
+  const std::string spec_path = write_scene("job_exec_node.json", job::spec_to_json(spec));
+  const std::string progress = dir + "/progress.jsonl";
+  fs::create_directories(dir);
+  EXPECT_EQ(cmd_job_exec({spec_path, "--progress-fd", "1", "--progress-file", progress}), kExitUsage);
+  EXPECT_EQ(cmd_job_exec({spec_path, "--progress-file", "/nonexistent/dir/p.jsonl"}), kExitUsage);
+
+  // Nothing to resume yet: --resume starts the run.
+  ASSERT_EQ(cmd_job_exec({spec_path, "--resume", "--progress-file", progress}), kExitOk);
+  std::vector<job::ReportLine> reports;
+  for (const std::string& l : lines(progress)) reports.push_back(job::parse_report_line(l));
+  ASSERT_GE(reports.size(), 4u);
+  EXPECT_EQ(reports.back().kind, job::ReportLine::Kind::kStatus);
+  EXPECT_TRUE(reports.back().status);
+  EXPECT_EQ(reports.front().kind, job::ReportLine::Kind::kProgress);
+  EXPECT_GT(reports.front().peak_host_bytes, 1000000u);  // the job's own peak so far
+  const size_t first_run = reports.size();
+
+  // Again, as a cluster job submitted a second time would be: --resume takes
+  // the run there (the spec says kRefuse for a directory that holds files),
+  // and the new lines follow the first run's.
+  const auto manifest = lines(dir + "/run/result.json");
+  ASSERT_EQ(cmd_job_exec({spec_path, "--resume", "--progress-file", progress}), kExitOk);
+  const auto after = lines(progress);
+  EXPECT_GT(after.size(), first_run);
+  // The run had finished: it is left as it was, and the job says so.
+  EXPECT_EQ(lines(dir + "/run/result.json"), manifest);
+  bool said = false;
+  for (const std::string& l : after) said = said || l.find("is complete: nothing to resume") != std::string::npos;
+  EXPECT_TRUE(said);
+  EXPECT_EQ(cmd_job_exec({spec_path, "--progress-file", progress}), kExitUsage);  // no --resume: refused
 }
 
 }  // namespace
