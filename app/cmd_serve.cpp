@@ -150,12 +150,8 @@ int cmd_serve(const Args& args) {
   if (executor == "slurm" && config.job_threads == 0) config.job_threads = config.slurm.cpus;
   auto file_list = [&](const char* flag) {
     std::vector<std::string> files;
-    const std::string list = parsed->get(flag, "");
-    for (size_t start = 0; start <= list.size();) {
-      const size_t comma = std::min(list.find(',', start), list.size());
-      if (comma > start) files.push_back(list.substr(start, comma - start));
-      start = comma + 1;
-    }
+    for (std::string& f : split_list(parsed->get(flag, "")))
+      if (!f.empty()) files.push_back(std::move(f));
     return files;
   };
   if (parsed->has("cost-model")) {

@@ -1,7 +1,9 @@
 // `collidoscope study`: flags and printing over the study library (study/study.h).
+#include <sys/stat.h>
+
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
-#include <sys/stat.h>
 
 #include "app/cli.h"
 #include "app/commands.h"
@@ -66,24 +68,19 @@ int cmd_study(const Args& args) {
     std::fprintf(stderr, "collidoscope study: cannot create %s\n", dir.c_str());
     return kExitFailure;
   }
+  auto failed = [](const Status& s) {
+    std::fprintf(stderr, "collidoscope study: %s\n", s.message().c_str());
+    return kExitFailure;
+  };
   std::vector<study::DetectRow> detect;
   std::vector<study::DynamicsRow> dynamics;
   if (only != "dynamics")
-    if (Status s = study::run_detect_study(o, &detect); !s) {
-      std::fprintf(stderr, "collidoscope study: %s\n", s.message().c_str());
-      return kExitFailure;
-    }
+    if (Status s = study::run_detect_study(o, &detect); !s) return failed(s);
   if (only != "detect")
-    if (Status s = study::run_dynamics_study(o, &dynamics); !s) {
-      std::fprintf(stderr, "collidoscope study: %s\n", s.message().c_str());
-      return kExitFailure;
-    }
+    if (Status s = study::run_dynamics_study(o, &dynamics); !s) return failed(s);
   std::string machine = std::to_string(pool.size()) + " CPU threads";
   if (o.backend == sim::Backend::kCuda) machine += ", " + sim::cuda_device_name();
-  if (Status s = study::write_study(dir, detect, dynamics, machine); !s) {
-    std::fprintf(stderr, "collidoscope study: %s\n", s.message().c_str());
-    return kExitFailure;
-  }
+  if (Status s = study::write_study(dir, detect, dynamics, machine); !s) return failed(s);
   // The findings in brief: failures by kind, and the automatic choices.
   size_t lost = 0, auto_rows = 0, auto_inexact = 0;
   for (const auto& r : detect) {

@@ -1227,48 +1227,42 @@ void JobService::job_finished(const Job& j, const std::string& state, const std:
   auto ended = store_->finish_job(j.id, state, cost.dump(), error, unix_now());
   forget_cancel_flag(j.id);
   if (!ended || !*ended) return;  // ended already (another replica): logged there
-  if (state != "done") {
-    if (!partial.is_object()) return;
-    // A run the scheduler (or a failure) ended: what was measured of it, kept
-    // in the log beside the finished jobs. No total time (it did not finish),
-    // so the prediction-error metrics and the retraining leave it out.
-    LogRow row;
-    row.job_id = j.id;
-    const json pred = json::parse(j.prediction_json, nullptr, false);
-    row.inputs_json = pred.is_object() && pred.contains("inputs") ? pred["inputs"].dump() : "{}";
-    json measured = partial;
-    measured["outcome"] = state;
-    measured["error"] = error;
-    row.measured_json = measured.dump();
-    row.predicted_json = j.prediction_json;
-    row.peak_host_bytes = partial.value("peak_host_bytes", uint64_t(0));
-    row.predicted_host_bytes = j.predicted_host_bytes;
-    row.created_at = unix_now();
-    store_->insert_log(row);
-    return;
-  }
-  // The run log row: the inputs the cost model prices by, what it cost, and
-  // what was predicted at submission.
+  if (state != "done" && !partial.is_object()) return;
+  // The run log row: the inputs the cost model prices by, what it cost (or, for
+  // a run the scheduler or a failure ended, what was measured of it), and what
+  // was predicted at submission.
   const json pred = json::parse(j.prediction_json, nullptr, false);
   LogRow row;
   row.job_id = j.id;
   json inputs = pred.is_object() && pred.contains("inputs") ? pred["inputs"] : json::object();
+  row.predicted_json = j.prediction_json;
+  row.predicted_host_bytes = j.predicted_host_bytes;
+  row.created_at = unix_now();
+  if (state != "done") {
+    // No total time (it did not finish), so the prediction-error metrics and
+    // the retraining leave it out.
+    json measured = partial;
+    measured["outcome"] = state;
+    measured["error"] = error;
+    row.inputs_json = inputs.dump();
+    row.measured_json = measured.dump();
+    row.peak_host_bytes = partial.value("peak_host_bytes", uint64_t(0));
+    store_->insert_log(row);
+    return;
+  }
   inputs["backend"] = manifest.value("backend", "");
   inputs["threads"] = manifest.value("threads", 0);
   inputs["steps"] = cost.value("steps", 0);
   row.inputs_json = inputs.dump();
   row.measured_json = cost.dump();
-  row.predicted_json = j.prediction_json;
   row.total_s = cost.value("total_s", 0.0);
   const double frames = std::max(1.0, double(cost.value("frames", 1)));
   row.per_frame_s = cost.value("simulate_s", 0.0) / frames;
   row.peak_host_bytes = cost.value("peak_host_bytes", uint64_t(0));
   row.peak_device_bytes = cost.value("peak_device_bytes", uint64_t(0));
   row.gpu_load = cost.value("gpu_busy_fraction", 0.0);
-  row.predicted_host_bytes = j.predicted_host_bytes;
   if (pred.is_object() && pred.contains("total_time_s") && pred["total_time_s"].is_object())
     row.predicted_total_s = pred["total_time_s"].value("value", -1.0);
-  row.created_at = unix_now();
 #ifdef COLLIDO_HAVE_JOB_COST
   row.job_record = job_record_of(j, pred, manifest);
 #endif

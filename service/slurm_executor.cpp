@@ -370,8 +370,7 @@ void SlurmExecutor::follow() {
         recheck_soon_ = true;  // look again in a moment rather than at the next poll
         continue;
       }
-      read_progress(j);  // its last lines, written as it ended
-      end(j, st);
+      end(j, st);  // with the lines read above: written before this look saw the end
       std::lock_guard lock(mu_);
       cancel_requested_.erase(j.id);
       continue;

@@ -18,17 +18,42 @@ std::vector<Method> auto_method_candidates(const TriangleMesh& mesh, double r_ma
   return out;
 }
 
-Status fastest_frame_ms(Detector& det, int min_frames, double* ms, DetectResult* last) {
+void fastest_frames_ms(const std::vector<Detector*>& dets, int min_frames, std::vector<double>* ms,
+                       std::vector<Status>* status, DetectResult* last_of_first) {
+  const size_t n = dets.size();
+  ms->assign(n, 1e300);
+  status->assign(n, Status::ok());
+  std::vector<double> spent(n, 0.0);
+  std::vector<bool> live(n);
   DetectResult r;
-  if (Status s = det.detect(&r); !s) return s;  // warm-up
-  double best = 1e300, spent = 0;
-  for (int k = 0; k < kAutoMaxFrames && (k < min_frames || spent < kAutoTimingBudgetMs); ++k) {
-    if (Status s = det.detect(&r); !s) return s;
-    best = std::min(best, r.times.frame_ms);
-    spent += r.times.frame_ms;
+  for (size_t i = 0; i < n; ++i) {
+    live[i] = dets[i] != nullptr;
+    if (live[i] && !((*status)[i] = dets[i]->detect(&r))) live[i] = false;  // the warm-up frame
   }
-  *ms = best;
-  if (last) *last = std::move(r);
+  for (int round = 0; round < kAutoMaxFrames; ++round) {
+    bool more = false;
+    for (size_t i = 0; i < n; ++i)
+      more = more || (live[i] && (round < min_frames || spent[i] < kAutoTimingBudgetMs));
+    if (!more) break;
+    for (size_t i = 0; i < n; ++i) {
+      if (!live[i]) continue;
+      if (!((*status)[i] = dets[i]->detect(&r))) {
+        live[i] = false;
+        continue;
+      }
+      (*ms)[i] = std::min((*ms)[i], r.times.frame_ms);
+      spent[i] += r.times.frame_ms;
+      if (i == 0 && last_of_first) *last_of_first = r;
+    }
+  }
+}
+
+Status fastest_frame_ms(Detector& det, int min_frames, double* ms, DetectResult* last) {
+  std::vector<double> best;
+  std::vector<Status> status;
+  fastest_frames_ms({&det}, min_frames, &best, &status, last);
+  if (!status[0]) return status[0];
+  *ms = best[0];
   return Status::ok();
 }
 
@@ -66,44 +91,23 @@ std::unique_ptr<Detector> prepare_candidate(const TriangleMesh& mesh, const Part
   return std::move(*det);
 }
 
-// Times candidates [begin, end) in rounds, one frame of each per round, so a
-// slow spell of the machine (another process, a clock change) falls on all of
-// them alike rather than on whichever was being timed then; each keeps its
-// fastest frame (fastest_frame_ms's rule: at least min_frames rounds, until
-// each has kAutoTimingBudgetMs of frames, at most kAutoMaxFrames).
-void time_interleaved(const TriangleMesh& mesh, const Particles& sample, const DetectConfig& base,
-                      int min_frames, AutoCandidate* begin, AutoCandidate* end) {
-  std::vector<std::unique_ptr<Detector>> dets;
-  for (AutoCandidate* c = begin; c != end; ++c) dets.push_back(prepare_candidate(mesh, sample, base, c));
-  const size_t n = dets.size();
-  std::vector<double> spent(n, 0.0);
-  DetectResult r;
-  for (size_t i = 0; i < n; ++i) {
-    begin[i].frame_ms = 1e300;
-    if (!dets[i]) continue;
-    if (Status st = dets[i]->detect(&r); !st) {  // the warm-up frame
-      begin[i].error = st.message();
-      dets[i].reset();
-    }
+// Times candidates [begin, end) together (fastest_frames_ms), each on its
+// own detector.
+void time_together(const TriangleMesh& mesh, const Particles& sample, const DetectConfig& base,
+                   int min_frames, AutoCandidate* begin, AutoCandidate* end) {
+  std::vector<std::unique_ptr<Detector>> owned;
+  std::vector<Detector*> dets;
+  for (AutoCandidate* c = begin; c != end; ++c) {
+    owned.push_back(prepare_candidate(mesh, sample, base, c));
+    dets.push_back(owned.back().get());
   }
-  for (int round = 0; round < kAutoMaxFrames; ++round) {
-    bool more = false;
-    for (size_t i = 0; i < n; ++i)
-      more = more || (dets[i] && (round < min_frames || spent[i] < kAutoTimingBudgetMs));
-    if (!more) break;
-    for (size_t i = 0; i < n; ++i) {
-      if (!dets[i]) continue;
-      if (Status st = dets[i]->detect(&r); !st) {
-        begin[i].error = st.message();
-        dets[i].reset();
-        continue;
-      }
-      begin[i].frame_ms = std::min(begin[i].frame_ms, r.times.frame_ms);
-      spent[i] += r.times.frame_ms;
-    }
+  std::vector<double> ms;
+  std::vector<Status> status;
+  fastest_frames_ms(dets, min_frames, &ms, &status);
+  for (size_t i = 0; i < dets.size(); ++i) {
+    if (!status[i]) begin[i].error = status[i].message();
+    begin[i].frame_ms = begin[i].error.empty() ? ms[i] : 0;
   }
-  for (size_t i = 0; i < n; ++i)
-    if (!begin[i].error.empty()) begin[i].frame_ms = 0;
 }
 
 }  // namespace
@@ -137,9 +141,9 @@ Expected<AutoChoice> choose_detection(const TriangleMesh& mesh, const Particles&
   AutoCandidate* all = choice.candidates.data();
   const size_t n = choice.candidates.size();
   if (gpu) {
-    for (size_t i = 0; i < n; ++i) time_interleaved(mesh, sample, base, repeats, all + i, all + i + 1);
+    for (size_t i = 0; i < n; ++i) time_together(mesh, sample, base, repeats, all + i, all + i + 1);
   } else {
-    time_interleaved(mesh, sample, base, repeats, all, all + n);
+    time_together(mesh, sample, base, repeats, all, all + n);
   }
   const AutoCandidate* best = nullptr;
   for (const auto& c : choice.candidates)

@@ -56,9 +56,16 @@ struct AutoChoice {
 inline constexpr double kAutoTimingBudgetMs = 20;
 inline constexpr int kAutoMaxFrames = 200;
 
-// The fastest of at least `min_frames` frames of `det` (after one warm-up),
-// timing for at least kAutoTimingBudgetMs and at most kAutoMaxFrames frames:
-// how the automatic choice and the study time a setting.
+// How the automatic choice and the study time a setting: the fastest of at
+// least `min_frames` frames (after one warm-up), timing for at least
+// kAutoTimingBudgetMs and at most kAutoMaxFrames frames. Several detectors are
+// timed in rounds, one frame of each per round, so a slow spell of the machine
+// (another process, a clock change) falls on all of them alike. (*ms)[i] is
+// dets[i]'s fastest frame; (*status)[i] its error, after which it is dropped
+// (a null detector is skipped). last_of_first: the first detector's last frame.
+void fastest_frames_ms(const std::vector<Detector*>& dets, int min_frames, std::vector<double>* ms,
+                       std::vector<Status>* status, DetectResult* last_of_first = nullptr);
+// One detector: its fastest frame, or its error.
 Status fastest_frame_ms(Detector& det, int min_frames, double* ms, DetectResult* last = nullptr);
 
 // The grid lengths tried, in units of r_max (the study's grid).

@@ -24,8 +24,11 @@ struct Scene {
 Expected<std::vector<Scene>> study_scenes(const StudyOptions& o) {
   std::vector<Scene> out;
   // The paper's walls with its radii (r_max = 1).
-  out.push_back({"wall1", sim::make_cylinder(50, 100, 40), 0.5, 1.0});
-  out.push_back({"wall2", sim::make_wall2(), 0.5, 1.0});
+  for (const char* wall : {"wall1", "wall2"}) {
+    auto mesh = sim::make_shape(wall);
+    if (!mesh) return mesh.status();
+    out.push_back({wall, std::move(*mesh), 0.5, 1.0});
+  }
   std::vector<std::string> files;
   std::error_code ec;
   for (const auto& e : std::filesystem::directory_iterator(o.mesh_dir, ec))
