@@ -73,7 +73,7 @@ Expected<JobAssessment> assess_job(const JobSpec& spec) {
   a.release = *release;
   a.steps = sim::plan_steps(s.dynamics, s.particles.r_min, s.particles.r_max,
                             0.5 * (s.particles.r_min + s.particles.r_max), a.release.speed,
-                            extent, s.duration / double(std::max<uint64_t>(a.frames, 1)),
+                            sim::mesh_bounds(*wall), s.duration / double(std::max<uint64_t>(a.frames, 1)),
                             a.frames);
   a.work = estimate_work(*wall, s.dynamics, s.particles.count, s.particles.r_max);
   if (Status st = check_budget(a.work, spec.budget); !st) return st;

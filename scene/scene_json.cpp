@@ -2,6 +2,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <vector>
 
 #include "common/number_text.h"
 #include "scene/scene.h"
@@ -195,17 +196,86 @@ Status read_placement(const json& p, Scene* s) {
   return Status::ok();
 }
 
+// The coefficients a particle material and a wall material share.
+Status read_coefficients(const ObjectReader& r, sim::Material* mat) {
+  COLLIDO_TRY(r.number("restitution", &mat->restitution, 1e-6, 1));
+  COLLIDO_TRY(r.number("friction", &mat->friction, 0, 10));
+  COLLIDO_TRY(r.number("rolling_friction", &mat->rolling_friction, 0, 1));
+  COLLIDO_TRY(r.number("stiffness", &mat->stiffness, 0, 1e15));
+  COLLIDO_TRY(r.number("youngs_modulus", &mat->youngs_modulus, 0, 1e13));
+  COLLIDO_TRY(r.number("poisson_ratio", &mat->poisson_ratio, 0, 0.5));
+  if (mat->stiffness > 0 && mat->youngs_modulus > 0)
+    return invalid_argument(r.name("stiffness") + ": give stiffness or youngs_modulus, not both");
+  return Status::ok();
+}
+
 Status read_material(const json& m, Scene* s) {
   ObjectReader r(m, "material");
-  COLLIDO_TRY(r.only({"restitution", "friction", "stiffness", "youngs_modulus", "impact_speed"}));
-  sim::Material& mat = s->dynamics.material;
-  COLLIDO_TRY(r.number("restitution", &mat.restitution, 1e-6, 1));
-  COLLIDO_TRY(r.number("friction", &mat.friction, 0, 10));
-  COLLIDO_TRY(r.number("stiffness", &mat.stiffness, 0, 1e15));
-  COLLIDO_TRY(r.number("youngs_modulus", &mat.youngs_modulus, 0, 1e13));
+  COLLIDO_TRY(r.only({"restitution", "friction", "rolling_friction", "stiffness", "youngs_modulus",
+                      "poisson_ratio", "impact_speed"}));
+  COLLIDO_TRY(read_coefficients(r, &s->dynamics.material));
   COLLIDO_TRY(r.number("impact_speed", &s->dynamics.impact_speed, 0, kMaxSpeed));
-  if (mat.stiffness > 0 && mat.youngs_modulus > 0)
-    return invalid_argument("material: give stiffness or youngs_modulus, not both");
+  return Status::ok();
+}
+
+// The wall's side of particle-wall contacts; keys not given are the particles'
+// (read after "material", whatever the document's order).
+Status read_wall_material(const json& m, Scene* s) {
+  ObjectReader r(m, "wall_material");
+  COLLIDO_TRY(r.only({"restitution", "friction", "rolling_friction", "stiffness", "youngs_modulus",
+                      "poisson_ratio"}));
+  sim::Material& w = s->dynamics.wall_material;
+  w = s->dynamics.material;
+  // The wall's elasticity is its own only where given.
+  w.stiffness = 0, w.youngs_modulus = 0;
+  COLLIDO_TRY(read_coefficients(r, &w));
+  s->dynamics.wall_material_set = true;
+  return Status::ok();
+}
+
+Status read_wall_motion(const json& m, Scene* s) {
+  ObjectReader r(m, "wall_motion");
+  COLLIDO_TRY(r.only({"kind", "axis", "center", "angular_speed", "rpm", "velocity", "amplitude",
+                      "frequency"}));
+  sim::WallMotion& w = s->dynamics.wall_motion;
+  std::string kind = "none";
+  COLLIDO_TRY(r.string("kind", &kind));
+  using K = sim::WallMotionKind;
+  std::vector<const char*> allowed;  // (an initializer_list would dangle)
+  if (kind == "rotate") {
+    w.kind = K::kRotate;
+    allowed = {"kind", "axis", "center", "angular_speed", "rpm"};
+  } else if (kind == "translate") {
+    w.kind = K::kTranslate;
+    allowed = {"kind", "velocity"};
+  } else if (kind == "oscillate") {
+    w.kind = K::kOscillate;
+    allowed = {"kind", "axis", "amplitude", "frequency"};
+  } else if (kind == "none") {
+    w.kind = K::kNone;
+    allowed = {"kind"};
+  } else {
+    return invalid_argument("wall_motion.kind: \"" + kind +
+                            "\" is not none, rotate, translate or oscillate");
+  }
+  for (auto it = m.begin(); it != m.end(); ++it) {
+    bool ok = false;
+    for (const char* k : allowed) ok = ok || it.key() == k;
+    if (!ok) return invalid_argument("wall_motion." + it.key() + ": not a setting of " + kind);
+  }
+  COLLIDO_TRY(r.vec3("axis", &w.axis, 1e6));
+  if ((w.kind == K::kRotate || w.kind == K::kOscillate) && !(length(w.axis) > 0))
+    return invalid_argument("wall_motion.axis: must not be zero");
+  COLLIDO_TRY(r.vec3("center", &w.center, kMaxCoordinate));
+  if (r.has("angular_speed") && r.has("rpm"))
+    return invalid_argument("wall_motion: give angular_speed (rad/s) or rpm, not both");
+  COLLIDO_TRY(r.number("angular_speed", &w.angular_speed, -1e4, 1e4));
+  double rpm = 0;
+  COLLIDO_TRY(r.number("rpm", &rpm, -1e5, 1e5));
+  if (r.has("rpm")) w.angular_speed = rpm * 2 * M_PI / 60;
+  COLLIDO_TRY(r.vec3("velocity", &w.velocity, kMaxSpeed));
+  COLLIDO_TRY(r.number("amplitude", &w.amplitude, 0, kMaxCoordinate));
+  COLLIDO_TRY(r.number("frequency", &w.frequency, 0, 1e5));
   return Status::ok();
 }
 
@@ -221,6 +291,8 @@ void scale_lengths(Scene* s, double k) {
   pl.velocity = pl.velocity * k;
   s->dynamics.impact_speed *= k;
   s->dynamics.grid_length *= k;
+  sim::WallMotion& w = s->dynamics.wall_motion;
+  w.center = w.center * k, w.velocity = w.velocity * k, w.amplitude *= k;
 }
 
 }  // namespace
@@ -233,7 +305,7 @@ Expected<Scene> parse_scene(const std::string& text) {
   COLLIDO_TRY(
       r.only({"wall", "particles", "placement", "gravity", "material", "duration", "fps", "method",
               "backend", "particle_contacts", "integrator", "time_step", "seed", "output",
-              "length_unit", "grid_length"}));
+              "length_unit", "grid_length", "contact_model", "wall_material", "wall_motion"}));
   COLLIDO_TRY(r.string("length_unit", &s.length_unit));
   if (s.length_unit != "m" && s.length_unit != "cm" && s.length_unit != "mm")
     return invalid_argument("length_unit: \"" + s.length_unit + "\" is not m, cm or mm");
@@ -243,6 +315,17 @@ Expected<Scene> parse_scene(const std::string& text) {
   if (r.has("particles")) COLLIDO_TRY(read_particles(r.at("particles"), &s));
   if (r.has("placement")) COLLIDO_TRY(read_placement(r.at("placement"), &s));
   if (r.has("material")) COLLIDO_TRY(read_material(r.at("material"), &s));
+  if (r.has("wall_material")) COLLIDO_TRY(read_wall_material(r.at("wall_material"), &s));
+  if (r.has("wall_motion")) COLLIDO_TRY(read_wall_motion(r.at("wall_motion"), &s));
+  std::string model = sim::to_string(s.dynamics.contact_model);
+  COLLIDO_TRY(r.string("contact_model", &model));
+  if (!sim::parse_contact_model(model, &s.dynamics.contact_model))
+    return invalid_argument("contact_model: \"" + model + "\" is not linear or hertz_mindlin");
+  if (s.dynamics.contact_model == sim::ContactModel::kHertzMindlin &&
+      (s.dynamics.material.stiffness > 0 || s.dynamics.wall_material.stiffness > 0))
+    return invalid_argument(
+        "material.stiffness: the hertz_mindlin model takes youngs_modulus (Pa) and "
+        "poisson_ratio, not a spring stiffness");
   COLLIDO_TRY(r.vec3("gravity", &s.dynamics.gravity, 1e4));
   COLLIDO_TRY(r.number("duration", &s.duration, 1e-9, kMaxDuration));
   COLLIDO_TRY(r.number("fps", &s.fps, 1e-3, 1e4));
@@ -326,11 +409,34 @@ std::string to_json(const Scene& si) {
     j["placement"]["rate"] = pl.rate;
   }
   const sim::Material& m = s.dynamics.material;
-  j["material"] = {{"restitution", m.restitution},
-                   {"friction", m.friction},
-                   {"stiffness", m.stiffness},
-                   {"youngs_modulus", m.youngs_modulus},
-                   {"impact_speed", s.dynamics.impact_speed}};
+  auto coefficients = [](const sim::Material& m) {
+    return json{{"restitution", m.restitution},       {"friction", m.friction},
+                {"rolling_friction", m.rolling_friction}, {"stiffness", m.stiffness},
+                {"youngs_modulus", m.youngs_modulus}, {"poisson_ratio", m.poisson_ratio}};
+  };
+  j["material"] = coefficients(m);
+  j["material"]["impact_speed"] = s.dynamics.impact_speed;
+  if (s.dynamics.wall_material_set) j["wall_material"] = coefficients(s.dynamics.wall_material);
+  j["contact_model"] = sim::to_string(s.dynamics.contact_model);
+  const sim::WallMotion& w = s.dynamics.wall_motion;
+  switch (w.kind) {
+    case sim::WallMotionKind::kRotate:
+      j["wall_motion"] = {{"kind", "rotate"},
+                          {"axis", v3(w.axis)},
+                          {"center", v3(w.center)},
+                          {"angular_speed", w.angular_speed}};
+      break;
+    case sim::WallMotionKind::kTranslate:
+      j["wall_motion"] = {{"kind", "translate"}, {"velocity", v3(w.velocity)}};
+      break;
+    case sim::WallMotionKind::kOscillate:
+      j["wall_motion"] = {{"kind", "oscillate"},
+                          {"axis", v3(w.axis)},
+                          {"amplitude", w.amplitude},
+                          {"frequency", w.frequency}};
+      break;
+    default: break;
+  }
   j["gravity"] = v3(s.dynamics.gravity);
   j["duration"] = s.duration;
   j["fps"] = s.fps;

@@ -97,12 +97,30 @@ struct WallContactSet {
   }
 };
 
-// Constants of the contact law shared by every pair.
+// The normal force law of a contact.
+enum class ContactModel : uint32_t {
+  kLinear = 0,        // linear spring-dashpot: F = k d - gamma v_n, gamma from the restitution
+  kHertzMindlin = 1,  // Hertz normal, Mindlin tangential, damping that keeps the restitution
+};
+
+// Constants of one kind of contact (particle-particle, or particle-wall).
 struct ContactLaw {
-  double k = 0;     // normal stiffness, N/m
-  double zeta = 0;  // damping ratio; gamma = 2 zeta sqrt(m_eff k)
-  double kt = 0;    // tangential stiffness, N/m (2/7 k)
-  double mu = 0;    // Coulomb coefficient (0: no friction)
+  ContactModel model = ContactModel::kLinear;
+  // Linear: the normal stiffness (N/m) and the damping ratio; gamma = 2 zeta sqrt(m_eff k).
+  // The tangential spring is 2/7 k with the same damping.
+  double k = 0;
+  double zeta = 0;
+  double kt = 0;
+  // Hertz-Mindlin: the effective Young's and shear moduli of the pair (Pa) and the
+  // damping factor eta: gamma = eta sqrt(m_eff S) with S the contact's current
+  // stiffness (S_n = 2 E* sqrt(R* d) normal, S_t = 8 G* sqrt(R* d) tangential).
+  // eta is solved from the restitution once (hertz_damping_factor), so the
+  // restitution is the requested one at every impact speed.
+  double e_star = 0;
+  double g_star = 0;
+  double eta = 0;
+  double mu = 0;       // Coulomb coefficient (0: no friction)
+  double mu_roll = 0;  // rolling resistance (constant torque mu_roll F_n R*; 0: none)
 };
 
 // Tangential spring state of one contact, kept between steps.
@@ -118,25 +136,44 @@ struct ContactForce {
   Vec3d f;         // force on the particle, N
   Vec3d torque;    // about its centre, N m
   double elastic;  // J stored in the normal and tangential springs
+  double fn;       // N, the normal force (negative while the dashpot pulls)
 };
 
 // Force of one contact on particle i. n: unit normal towards i; overlap > 0;
 // vrel: velocity of i's surface point relative to the partner's at the contact
-// (translation and rotation); m_eff: reduced mass; lever: distance from i's
-// centre to the contact point. *spring is the tangential spring (in: last
-// step's, out: this step's); dt is the step.
+// (translation and rotation); m_eff: reduced mass; r_eff: the contact's
+// effective radius (r_i r_j / (r_i + r_j), or r_i on a wall; Hertz only);
+// lever: distance from i's centre to the contact point. *spring is the
+// tangential spring (in: last step's, out: this step's); dt is the step.
 COLLIDO_HD COLLIDO_FORCEINLINE ContactForce contact_force(const ContactLaw& law, Vec3d n,
                                                           double overlap, Vec3d vrel, double m_eff,
-                                                          double lever, Vec3d* spring, double dt) {
+                                                          double r_eff, double lever,
+                                                          Vec3d* spring, double dt) {
   ContactForce out;
-  const double gamma = 2.0 * law.zeta * hd_sqrt(m_eff * law.k);
+  double kn, kt, gamma_n, gamma_t;
+  if (law.model == ContactModel::kHertzMindlin) {
+    // Stiffness grows with the contact's radius sqrt(R* d); the elastic force is
+    // 4/3 E* sqrt(R*) d^3/2, its energy 8/15 E* sqrt(R*) d^5/2.
+    const double a = hd_sqrt(r_eff * overlap);
+    const double sn = 2.0 * law.e_star * a, st = 8.0 * law.g_star * a;
+    kn = 2.0 / 3.0 * sn;
+    kt = st;
+    gamma_n = law.eta * hd_sqrt(m_eff * sn);
+    gamma_t = law.eta * hd_sqrt(m_eff * st);
+    out.elastic = 0.4 * kn * overlap * overlap;
+  } else {
+    kn = law.k;
+    kt = law.kt;
+    gamma_n = gamma_t = 2.0 * law.zeta * hd_sqrt(m_eff * law.k);
+    out.elastic = 0.5 * law.k * overlap * overlap;
+  }
   const double vn = dot(vrel, n);
   // Not clamped at zero: the dashpot may pull briefly as a pair separates.
   // That keeps the restitution exactly the one the damping was derived
   // from (clamping ends the contact early and gives e = 0.4 for a nominal 0.3).
-  const double fn = law.k * overlap - gamma * vn;
+  const double fn = kn * overlap - gamma_n * vn;
   out.f = n * fn;
-  out.elastic = 0.5 * law.k * overlap * overlap;
+  out.fn = fn;
   out.torque = Vec3d{0, 0, 0};
   if (law.mu > 0) {
     const Vec3d vt = vrel - n * vn;
@@ -147,20 +184,36 @@ COLLIDO_HD COLLIDO_FORCEINLINE ContactForce contact_force(const ContactLaw& law,
     const double len2 = length(s);
     if (len2 > 0) s = s * (len / len2);
     s = s + vt * dt;
-    const double gt = gamma;  // same damping as the normal direction
-    Vec3d ft = s * (-law.kt) - vt * gt;
+    Vec3d ft = s * (-kt) - vt * gamma_t;
     const double ftn = length(ft), limit = law.mu * (fn > 0 ? fn : 0);
     if (ftn > limit) {
       // Sliding: cap at the Coulomb limit, and reset the spring to what that force implies.
       ft = ftn > 0 ? ft * (limit / ftn) : Vec3d{0, 0, 0};
-      s = (ft + vt * gt) * (-1.0 / law.kt);
+      s = kt > 0 ? (ft + vt * gamma_t) * (-1.0 / kt) : Vec3d{0, 0, 0};
     }
     *spring = s;
     out.f = out.f + ft;
     out.torque = cross(n * (-lever), ft);
-    out.elastic += 0.5 * law.kt * dot(s, s);
+    out.elastic += 0.5 * kt * dot(s, s);
   }
   return out;
+}
+
+// Rolling resistance of one contact (the constant directional torque model,
+// "CDT" in the DEM codes): mu_roll F_n R* against the relative rolling spin
+// (the twist about the normal is left free), never more than the torque that
+// would stop that spin within the step (i_eff: the pair's reduced moment of
+// inertia), so a resting ball does not rock to and fro. w_rel: i's spin
+// minus its partner's. Zero on the measuring pass (dt = 0).
+COLLIDO_HD COLLIDO_FORCEINLINE Vec3d rolling_torque(const ContactLaw& law, Vec3d n, double fn,
+                                                    Vec3d w_rel, double r_eff, double i_eff,
+                                                    double dt) {
+  if (!(law.mu_roll > 0) || !(dt > 0) || !(fn > 0)) return Vec3d{0, 0, 0};
+  const Vec3d w = w_rel - n * dot(w_rel, n);
+  const double wl = length(w);
+  if (!(wl > 0)) return Vec3d{0, 0, 0};
+  const double t = hd_min(law.mu_roll * fn * r_eff, i_eff * wl / dt);
+  return w * (-t / wl);
 }
 
 }  // namespace collido::sim

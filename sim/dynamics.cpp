@@ -32,10 +32,191 @@ double damping_ratio(double e) {
   return -l / std::sqrt(M_PI * M_PI + l * l);
 }
 
+const char* to_string(ContactModel m) {
+  return m == ContactModel::kHertzMindlin ? "hertz_mindlin" : "linear";
+}
+
+bool parse_contact_model(const std::string& s, ContactModel* out) {
+  if (s == "linear" || s == "linear_spring_dashpot") return *out = ContactModel::kLinear, true;
+  if (s == "hertz_mindlin" || s == "hertz") return *out = ContactModel::kHertzMindlin, true;
+  return false;
+}
+
+const char* to_string(WallMotionKind k) {
+  switch (k) {
+    case WallMotionKind::kRotate: return "rotate";
+    case WallMotionKind::kTranslate: return "translate";
+    case WallMotionKind::kOscillate: return "oscillate";
+    default: return "none";
+  }
+}
+
+WallPose WallMotion::pose(double t, Vec3d origin) const {
+  WallPose p;
+  p.moving = moving();
+  p.c = center - origin;
+  const double al = length(axis);
+  const Vec3d a = al > 0 ? axis * (1.0 / al) : Vec3d{0, 0, 1};
+  switch (kind) {
+    case WallMotionKind::kRotate: {
+      // Rodrigues: R = cos I + sin [a]x + (1 - cos) a a^T.
+      const double th = angular_speed * t, c = std::cos(th), s = std::sin(th), k = 1 - c;
+      p.r0 = {c + k * a.x * a.x, k * a.x * a.y - s * a.z, k * a.x * a.z + s * a.y};
+      p.r1 = {k * a.y * a.x + s * a.z, c + k * a.y * a.y, k * a.y * a.z - s * a.x};
+      p.r2 = {k * a.z * a.x - s * a.y, k * a.z * a.y + s * a.x, c + k * a.z * a.z};
+      p.w = a * angular_speed;
+      break;
+    }
+    case WallMotionKind::kTranslate:
+      p.d = velocity * t;
+      p.v = velocity;
+      break;
+    case WallMotionKind::kOscillate: {
+      const double om = 2 * M_PI * frequency;
+      p.d = a * (amplitude * std::sin(om * t));
+      p.v = a * (amplitude * om * std::cos(om * t));
+      break;
+    }
+    default: break;
+  }
+  return p;
+}
+
+namespace {
+// The corners of a box, for the motion's bounds.
+std::vector<Vec3d> corners(const Bounds3d& b) {
+  std::vector<Vec3d> out;
+  for (int i = 0; i < 8; ++i)
+    out.push_back({i & 1 ? b.hi.x : b.lo.x, i & 2 ? b.hi.y : b.lo.y, i & 4 ? b.hi.z : b.lo.z});
+  return out;
+}
+}  // namespace
+
+double WallMotion::surface_speed(const Bounds3d& box) const {
+  switch (kind) {
+    case WallMotionKind::kRotate: {
+      const double al = length(axis);
+      const Vec3d a = al > 0 ? axis * (1.0 / al) : Vec3d{0, 0, 1};
+      double rho = 0;
+      for (const Vec3d& q : corners(box)) {
+        const Vec3d d = q - center;
+        rho = std::max(rho, length(d - a * dot(d, a)));
+      }
+      return std::fabs(angular_speed) * rho;
+    }
+    case WallMotionKind::kTranslate: return length(velocity);
+    case WallMotionKind::kOscillate: return std::fabs(amplitude) * 2 * M_PI * std::fabs(frequency);
+    default: return 0;
+  }
+}
+
+Bounds3d WallMotion::swept_box(const Bounds3d& box) const {
+  if (kind != WallMotionKind::kRotate) return box;
+  // Every point turns on a circle about the axis: the box of the cylinder
+  // that holds the corners' circles.
+  const double al = length(axis);
+  const Vec3d a = al > 0 ? axis * (1.0 / al) : Vec3d{0, 0, 1};
+  double rho = 0, lo = 1e300, hi = -1e300;
+  for (const Vec3d& q : corners(box)) {
+    const Vec3d d = q - center;
+    const double t = dot(d, a);
+    lo = std::min(lo, t), hi = std::max(hi, t);
+    rho = std::max(rho, length(d - a * t));
+  }
+  Bounds3d out;
+  const Vec3d ext{rho * std::sqrt(std::max(0.0, 1 - a.x * a.x)),
+                  rho * std::sqrt(std::max(0.0, 1 - a.y * a.y)),
+                  rho * std::sqrt(std::max(0.0, 1 - a.z * a.z))};
+  for (double t : {lo, hi}) {
+    const Vec3d p = center + a * t;
+    out.grow(p - ext);
+    out.grow(p + ext);
+  }
+  return out;
+}
+
+double hertz_restitution(double eta) {
+  // x'' = -x^3/2 - c x^1/4 x', x(0) = 0, x'(0) = 1 (units where m = K = v = 1: the
+  // rebound does not depend on them), c = eta sqrt(3/2) (S_n = 3/2 K sqrt(x)).
+  // RK4 until the overlap closes; the rebound speed is the restitution.
+  const double c = eta * std::sqrt(1.5);
+  auto acc = [c](double x, double v) {
+    const double xp = x > 0 ? x : 0;
+    return -xp * std::sqrt(xp) - c * std::sqrt(std::sqrt(xp)) * v;
+  };
+  double x = 0, v = 1;
+  const double h = 1e-3;  // the undamped contact lasts 3.218: e to 1e-6 (checked at 2e-4)
+  for (int k = 0; k < 200000; ++k) {
+    const double k1x = v, k1v = acc(x, v);
+    const double k2x = v + 0.5 * h * k1v, k2v = acc(x + 0.5 * h * k1x, v + 0.5 * h * k1v);
+    const double k3x = v + 0.5 * h * k2v, k3v = acc(x + 0.5 * h * k2x, v + 0.5 * h * k2v);
+    const double k4x = v + h * k3v, k4v = acc(x + h * k3x, v + h * k3v);
+    const double xn = x + h / 6 * (k1x + 2 * k2x + 2 * k3x + k4x);
+    const double vn = v + h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v);
+    if (k > 0 && xn <= 0) {
+      // Interpolate the speed at the crossing.
+      const double f = x / (x - xn);
+      return -(v + f * (vn - v));
+    }
+    x = xn, v = vn;
+  }
+  return 0;  // still pressed in at 60 contact times: no rebound to speak of
+}
+
+double hertz_damping_factor(double e) {
+  if (!(e < 1)) return 0;
+  // The restitution falls as eta grows: bisect.
+  double lo = 0, hi = 1;
+  while (hertz_restitution(hi) > e && hi < 1e6) hi *= 2;
+  for (int i = 0; i < 60 && hi - lo > 1e-12 * hi; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (hertz_restitution(mid) > e ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
 namespace {
 
 bool finite_nonneg(double v) {
   return std::isfinite(v) && v >= 0;
+}
+
+// The material's coefficients; messages name the key under `where`.
+Status validate_material(const Material& m, const std::string& where, bool density) {
+  if (density && (!(m.density > 0) || !std::isfinite(m.density)))
+    return invalid_argument(where + ".density must be a positive density in kg/m^3");
+  if (!(m.restitution > 0 && m.restitution <= 1))
+    return invalid_argument(where + ".restitution must lie in (0, 1], got " +
+                            std::to_string(m.restitution));
+  if (!finite_nonneg(m.friction) || m.friction > 10)
+    return invalid_argument(where + ".friction must lie in [0, 10], got " +
+                            std::to_string(m.friction));
+  if (!finite_nonneg(m.rolling_friction) || m.rolling_friction > 1)
+    return invalid_argument(where + ".rolling_friction must lie in [0, 1], got " +
+                            std::to_string(m.rolling_friction));
+  if (!finite_nonneg(m.stiffness)) return invalid_argument(where + ".stiffness must be >= 0 N/m");
+  if (!finite_nonneg(m.youngs_modulus))
+    return invalid_argument(where + ".youngs_modulus must be >= 0 Pa");
+  if (!(m.poisson_ratio >= 0 && m.poisson_ratio <= 0.5))
+    return invalid_argument(where + ".poisson_ratio must lie in [0, 0.5], got " +
+                            std::to_string(m.poisson_ratio));
+  return Status::ok();
+}
+
+Status validate_motion(const WallMotion& w) {
+  if (!w.moving()) return Status::ok();
+  for (double v : {w.axis.x, w.axis.y, w.axis.z, w.center.x, w.center.y, w.center.z,
+                   w.velocity.x, w.velocity.y, w.velocity.z, w.angular_speed, w.amplitude,
+                   w.frequency})
+    if (!std::isfinite(v)) return invalid_argument("wall_motion: values must be finite");
+  if ((w.kind == WallMotionKind::kRotate || w.kind == WallMotionKind::kOscillate) &&
+      !(length(w.axis) > 0))
+    return invalid_argument("wall_motion.axis: must not be zero");
+  if (!(std::fabs(w.angular_speed) <= 1e4))
+    return invalid_argument("wall_motion.angular_speed: must lie within +-1e4 rad/s");
+  if (w.amplitude < 0 || w.frequency < 0 || w.frequency > 1e5)
+    return invalid_argument("wall_motion: amplitude must be >= 0 m and frequency in [0, 1e5] Hz");
+  return Status::ok();
 }
 
 Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const ParticleSet& p) {
@@ -43,18 +224,17 @@ Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const Particl
   if (c.method == Method::kReference)
     return invalid_argument(
         "method: the dynamics prepares the wall as bin or a division method, not reference");
-  const Material& m = c.material;
-  if (!(m.density > 0) || !std::isfinite(m.density))
-    return invalid_argument("material.density must be a positive density in kg/m^3");
-  if (!(m.restitution > 0 && m.restitution <= 1))
-    return invalid_argument("material.restitution must lie in (0, 1], got " +
-                            std::to_string(m.restitution));
-  if (!finite_nonneg(m.friction) || m.friction > 10)
-    return invalid_argument("material.friction must lie in [0, 10], got " +
-                            std::to_string(m.friction));
-  if (!finite_nonneg(m.stiffness)) return invalid_argument("material.stiffness must be >= 0 N/m");
-  if (!finite_nonneg(m.youngs_modulus))
-    return invalid_argument("material.youngs_modulus must be >= 0 Pa");
+  if (Status s = validate_material(c.material, "material", true); !s) return s;
+  if (c.wall_material_set)
+    if (Status s = validate_material(c.wall_material, "wall_material", false); !s) return s;
+  if (c.contact_model == ContactModel::kHertzMindlin &&
+      (c.material.stiffness > 0 || (c.wall_material_set && c.wall_material.stiffness > 0)))
+    return invalid_argument(
+        "material.stiffness: the hertz_mindlin model takes youngs_modulus (Pa) and "
+        "poisson_ratio, not a spring stiffness");
+  if (c.material.stiffness > 0 && c.material.youngs_modulus > 0)
+    return invalid_argument("material: give stiffness or youngs_modulus, not both");
+  if (Status s = validate_motion(c.wall_motion); !s) return s;
   if (!std::isfinite(c.gravity.x) || !std::isfinite(c.gravity.y) || !std::isfinite(c.gravity.z))
     return invalid_argument("gravity must be finite");
   if (!finite_nonneg(c.time_step))
@@ -90,7 +270,7 @@ TimeStepInfo time_step_physics(const DynamicsConfig& c, const ParticleSet& p,
     r3_sum += p.r[i] * p.r[i] * p.r[i];
     v_max = std::max(v_max, std::sqrt(p.vx[i] * p.vx[i] + p.vy[i] * p.vy[i] + p.vz[i] * p.vz[i]));
   }
-  TimeStepInfo ts = contact_time_step(c, r_min, r_max, r_sum / double(p.size()), v_max, wall_box.extent());
+  TimeStepInfo ts = contact_time_step(c, r_min, r_max, r_sum / double(p.size()), v_max, wall_box);
   // With particle contacts one particle may gather its neighbours' energy, so
   // only the total is bounded: every particle at the speed bound at most.
   const double mass = c.material.density * 4.0 / 3.0 * M_PI * r3_sum;
@@ -108,8 +288,18 @@ double fall_speed(const DynamicsConfig& c, Vec3d e) {
                             : 0.0;
   return std::sqrt(2 * g * drop);
 }
-double impact_speed(const DynamicsConfig& c, double v_max, Vec3d e) {
-  return c.impact_speed > 0 ? c.impact_speed : std::max({v_max + fall_speed(c, e), 1e-3});
+// The fastest a particle may move: its start, a fall across the wall's box, and
+// what the wall's own motion can give it.
+double speed_bound(const DynamicsConfig& c, double v_max, const Bounds3d& box) {
+  return v_max + fall_speed(c, box.extent()) + c.wall_motion.surface_speed(box);
+}
+double impact_speed(const DynamicsConfig& c, double v_max, const Bounds3d& box) {
+  return c.impact_speed > 0 ? c.impact_speed : std::max(speed_bound(c, v_max, box), 1e-3);
+}
+
+// Explicit integration of a damped oscillator is stable for omega dt < 2 (sqrt(1 + z^2) - z).
+double critical_step(double k, double m_eff, double zeta) {
+  return 2.0 / std::sqrt(k / m_eff) * (std::sqrt(1 + zeta * zeta) - zeta);
 }
 
 }  // namespace
@@ -120,8 +310,9 @@ Expected<std::unique_ptr<Simulation>> Simulation::create(const TriangleMesh& wal
   if (Status s = validate(wall, config, particles); !s) return s;
   const Bounds3d wall_box = mesh_bounds(wall);
   const TimeStepInfo ts = time_step_physics(config, particles, wall_box);
-  // The domain: the wall's box and every starting position, grown by the margin.
-  Bounds3d box = wall_box;
+  // The domain: the wall's box (every place a rotating wall turns to) and
+  // every starting position, grown by the margin.
+  Bounds3d box = config.wall_motion.swept_box(wall_box);
   for (size_t i = 0; i < particles.size(); ++i)
     box.grow({particles.x[i], particles.y[i], particles.z[i]});
   const double margin =
@@ -139,37 +330,81 @@ Expected<std::unique_ptr<Simulation>> Simulation::create(const TriangleMesh& wal
 }
 
 TimeStepInfo contact_time_step(const DynamicsConfig& c, double r_min, double r_max, double r_mean,
-                               double v_max, Vec3d wall_extent) {
+                               double v_max, const Bounds3d& wall_box) {
   TimeStepInfo ts;
   ts.r_min = r_min;
   ts.r_max = r_max;
   auto mass = [&](double r) { return c.material.density * 4.0 / 3.0 * M_PI * r * r * r; };
   ts.m_min = mass(ts.r_min);
-  const Material& m = c.material;
-  if (m.stiffness > 0) {
-    ts.stiffness = m.stiffness;
-  } else if (m.youngs_modulus > 0) {
-    // Linearised elastic contact: a sphere of radius r pressed into a flat of modulus E.
-    ts.stiffness = m.youngs_modulus * r_mean;
+  const Material& pm = c.material;
+  const Material& wm = c.wall_material_set ? c.wall_material : c.material;
+  const double v = impact_speed(c, v_max, wall_box);
+  ContactLaw& pl = ts.pair_law;
+  ContactLaw& wl = ts.wall_law;
+  pl.model = wl.model = c.contact_model;
+  pl.mu = pm.friction, pl.mu_roll = pm.rolling_friction;
+  wl.mu = wm.friction, wl.mu_roll = wm.rolling_friction;
+  pl.zeta = damping_ratio(pm.restitution);
+  wl.zeta = damping_ratio(wm.restitution);
+  // The stiffest contact sizes the step: a small particle on the wall, or two of them.
+  double k_wall = 0, k_pair = 0;
+  if (c.contact_model == ContactModel::kLinear) {
+    if (pm.stiffness > 0) {
+      k_pair = pm.stiffness;
+    } else if (pm.youngs_modulus > 0) {
+      // Linearised elastic contact: a sphere of radius r pressed into a flat of modulus E.
+      k_pair = pm.youngs_modulus * r_mean;
+    } else {
+      // Automatic: stiff enough that the fastest expected impact (the initial speed,
+      // the longest fall inside the wall's box along gravity, the wall's own speed)
+      // overlaps at most 2 % of the radius (the largest particle has the most mass per radius^2).
+      const double delta = 0.02 * ts.r_max;
+      k_pair = mass(ts.r_max) * (v / delta) * (v / delta);
+    }
+    k_wall = c.wall_material_set && wm.stiffness > 0        ? wm.stiffness
+             : c.wall_material_set && wm.youngs_modulus > 0 ? wm.youngs_modulus * r_mean
+                                                            : k_pair;
+    pl.k = k_pair, pl.kt = 2.0 / 7.0 * k_pair;
+    wl.k = k_wall, wl.kt = 2.0 / 7.0 * k_wall;
   } else {
-    // Automatic: stiff enough that the fastest expected impact (the initial speed
-    // and the longest fall inside the wall's box, along gravity) overlaps at most
-    // 2 % of the radius (the largest particle has the most mass per radius^2).
-    const double v = impact_speed(c, v_max, wall_extent);
-    const double delta = 0.02 * ts.r_max;
-    ts.stiffness = mass(ts.r_max) * (v / delta) * (v / delta);
+    const double nu = pm.poisson_ratio, nw = wm.poisson_ratio;
+    double e = pm.youngs_modulus;
+    if (!(e > 0)) {
+      // Automatic: the largest particle hitting a wall of its own material at the
+      // fastest expected speed overlaps 2 % of its radius. Energy: 1/2 m v^2 =
+      // 2/5 K d^5/2 with K = 4/3 E* sqrt(r), E* = E / (2 (1 - nu^2)).
+      const double r = ts.r_max, d = 0.02 * r;
+      const double k = 1.25 * mass(r) * v * v / (d * d * std::sqrt(d));
+      e = 0.75 * k / std::sqrt(r) * 2 * (1 - nu * nu);
+    }
+    const double ew = c.wall_material_set && wm.youngs_modulus > 0 ? wm.youngs_modulus : e;
+    ts.youngs_modulus = e;
+    pl.e_star = e / (2 * (1 - nu * nu));
+    pl.g_star = e / (4 * (2 - nu) * (1 + nu));
+    wl.e_star = 1 / ((1 - nu * nu) / e + (1 - nw * nw) / ew);
+    wl.g_star = 1 / (2 * (2 - nu) * (1 + nu) / e + 2 * (2 - nw) * (1 + nw) / ew);
+    pl.eta = hertz_damping_factor(pm.restitution);
+    wl.eta = wm.restitution == pm.restitution ? pl.eta : hertz_damping_factor(wm.restitution);
+    // The stiffness at the deepest overlap of an impact at v: dF/dd = 3/2 K sqrt(d_max).
+    auto stiffest = [&](double e_star, double r_eff, double m_eff) {
+      const double k = 4.0 / 3.0 * e_star * std::sqrt(r_eff);
+      const double d = std::pow(1.25 * m_eff * v * v / k, 0.4);
+      return 1.5 * k * std::sqrt(d);
+    };
+    k_wall = stiffest(wl.e_star, ts.r_min, ts.m_min);
+    k_pair = stiffest(pl.e_star, ts.r_min / 2, ts.m_min / 2);
   }
-  ts.damping_ratio = damping_ratio(m.restitution);
-  // Lightest contact: a small particle on the wall, or two of them.
-  const double m_eff = c.particle_contacts ? ts.m_min / 2 : ts.m_min;
-  const double omega = std::sqrt(ts.stiffness / m_eff);
-  const double z = ts.damping_ratio;
-  // Explicit integration of a damped oscillator is stable for omega dt < 2 (sqrt(1 + z^2) - z).
-  ts.critical_step = 2.0 / omega * (std::sqrt(1 + z * z) - z);
+  ts.stiffness = k_wall, ts.damping_ratio = wl.zeta;
+  ts.critical_step = critical_step(k_wall, ts.m_min, wl.zeta);
+  if (c.particle_contacts) {
+    const double pair_step = critical_step(k_pair, ts.m_min / 2, pl.zeta);
+    if (pair_step < ts.critical_step)
+      ts.critical_step = pair_step, ts.stiffness = k_pair, ts.damping_ratio = pl.zeta;
+  }
   ts.spring_step = c.step_fraction * ts.critical_step;
   ts.explicit_step = c.time_step;
   ts.beyond_stable = c.time_step > ts.critical_step;
-  ts.speed_bound = v_max + fall_speed(c, wall_extent);
+  ts.speed_bound = speed_bound(c, v_max, wall_box);
   ts.particle_contacts = c.particle_contacts;
   return ts;
 }
@@ -220,10 +455,11 @@ FrameWarnings frame_warnings(const FrameStats& st, const TimeStepInfo& ts) {
 }
 
 StepPlan plan_steps(const DynamicsConfig& c, double r_min, double r_max, double r_mean,
-                    double v_max, Vec3d wall_extent, double frame_duration, uint64_t frames) {
+                    double v_max, const Bounds3d& wall_box, double frame_duration,
+                    uint64_t frames) {
   StepPlan plan;
-  plan.contact = contact_time_step(c, r_min, r_max, r_mean, v_max, wall_extent);
-  plan.expected_speed = impact_speed(c, v_max, wall_extent);
+  plan.contact = contact_time_step(c, r_min, r_max, r_mean, v_max, wall_box);
+  plan.expected_speed = impact_speed(c, v_max, wall_box);
   if (c.time_step > 0) {
     plan.step = c.time_step;
   } else {

@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "sim/contact_force.h"
 #include "sim/detect.h"
 #include "sim/hd.h"
 #include "sim/mesh.h"
@@ -29,19 +30,78 @@ enum class Integrator {
 const char* to_string(Integrator i);
 bool parse_integrator(const std::string& s, Integrator* out);
 
+const char* to_string(ContactModel m);
+bool parse_contact_model(const std::string& s, ContactModel* out);
+
 struct Material {
   double density = 2500;      // particle density, kg/m^3
-  double stiffness = 0;       // normal contact spring, N/m; 0 = from youngs_modulus, else automatic
-  double youngs_modulus = 0;  // Pa; when set (and stiffness is 0), stiffness = E * mean radius
-  double restitution = 0.5;   // normal coefficient of restitution, (0, 1]
-  double friction = 0;        // Coulomb coefficient; 0 = frictionless, no tangential state kept
+  // Linear model: the normal contact spring, N/m; 0 = from youngs_modulus, else automatic.
+  double stiffness = 0;
+  // Pa. Linear: stiffness = E * mean radius. Hertz-Mindlin: the elastic modulus
+  // itself (0 = automatic: a modulus that lets the fastest impact overlap 2 % of a radius).
+  double youngs_modulus = 0;
+  double poisson_ratio = 0.3;  // Hertz-Mindlin's shear modulus and effective moduli
+  double restitution = 0.5;    // normal coefficient of restitution, (0, 1]
+  double friction = 0;         // Coulomb coefficient; 0 = frictionless, no tangential state kept
+  // Rolling resistance coefficient (constant torque mu_r F_n R*, against the rolling spin);
+  // 0 = none: a ball rolls on forever.
+  double rolling_friction = 0;
+};
+
+// How the whole wall moves (a rigid motion; the wall's triangles are given at
+// time 0). The wall index is built once in the wall's own frame: each step
+// looks particles up there, so the motion costs a transform per particle,
+// never a rebuild.
+enum class WallMotionKind { kNone, kRotate, kTranslate, kOscillate };
+const char* to_string(WallMotionKind k);
+
+// The wall's pose at one time: world = R (body - c) + c + d; its velocity
+// field v(p) = v + w x (p - c - d).
+struct WallPose {
+  Vec3d r0{1, 0, 0}, r1{0, 1, 0}, r2{0, 0, 1};  // rows of R
+  Vec3d c{0, 0, 0}, d{0, 0, 0};                 // centre of rotation (body frame), offset
+  Vec3d w{0, 0, 0}, v{0, 0, 0};                 // angular (rad/s) and linear (m/s) velocity
+  bool moving = false;
+  COLLIDO_HD Vec3d rotate(Vec3d b) const { return {dot(r0, b), dot(r1, b), dot(r2, b)}; }
+  COLLIDO_HD Vec3d unrotate(Vec3d x) const {
+    return r0 * x.x + r1 * x.y + r2 * x.z;  // R^T x
+  }
+  COLLIDO_HD Vec3d to_body(Vec3d x) const { return unrotate(x - c - d) + c; }
+  COLLIDO_HD Vec3d to_world(Vec3d b) const { return rotate(b - c) + c + d; }
+  COLLIDO_HD Vec3d velocity_at(Vec3d x) const { return v + cross(w, x - c - d); }
+};
+
+struct WallMotion {
+  WallMotionKind kind = WallMotionKind::kNone;
+  Vec3d axis{0, 0, 1};       // rotate: the axis; oscillate: the direction (normalised when used)
+  Vec3d center{0, 0, 0};     // rotate: a point on the axis, world, m
+  double angular_speed = 0;  // rotate: rad/s, right-handed about axis
+  Vec3d velocity{0, 0, 0};   // translate: m/s
+  double amplitude = 0;      // oscillate: m, d(t) = axis amplitude sin(2 pi frequency t)
+  double frequency = 0;      // oscillate: Hz
+  bool moving() const { return kind != WallMotionKind::kNone; }
+  // The pose at time t, with `origin` subtracted from the centre (the engine's local frame).
+  WallPose pose(double t, Vec3d origin = {0, 0, 0}) const;
+  // The fastest any point of the wall moves (m/s), the wall's box given at time 0.
+  double surface_speed(const Bounds3d& wall_box) const;
+  // A box holding every place the wall reaches (rotation sweeps; a translation
+  // or oscillation is followed by the domain check, which moves with the wall).
+  Bounds3d swept_box(const Bounds3d& wall_box) const;
 };
 
 struct DynamicsConfig {
   Method method = Method::kBin;  // how the wall is prepared (bin or a division method)
   Backend backend = Backend::kCpu;
   Integrator integrator = Integrator::kVelocityVerlet;
+  ContactModel contact_model = ContactModel::kLinear;
   Material material;
+  // The wall's side of particle-wall contacts: the contact's restitution,
+  // friction and rolling resistance, and the wall's own stiffness (linear; 0 =
+  // the particles') or Young's modulus and Poisson's ratio (Hertz-Mindlin).
+  // Unset: the particles' material throughout. density is not used.
+  bool wall_material_set = false;
+  Material wall_material;
+  WallMotion wall_motion;
   Vec3d gravity{0, 0, -9.81};  // m/s^2
   bool particle_contacts = false;
   double time_step = 0;          // s; 0 = automatic (re-evaluated as speeds change)
@@ -78,8 +138,12 @@ inline constexpr uint8_t kFlagParticleContact = 8;  // touches another particle 
 
 // How the time step was chosen: printed by the CLI and written with the run.
 struct TimeStepInfo {
-  double stiffness = 0;        // N/m, as used
-  double damping_ratio = 0;    // from the restitution
+  // N/m: the linear model's particle stiffness; Hertz-Mindlin's stiffness of
+  // the stiffest contact at the fastest expected impact (what sizes the step).
+  double stiffness = 0;
+  double damping_ratio = 0;    // from the restitution (of the contact that sizes the step)
+  double youngs_modulus = 0;   // Pa, Hertz-Mindlin: as used (given or automatic)
+  ContactLaw pair_law, wall_law;  // the contact laws as sized
   double critical_step = 0;    // s: explicit stability bound of the stiffest contact
   double spring_step = 0;      // s: step_fraction * critical_step
   double explicit_step = 0;    // s: the scene's fixed step (0 = automatic)
@@ -87,6 +151,7 @@ struct TimeStepInfo {
   double r_min = 0, r_max = 0, m_min = 0;
   // m/s: the fastest speed the scene's energy allows (the fastest initial speed
   // plus a fall across the wall's box); contacts only take energy away.
+  // (plus the fastest the wall moves, when it moves).
   double speed_bound = 0;
   // J: the most kinetic energy all particles together may hold (each at
   // speed_bound); with particle contacts only the total is bounded. 0 = unknown.
@@ -193,6 +258,13 @@ FrameWarnings frame_warnings(const FrameStats& stats, const TimeStepInfo& ts);
 
 // Linear spring-dashpot damping ratio for a restitution e in (0, 1].
 double damping_ratio(double restitution);
+// Hertz-Mindlin's damping factor eta (gamma = eta sqrt(m_eff S)) that gives the
+// restitution e in (0, 1]: the rebound of the Hertz contact with that damping
+// does not depend on the impact speed, so it is solved once, by integrating the
+// dimensionless contact and bisecting on eta.
+double hertz_damping_factor(double restitution);
+// The restitution that damping factor gives (the integration alone).
+double hertz_restitution(double eta);
 
 // ---- The time-step plan, known before a run ------------------------------------
 // Simulation::create() sizes the contact spring and its step from these same
@@ -202,12 +274,12 @@ double damping_ratio(double restitution);
 // Steps between re-evaluations of the motion bound (the fastest speed).
 inline constexpr int kSpeedCheckInterval = 8;
 
-// The contact spring and the critical step it allows, from the material, the
+// The contact laws and the critical step they allow, from the material, the
 // particle radii (m; r_mean sizes a stiffness from youngs_modulus), the fastest
-// initial speed v_max (m/s) and the wall's bounding-box sides (m; the longest
-// fall along gravity sizes the automatic stiffness).
+// initial speed v_max (m/s) and the wall's bounding box at time 0 (m; the
+// longest fall along gravity and the wall's own speed size the automatic stiffness).
 TimeStepInfo contact_time_step(const DynamicsConfig& config, double r_min, double r_max,
-                               double r_mean, double v_max, Vec3d wall_extent);
+                               double r_mean, double v_max, const Bounds3d& wall_box);
 
 // The automatic step (s) at the fastest current speed v_max (m/s): the spring
 // step, or less where a particle would travel more than motion_fraction of the
@@ -239,6 +311,7 @@ struct StepPlan {
 // against the motion bound's 0.1 r_min / v) the count is exact; where the
 // motion bound does, it is an upper estimate (particles are slower most of the run).
 StepPlan plan_steps(const DynamicsConfig& config, double r_min, double r_max, double r_mean,
-                    double v_max, Vec3d wall_extent, double frame_duration, uint64_t frames);
+                    double v_max, const Bounds3d& wall_box, double frame_duration,
+                    uint64_t frames);
 
 }  // namespace collido::sim

@@ -126,7 +126,7 @@ class DynamicsPipeline final : public Simulation {
     if (n_ == 0) return backend_.status();
     // The grid as the positions are now (symplectic Euler drifted after the last build).
     if (cfg_.particle_contacts) build_particle_grid();
-    forces(0.0, /*measure=*/true);
+    forces(0.0, /*measure=*/true, time_);
     kinematics_stats();
     double col[kStatColumns];
     for (size_t c = 0; c < kStatColumns; ++c) {
@@ -231,10 +231,10 @@ class DynamicsPipeline final : public Simulation {
         !e)
       return e;
     lo_ = domain_lo - wall_.origin, hi_ = domain_hi - wall_.origin;
-    law_.k = ts_.stiffness;
-    law_.zeta = ts_.damping_ratio;
-    law_.kt = 2.0 / 7.0 * ts_.stiffness;
-    law_.mu = cfg_.material.friction;
+    pair_law_ = ts_.pair_law;
+    wall_law_ = ts_.wall_law;
+    // Spins are followed once any contact has friction (rolling resistance acts on them).
+    rotation_ = wall_law_.mu > 0 || (cfg_.particle_contacts && pair_law_.mu > 0);
 
     radius_host_ = ps.r;
     release_host_ = ps.release;
@@ -264,7 +264,7 @@ class DynamicsPipeline final : public Simulation {
     backend_.resize(scratch_, std::max<size_t>(n_ * kStatColumns, 1));
     backend_.fill(scratch_.data(), n_ * kStatColumns,
                   0.0);  // pair columns stay 0 without pair contacts
-    if (law_.mu > 0) {
+    if (rotation_) {
       backend_.resize(omega_, std::max<size_t>(n_, 1));
       backend_.resize(alpha_, std::max<size_t>(n_, 1));
       backend_.fill(omega_.data(), n_, Vec3d{0, 0, 0});
@@ -301,8 +301,8 @@ class DynamicsPipeline final : public Simulation {
     // Forces of the initial state, so the first Verlet half kick has them.
     release(0.0);
     if (cfg_.particle_contacts) build_particle_grid();
-    forces(0.0, false);
-    if (law_.mu > 0) swap_history();
+    forces(0.0, false, 0.0);
+    if (rotation_) swap_history();
     speeds();
     backend_.sync();
     return backend_.status();
@@ -315,7 +315,7 @@ class DynamicsPipeline final : public Simulation {
   bool state_arrays(F&& f) {
     bool ok = f(pos_, n_) && f(vel_, n_) && f(acc_, n_) && f(state_, n_) && f(flags_, n_) &&
               f(speed_, n_);
-    if (ok && law_.mu > 0) {
+    if (ok && rotation_) {
       ok = f(omega_, n_) && f(alpha_, n_) && f(wall_hist_[hist_in_], n_ * kWallSlots);
       if (ok && cfg_.particle_contacts) ok = f(pair_hist_[hist_in_], n_ * kPairSlots);
     }
@@ -353,9 +353,10 @@ class DynamicsPipeline final : public Simulation {
       build_particle_grid();
       lap(times_.grid_ms);
     }
-    forces(dt, false);
-    if (law_.mu > 0) swap_history();
-    finish_step(dt, verlet);
+    // Forces where the positions now are: after Verlet's drift, at the step's end.
+    forces(dt, false, verlet ? time_ + dt : time_);
+    if (rotation_) swap_history();
+    finish_step(dt, verlet, wall_pose(time_ + dt));
     lap(times_.kick_ms);
     times_.steps += timing_;
     time_ += dt;
@@ -389,7 +390,7 @@ class DynamicsPipeline final : public Simulation {
 
   void kick_drift(double dt) {
     const ParticleArrays P = arrays();
-    const bool rot = law_.mu > 0;
+    const bool rot = rotation_;
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
       if (P.state[i] != kActive) return;
       P.v[i] = P.v[i] + P.acc[i] * (0.5 * dt);
@@ -398,11 +399,15 @@ class DynamicsPipeline final : public Simulation {
     });
   }
 
-  void finish_step(double dt, bool verlet) {
+  // The wall's pose at time t, in the engine's local frame.
+  WallPose wall_pose(double t) const { return cfg_.wall_motion.pose(t, wall_.origin); }
+
+  // pose: the wall at the step's end; a translating or oscillating wall carries the domain along.
+  void finish_step(double dt, bool verlet, const WallPose& pose) {
     const ParticleArrays P = arrays();
     double* speed = speed_.data();
-    const bool rot = law_.mu > 0;
-    const Vec3d lo = lo_, hi = hi_;
+    const bool rot = rotation_;
+    const Vec3d lo = lo_ + pose.d, hi = hi_ + pose.d;
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
       if (P.state[i] != kActive) {
         speed[i] = 0;
@@ -483,12 +488,12 @@ class DynamicsPipeline final : public Simulation {
   // statistics only (no accelerations, no friction memory), so measuring
   // never changes the run.
   // The laps time a step's stages; the measuring pass is not a step.
-  void forces(double dt, bool measure) {
+  void forces(double dt, bool measure, double t) {
     if (cfg_.particle_contacts) {
       pair_forces(dt, measure);
       if (!measure) lap(times_.pair_ms);
     }
-    wall_forces(dt, measure);
+    wall_forces(dt, measure, wall_pose(t));
     if (!measure) lap(times_.wall_ms);
   }
 
@@ -503,7 +508,8 @@ class DynamicsPipeline final : public Simulation {
   void pair_forces(double dt, bool measure) {
     const ParticleArrays P = arrays();
     const GridSpec pg = pgrid_;
-    const ContactLaw law = law_;
+    const ContactLaw law = pair_law_;
+    const bool rot = rotation_;
     const Vec3d grav = cfg_.gravity;
     const FrictionSlot* hin = pair_hist_[hist_in_].data();
     FrictionSlot* hout = pair_hist_[hist_in_ ^ 1].data();
@@ -523,7 +529,7 @@ class DynamicsPipeline final : public Simulation {
         return;
       }
       const Vec3d xi = P.x[i], vi = P.v[i];
-      const Vec3d wi = friction ? P.w[i] : Vec3d{0, 0, 0};
+      const Vec3d wi = rot ? P.w[i] : Vec3d{0, 0, 0};
       const double r = P.r[i], m = 1.0 / P.inv_mass[i];
       const Vec3f xf = cast3<float>(xi);
       const float rf = float(r);
@@ -557,10 +563,16 @@ class DynamicsPipeline final : public Simulation {
             Vec3d vrel = vi - P.v[j];
             if (friction) vrel = vrel + cross(wi, nrm * (-r)) - cross(P.w[j], nrm * P.r[j]);
             Vec3d spring = friction ? find_spring(old_slots, kPairSlots, j) : Vec3d{0, 0, 0};
+            const double rj = P.r[j], r_eff = r * rj / rs;
             const ContactForce cf =
-                contact_force(law, nrm, rs - dist, vrel, m * mj / (m + mj), r, &spring, dt);
+                contact_force(law, nrm, rs - dist, vrel, m * mj / (m + mj), r_eff, r, &spring, dt);
             f = f + cf.f;
             torque = torque + cf.torque;
+            if (rot && law.mu_roll > 0) {
+              const double ii = 0.4 * m * r * r, ij = 0.4 * mj * rj * rj;
+              torque = torque +
+                       rolling_torque(law, nrm, cf.fn, wi - P.w[j], r_eff, ii * ij / (ii + ij), dt);
+            }
             elastic += 0.5 * cf.elastic;  // each side holds half the pair's springs
             overlap_max = hd_max(overlap_max, (rs - dist) / r);
             ++npair;
@@ -588,21 +600,24 @@ class DynamicsPipeline final : public Simulation {
         return;
       }
       P.acc[i] = f * (1.0 / m);
-      if (friction) {
-        if (slots < uint32_t(kPairSlots)) new_slots[slots].key = kNoKey;  // terminates the list
-        P.alpha[i] = torque * (1.0 / (0.4 * m * r * r));
-      }
+      if (friction && slots < uint32_t(kPairSlots))
+        new_slots[slots].key = kNoKey;  // terminates the list
+      if (rot) P.alpha[i] = torque * (1.0 / (0.4 * m * r * r));
     });
   }
 
   // Wall contacts, one per touched feature: on top of pair_forces' accelerations when the
   // scene has particle contacts, else from gravity.
-  void wall_forces(double dt, bool measure) {
+  // A moving wall (pose) is searched in its own frame: the particle's centre
+  // is taken there, and the contact's normal brought back; the contact moves
+  // with the wall's velocity at the contact point.
+  void wall_forces(double dt, bool measure, const WallPose pose) {
     const bool add = cfg_.particle_contacts;
     const ParticleArrays P = arrays();
     const WallView wall = wall_.view();
     const PlanarTriangleD* tris_d = wall_.tris_d.data();
-    const ContactLaw law = law_;
+    const ContactLaw law = wall_law_;
+    const bool rot = rotation_;
     const Vec3d grav = cfg_.gravity;
     const FrictionSlot* hin = wall_hist_[hist_in_].data();
     FrictionSlot* hout = wall_hist_[hist_in_ ^ 1].data();
@@ -622,7 +637,7 @@ class DynamicsPipeline final : public Simulation {
         P.flags[i] = st;
         return;
       }
-      const Vec3d xi = P.x[i];
+      const Vec3d xi = pose.moving ? pose.to_body(P.x[i]) : P.x[i];
       const double r = P.r[i];
       // Candidates from the prepared wall; most particles have none and stop here.
       WallContactSet<kMaxWallContacts> set;
@@ -652,16 +667,20 @@ class DynamicsPipeline final : public Simulation {
       Vec3d f{0, 0, 0}, torque{0, 0, 0};
       double elastic = 0, overlap_max = 0;
       const Vec3d vi = P.v[i];
-      const Vec3d wi = friction ? P.w[i] : Vec3d{0, 0, 0};
+      const Vec3d wi = rot ? P.w[i] : Vec3d{0, 0, 0};
       for (int k = 0; k < set.n; ++k) {
-        const Vec3d nrm = set.c[k].n;
+        const Vec3d nrm = pose.moving ? pose.rotate(set.c[k].n) : set.c[k].n;
         const double overlap = r - set.c[k].dist;
-        const Vec3d vrel = friction ? vi + cross(wi, nrm * (-r)) : vi;
+        Vec3d vrel = friction ? vi + cross(wi, nrm * (-r)) : vi;
+        // The wall's own velocity where it touches (the point on it nearest the centre).
+        if (pose.moving) vrel = vrel - pose.velocity_at(P.x[i] - nrm * set.c[k].dist);
         const uint32_t key = kWallKeyBit | set.c[k].triangle;
         Vec3d spring = friction ? find_spring(old_slots, kWallSlots, key) : Vec3d{0, 0, 0};
-        const ContactForce cf = contact_force(law, nrm, overlap, vrel, m, r, &spring, dt);
+        const ContactForce cf = contact_force(law, nrm, overlap, vrel, m, r, r, &spring, dt);
         f = f + cf.f;
         torque = torque + cf.torque;
+        if (rot && law.mu_roll > 0)
+          torque = torque + rolling_torque(law, nrm, cf.fn, wi - pose.w, r, 0.4 * m * r * r, dt);
         elastic += cf.elastic;
         overlap_max = hd_max(overlap_max, overlap / r);
         if (friction && !measure)
@@ -680,8 +699,8 @@ class DynamicsPipeline final : public Simulation {
       if (overlap_max > peak[i]) peak[i] = overlap_max;
       const Vec3d a = f * (1.0 / m);
       P.acc[i] = add ? P.acc[i] + a : a + grav;
-      if (friction) {
-        if (set.n < kWallSlots) new_slots[set.n].key = kNoKey;  // terminates the list
+      if (friction && set.n < kWallSlots) new_slots[set.n].key = kNoKey;  // terminates the list
+      if (rot) {
         const Vec3d al = torque * (1.0 / (0.4 * m * r * r));
         P.alpha[i] = add ? P.alpha[i] + al : al;
       }
@@ -693,7 +712,7 @@ class DynamicsPipeline final : public Simulation {
     const ParticleArrays P = arrays();
     double* stats = scratch_.data();
     const size_t n = n_;
-    const bool rot = law_.mu > 0;
+    const bool rot = rotation_;
     const Vec3d g = cfg_.gravity;
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
       const uint8_t st = P.state[i];
@@ -720,7 +739,8 @@ class DynamicsPipeline final : public Simulation {
   DynamicsConfig cfg_;
   TimeStepInfo ts_;
   PrepareInfo info_;
-  ContactLaw law_;
+  ContactLaw pair_law_, wall_law_;
+  bool rotation_ = false;  // spins are followed (some contact has friction)
   WallIndex<B> wall_;
   GridSpec pgrid_;
   int pkey_bits_ = 32;  // radix sort bits of a particle bucket key, set with pgrid_

@@ -162,6 +162,7 @@ namespace {
 struct ShapeArgs {
   std::map<std::string, double> num;
   std::string caps = "";
+  char axis = 'z';  // a lathed shape's axis
 };
 
 Expected<ShapeArgs> parse_params(const std::string& kind, const std::string& params,
@@ -178,6 +179,12 @@ Expected<ShapeArgs> parse_params(const std::string& kind, const std::string& par
     std::string key = item.substr(0, eq), value = item.substr(eq + 1);
     if (!allowed.count(key) && key != "dx" && key != "dy" && key != "dz")
       return invalid_argument(kind + ": unknown parameter '" + key + "'");
+    if (key == "axis") {
+      if (value != "x" && value != "y" && value != "z")
+        return invalid_argument(kind + ": axis must be x, y or z, got '" + value + "'");
+      out.axis = value[0];
+      continue;
+    }
     if (key == "caps") {
       if (value != "both" && value != "none" && value != "top" && value != "bottom")
         return invalid_argument(kind + ": caps must be both, none, top or bottom, got '" + value + "'");
@@ -238,7 +245,7 @@ Expected<TriangleMesh> make_one(const std::string& spec, size_t budget) {
     a = *p;
     mesh = kind == "wall1" ? make_cylinder(50, 100, 40) : make_wall2();
   } else if (kind == "cylinder") {
-    auto p = parse_params(kind, params, {"r", "h", "segments", "caps"});
+    auto p = parse_params(kind, params, {"r", "h", "segments", "caps", "axis"});
     if (!p) return p.status();
     a = *p;
     double r = get(a, "r", 50), h = get(a, "h", 100), n = get(a, "segments", 40);
@@ -246,7 +253,7 @@ Expected<TriangleMesh> make_one(const std::string& spec, size_t budget) {
       if (!s) return s;
     mesh = make_cylinder(r, h, static_cast<int>(n), caps_of(a.caps, Caps::kBoth));
   } else if (kind == "cone" || kind == "funnel") {
-    auto p = parse_params(kind, params, {"r1", "r2", "h", "segments", "caps"});
+    auto p = parse_params(kind, params, {"r1", "r2", "h", "segments", "caps", "axis"});
     if (!p) return p.status();
     a = *p;
     double r1 = get(a, "r1", 10), r2 = get(a, "r2", kind == "cone" ? 0 : 40), h = get(a, "h", 30),
@@ -279,6 +286,11 @@ Expected<TriangleMesh> make_one(const std::string& spec, size_t budget) {
     return invalid_argument("unknown shape '" + kind +
                             "' (cylinder, cone, funnel, box, sphere, wall1, wall2)");
   }
+  // A lathed shape along x or y (a drum lies on its side): turned by a proper
+  // rotation, so the triangles keep facing the way they did.
+  if (a.axis != 'z')
+    for (Vec3d& v : mesh.vertices)
+      v = a.axis == 'y' ? Vec3d{v.x, v.z, -v.y} : Vec3d{v.z, v.y, -v.x};
   translate(mesh, {get(a, "dx", 0), get(a, "dy", 0), get(a, "dz", 0)});
   return mesh;
 }

@@ -29,7 +29,9 @@ void translate(TriangleMesh& mesh, Vec3d d);
 // Builds a wall from a spec such as "cylinder:r=50,h=100,segments=40", "wall1",
 // "box:x=10,y=10,z=5", "sphere:r=5,subdivisions=3", "cone:r1=10,r2=0,h=20,segments=32",
 // "funnel:r1=10,r2=40,h=30,segments=64" (an open cone), joined by '+' for unions;
-// every shape accepts dx=,dy=,dz= offsets. Unknown keys and impossible values are errors.
+// every shape accepts dx=,dy=,dz= offsets; cylinder, cone and funnel take axis=x|y|z
+// (default z; "cylinder:r=5,h=2,axis=y" is a drum on its side, from y = 0 to h).
+// Unknown keys and impossible values are errors.
 Expected<TriangleMesh> make_shape(const std::string& spec);
 
 }  // namespace collido::sim

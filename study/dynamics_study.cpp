@@ -29,9 +29,12 @@ struct Setup {
   bool per_step = false;    // one frame per step (contact time is counted per step)
 };
 
+// The study's scenes size the contact from their own speeds (impact_speed), not a fall.
+const sim::Bounds3d kUnitBox{{0, 0, 0}, {1, 1, 1}, false};
+
 // The contact duration of the linear spring at the stiffness sized for kSceneSpeed.
 double contact_time(const sim::DynamicsConfig& cfg) {
-  const sim::TimeStepInfo ts = sim::contact_time_step(cfg, kRadius, kRadius, kRadius, 0, {1, 1, 1});
+  const sim::TimeStepInfo ts = sim::contact_time_step(cfg, kRadius, kRadius, kRadius, 0, kUnitBox);
   const double omega = std::sqrt(ts.stiffness / ts.m_min);
   return M_PI / (omega * std::sqrt(std::max(1e-12, 1 - ts.damping_ratio * ts.damping_ratio)));
 }
@@ -92,7 +95,7 @@ Setup make_setup(const std::string& scene, double speed, bool pairs, sim::Method
 
 // The automatic step at the setting's own speed (spring bound and motion bound).
 double automatic_step(const Setup& s, double speed) {
-  const sim::TimeStepInfo ts = sim::contact_time_step(s.cfg, kRadius, kRadius, kRadius, speed, {1, 1, 1});
+  const sim::TimeStepInfo ts = sim::contact_time_step(s.cfg, kRadius, kRadius, kRadius, speed, kUnitBox);
   return sim::automatic_step_size(ts.spring_step, s.cfg.motion_fraction, kRadius, speed, 0);
 }
 

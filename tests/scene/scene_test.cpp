@@ -138,6 +138,52 @@ TEST(Scene, ErrorsNameTheKey) {
   expect_error("", "scene: not valid JSON");
 }
 
+// The contact model, a wall material that inherits what it does not say, and a
+// moving wall; their errors name the key; a round trip keeps them.
+TEST(Scene, ContactModelWallMaterialAndWallMotion) {
+  auto s = parse_scene(R"({"wall": "cylinder:r=50,h=20,axis=y", "length_unit": "mm",
+    "contact_model": "hertz_mindlin",
+    "material": {"restitution": 0.6, "friction": 0.4, "rolling_friction": 0.02,
+                 "youngs_modulus": 5e6, "poisson_ratio": 0.25},
+    "wall_material": {"friction": 0.8, "youngs_modulus": 2e11},
+    "wall_motion": {"kind": "rotate", "axis": [0, 1, 0], "center": [0, 10, 0], "rpm": 30}})");
+  ASSERT_TRUE(s) << s.status().message();
+  const sim::DynamicsConfig& d = s->dynamics;
+  EXPECT_EQ(d.contact_model, sim::ContactModel::kHertzMindlin);
+  EXPECT_DOUBLE_EQ(d.material.rolling_friction, 0.02);
+  EXPECT_DOUBLE_EQ(d.material.poisson_ratio, 0.25);
+  ASSERT_TRUE(d.wall_material_set);
+  EXPECT_DOUBLE_EQ(d.wall_material.friction, 0.8);
+  EXPECT_DOUBLE_EQ(d.wall_material.restitution, 0.6);  // the particles', not said
+  EXPECT_DOUBLE_EQ(d.wall_material.poisson_ratio, 0.25);
+  EXPECT_DOUBLE_EQ(d.wall_material.youngs_modulus, 2e11);
+  EXPECT_EQ(d.wall_motion.kind, sim::WallMotionKind::kRotate);
+  EXPECT_DOUBLE_EQ(d.wall_motion.angular_speed, M_PI);  // 30 rpm
+  EXPECT_DOUBLE_EQ(d.wall_motion.center.y, 0.01);       // millimetres
+  auto back = parse_scene(to_json(*s));
+  ASSERT_TRUE(back) << back.status().message() << "\n" << to_json(*s);
+  EXPECT_EQ(to_json(*s), to_json(*back));
+  auto osc = parse_scene(R"({"wall": "box", "wall_motion": {"kind": "oscillate",
+    "axis": [0, 0, 1], "amplitude": 0.002, "frequency": 20}})");
+  ASSERT_TRUE(osc) << osc.status().message();
+  EXPECT_EQ(to_json(*osc), to_json(*parse_scene(to_json(*osc))));
+
+  expect_error(R"({"wall": "wall1", "contact_model": "jkr"})", "contact_model");
+  expect_error(R"({"wall": "wall1", "contact_model": "hertz_mindlin", "material": {"stiffness": 1e6}})",
+               "material.stiffness");
+  expect_error(R"({"wall": "wall1", "material": {"poisson_ratio": 0.6}})", "material.poisson_ratio");
+  expect_error(R"({"wall": "wall1", "material": {"rolling_friction": 2}})",
+               "material.rolling_friction");
+  expect_error(R"({"wall": "wall1", "wall_material": {"density": 3}})", "wall_material.density");
+  expect_error(R"({"wall": "wall1", "wall_motion": {"kind": "spin"}})", "wall_motion.kind");
+  expect_error(R"({"wall": "wall1", "wall_motion": {"kind": "rotate", "axis": [0, 0, 0]}})",
+               "wall_motion.axis");
+  expect_error(R"({"wall": "wall1", "wall_motion": {"kind": "rotate", "rpm": 5, "angular_speed": 1}})",
+               "wall_motion");
+  expect_error(R"({"wall": "wall1", "wall_motion": {"kind": "translate", "amplitude": 1}})",
+               "wall_motion.amplitude");
+}
+
 TEST(Scene, WallFileIsRelativeToTheSceneFile) {
   const std::string dir = ::testing::TempDir();
   const std::string path = dir + "/s.json";

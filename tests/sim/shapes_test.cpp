@@ -56,6 +56,25 @@ TEST(Shapes, UnionsAndOffsets) {
   for (size_t i = 0; i < m->source_ids.size(); ++i) EXPECT_EQ(m->source_ids[i], i);
 }
 
+// A drum on its side: the lathed shapes turn to lie along x or y, still closed
+// and facing out; a wrong axis is an error.
+TEST(Shapes, LathedShapesLieAlongTheAxisAsked) {
+  for (const char* axis : {"x", "y"}) {
+    auto m = make_shape(std::string("cylinder:r=5,h=2,segments=32,axis=") + axis + ",dz=7");
+    ASSERT_TRUE(m) << m.status().message();
+    expect_closed_outward(*m, axis);
+    const Bounds3d b = mesh_bounds(*m);
+    const double along = axis[0] == 'x' ? b.hi.x - b.lo.x : b.hi.y - b.lo.y;
+    EXPECT_NEAR(along, 2, 1e-9) << axis;
+    EXPECT_NEAR(b.hi.z - b.lo.z, 10, 1e-9) << axis;
+    EXPECT_NEAR(0.5 * (b.hi.z + b.lo.z), 7, 1e-9) << axis;
+  }
+  auto bad = make_shape("cylinder:axis=w");
+  ASSERT_FALSE(bad);
+  EXPECT_NE(bad.status().message().find("axis"), std::string::npos);
+  EXPECT_FALSE(make_shape("box:axis=y"));  // a box has no axis
+}
+
 TEST(Shapes, BadSpecsNameTheProblem) {
   struct Case {
     const char* spec;
