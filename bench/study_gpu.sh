@@ -8,12 +8,12 @@ cmake -S . -B build-dev -DCMAKE_BUILD_TYPE=Release -DCMAKE_PREFIX_PATH="$PWD/gpu
   -DCOLLIDO_CUDA=ON -DCMAKE_CUDA_ARCHITECTURES=90 -DCOLLIDO_WITH_RENDER=OFF \
   -DCOLLIDO_WITH_MESH_IMPORT=OFF -DCOLLIDO_WITH_SERVICE=OFF >"$out/cmake.log" 2>&1 || { tail -20 "$out/cmake.log"; exit 1; }
 targets=(collidoscope)
-for step in "$@"; do [ "$step" = tests ] && targets+=(detect_test dynamics_test); done
+for step in "$@"; do [ "$step" = tests ] && targets+=(detect_test dynamics_test contact_models_test); done
 cmake --build build-dev -j16 --target "${targets[@]}" >"$out/build.log" 2>&1 || { grep -m20 error "$out/build.log"; exit 1; }
 for step in "$@"; do
   case $step in
     tests)
-      (build-dev/tests/sim/detect_test; build-dev/tests/sim/dynamics_test) >"$out/gpu_tests.log" 2>&1
+      (build-dev/tests/sim/detect_test; build-dev/tests/sim/dynamics_test; build-dev/tests/sim/contact_models_test) >"$out/gpu_tests.log" 2>&1
       grep -E "PASSED|FAILED|^\[  FAILED" "$out/gpu_tests.log" ;;
     study-walls)  # the paper's walls up to 10^6 particles
       build-dev/app/collidoscope study --backend cuda --only detect --scenes wall1,wall2 --out "$out/walls" \

@@ -14,6 +14,7 @@
 #include <thread>
 
 #include "render/render.h"
+#include "scene/scene.h"
 #include "sim/mesh.h"
 #include "sim/snapshot.h"
 
@@ -55,10 +56,13 @@ Expected<std::vector<FrameFile>> list_frames(const std::string& run_dir) {
 
 // The bridge from the engine to the renderer. The wall in render coordinates:
 // world minus the render origin, in float.
-render::WallMesh to_render_wall(const sim::TriangleMesh& mesh, sim::Vec3d origin) {
+// The wall at its pose (world = pose.to_world(vertex)), in render coordinates.
+render::WallMesh to_render_wall(const sim::TriangleMesh& mesh, sim::Vec3d origin,
+                                const sim::WallPose& pose = {}) {
   render::WallMesh w;
   w.vertices.reserve(mesh.vertices.size() * 3);
-  for (const auto& v : mesh.vertices) {
+  for (const auto& vertex : mesh.vertices) {
+    const sim::Vec3d v = pose.moving ? pose.to_world(vertex) : vertex;
     w.vertices.push_back(float(v.x - origin.x));
     w.vertices.push_back(float(v.y - origin.y));
     w.vertices.push_back(float(v.z - origin.z));
@@ -66,6 +70,13 @@ render::WallMesh to_render_wall(const sim::TriangleMesh& mesh, sim::Vec3d origin
   w.indices.reserve(mesh.triangles.size() * 3);
   for (const auto& t : mesh.triangles) w.indices.insert(w.indices.end(), t.begin(), t.end());
   return w;
+}
+
+// How the run's wall moves, from the scene it wrote beside its frames (none
+// when the run has no scene file, as with frames from elsewhere).
+sim::WallMotion run_wall_motion(const std::string& run_dir) {
+  auto scene = scene::load_scene((fs::path(run_dir) / "scene.json").string());
+  return scene ? scene->dynamics.wall_motion : sim::WallMotion{};
 }
 
 // Particles of one engine snapshot into the render snapshot (the wall and the
@@ -276,14 +287,28 @@ Status render_run(const std::string& run_dir, const std::string& out_dir,
   const sim::Vec3d origin = first->origin;
   render::Snapshot scene;
   const std::string wall_path = (fs::path(run_dir) / "wall.stl").string();
+  // A moving wall is drawn where it is at each frame's time.
+  const sim::WallMotion motion = run_wall_motion(run_dir);
+  sim::TriangleMesh wall_mesh;
   if (fs::exists(wall_path)) {
     auto mesh = sim::load_stl(wall_path);
     if (!mesh) return mesh.status();
-    scene.wall = to_render_wall(*mesh, origin);
+    wall_mesh = std::move(*mesh);
+    scene.wall = to_render_wall(wall_mesh, origin);
   }
-  // A fixed frame for the whole run: the wall's box, or the first frame's particles.
+  // A fixed frame for the whole run: the wall's box (all it sweeps when it
+  // turns), or the first frame's particles.
   fill_particles(*first, origin, &scene);
   scene.bounds = render::compute_bounds(scene);
+  if (motion.moving() && !wall_mesh.vertices.empty()) {
+    const sim::Bounds3d swept = motion.swept_box(sim::mesh_bounds(wall_mesh));
+    const sim::Vec3d lo = swept.lo - origin, hi = swept.hi - origin;
+    const double los[3] = {lo.x, lo.y, lo.z}, his[3] = {hi.x, hi.y, hi.z};
+    for (int k = 0; k < 3; ++k) {
+      scene.bounds.lo[k] = std::min(scene.bounds.lo[k], float(los[k]));
+      scene.bounds.hi[k] = std::max(scene.bounds.hi[k], float(his[k]));
+    }
+  }
 
   if (ro.color == render::ColorMode::kSpeed) {
     ro.color_min = 0;
@@ -342,6 +367,8 @@ Status render_run(const std::string& run_dir, const std::string& out_dir,
       auto snap = i == 0 ? std::move(first) : sim::read_snapshot(frames[i].path);
       if (!snap) return snap.status();
       fill_particles(*snap, origin, &scene);
+      if (motion.moving() && !wall_mesh.vertices.empty())
+        scene.wall = to_render_wall(wall_mesh, origin, motion.pose(snap->time));
       // One full turn over the run.
       if (ro.camera == render::CameraPreset::kOrbit)
         renderer->set_orbit_deg(360.0 * double(i) / double(frames.size()));
