@@ -85,9 +85,11 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
   return Status::ok();
 }
 
-// A disc lattice of slots across the inlet. Each slot releases a particle every tau,
-// the time a particle takes to move 1.2 lattice spacings on, so two particles of one
-// slot never overlap; different slots are a lattice spacing apart.
+// A hexagonal lattice of slots across the inlet disc, a spacing s = 2.2 r apart.
+// Each slot releases a particle every tau, the time a particle takes to move s
+// on, so two particles of one slot never overlap; different slots are s apart
+// across. The inlet's capacity is slots / tau: a rate above it is refused
+// (no arrangement of a disc's particles delivers more at that speed).
 struct InletLayout {
   Vec3d v, centre;
   std::vector<Vec3d> disc;  // slot offsets from the centre
@@ -126,17 +128,19 @@ Status inlet_layout(const Bounds3d& box, const ParticleSpec& ps, const Placement
                             number_text(s) + " m) across");
   std::vector<Vec3d>& disc = out->disc;
   disc.clear();
-  const int n = int(across);
-  for (int i = -n; i <= n; ++i)
-    for (int j = -n; j <= n; ++j) {
-      const double a = i * s, b = j * s;
+  const int n = int(across) + 1;
+  const double row = s * std::sqrt(3.0) / 2;
+  const int rows = int(std::floor(radius / row));
+  for (int j = -rows; j <= rows; ++j)
+    for (int i = -n; i <= n; ++i) {
+      const double a = (i + ((j & 1) ? 0.5 : 0.0)) * s, b = j * row;
       if (std::sqrt(a * a + b * b) <= radius - r) disc.push_back(u * a + w * b);
     }
   if (disc.empty())
     return invalid_argument("placement.inlet_radius: " + number_text(radius) +
                             " m holds no particle of radius " + number_text(r) + " m");
-  // Time for a layer to move D = 1.2 s along dir with speed v0 and acceleration a = g . dir.
-  const double D = 1.2 * s, a = dot(gravity, dir);
+  // Time for a layer to move D = s along dir with speed v0 and acceleration a = g . dir.
+  const double D = s, a = dot(gravity, dir);
   double tau = D / v0;
   if (std::fabs(a) > 1e-12) {
     const double disc2 = v0 * v0 + 2 * a * D;
@@ -145,7 +149,18 @@ Status inlet_layout(const Bounds3d& box, const ParticleSpec& ps, const Placement
                               " m/s is too slow against gravity to leave the inlet");
     tau = (std::sqrt(disc2) - v0) / a;
   }
-  if (pl.rate > 0) tau = std::max(tau, double(disc.size()) / pl.rate);
+  const double capacity = double(disc.size()) / tau;
+  if (pl.rate > capacity * (1 + 1e-9)) {
+    // Slots grow with the inlet's area: the radius that would carry the rate.
+    const double wider = r + (radius - r) * std::sqrt(pl.rate / capacity) * 1.05;
+    return invalid_argument("placement.rate: " + number_text(pl.rate) +
+                            " particles/s is more than the inlet delivers at " +
+                            number_text(v0) + " m/s (" + number_text(std::floor(capacity)) +
+                            " particles/s through " + std::to_string(disc.size()) +
+                            " slots); widen inlet_radius to about " + number_text(wider) +
+                            " m or give a faster velocity");
+  }
+  if (pl.rate > 0) tau = double(disc.size()) / pl.rate;
   out->v = v;
   out->centre = centre;
   out->tau = tau;
@@ -162,8 +177,14 @@ Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSp
   const std::vector<Vec3d>& disc = lay.disc;
   const Vec3d v = lay.v;
   out->resize(ps.count);
+  // Phases spread evenly over [0, 1) and dealt to the slots at random: the
+  // stream leaves one particle at a time at the steady rate from the start
+  // (independent phases would let the count wander by sqrt(slots)).
   std::vector<double> phase(disc.size());
-  for (double& f : phase) f = rng.uniform(0.0, 1.0);
+  const double shift = rng.uniform(0.0, 1.0);
+  for (size_t k = 0; k < phase.size(); ++k) phase[k] = (double(k) + shift) / double(phase.size());
+  for (size_t k = phase.size(); k > 1; --k)
+    std::swap(phase[k - 1], phase[std::min(k - 1, size_t(rng.uniform() * double(k)))]);
   const double jitter = 0.02 * r;
   for (uint64_t i = 0; i < ps.count; ++i) {
     const size_t slot = i % disc.size();

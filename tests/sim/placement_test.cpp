@@ -2,6 +2,7 @@
 // inlets release streams whose particles never overlap; bad requests say what fits.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <set>
 #include <string>
@@ -126,6 +127,57 @@ TEST(Placement, PourReleasesAStreamThatNeverOverlaps) {
       closest = std::min(closest, length(d));
     }
   EXPECT_GT(closest, 2.0 * ps.r_max);
+}
+
+// A pour's and a jet's released particles counted against rate x time from the
+// first quarter second: within 2 % (the inlet's phases are spread evenly, so the
+// count is exact to a particle or two); a rate the inlet cannot carry is refused
+// with the radius that would, and that radius carries it.
+std::string refusal(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl,
+                    Vec3d gravity);
+TEST(Placement, PourAndJetDeliverTheirRateFromTheStart) {
+  struct Case {
+    const char* what;
+    TriangleMesh wall;
+    PlacementKind kind;
+    Vec3d inlet, velocity;
+    double inlet_radius, rate, r_min, r_max;
+    uint64_t count;
+  };
+  const Case cases[] = {
+      {"wall1 pour", make_cylinder(50, 100, 40), PlacementKind::kPour, {0, 0, 60}, {0, 0, -2}, 25,
+       800, 1, 1, 3000},
+      {"funnel jet", make_cone(5, 30, 40, 64, Caps::kNone), PlacementKind::kJet, {-20, 0, 45},
+       {8, 0, 0}, 8, 600, 0.4, 0.6, 3000},
+  };
+  for (const Case& c : cases) {
+    ParticleSpec ps;
+    ps.count = c.count;
+    ps.r_min = c.r_min, ps.r_max = c.r_max;
+    PlacementSpec pl;
+    pl.kind = c.kind;
+    pl.has_inlet = true;
+    pl.inlet = c.inlet;
+    pl.inlet_radius = c.inlet_radius;
+    pl.velocity = c.velocity;
+    pl.rate = c.rate;
+    auto p = place_particles(c.wall, ps, pl, {0, 0, -9.81}, 3);
+    ASSERT_TRUE(p) << c.what << ": " << p.status().message();
+    for (double t : {0.25, 0.5, 1.0, 2.0, 2.5}) {
+      const size_t released = size_t(std::count_if(p->release.begin(), p->release.end(),
+                                                   [&](double r) { return r <= t; }));
+      const double expected = std::min(double(c.count), c.rate * t);
+      EXPECT_NEAR(double(released), expected, 0.02 * expected) << c.what << " at " << t << " s";
+    }
+    // Twice the rate is more than this inlet carries: refused, naming the radius that would.
+    pl.rate = 2 * c.rate;
+    const std::string why = refusal(c.wall, ps, pl, {0, 0, -9.81});
+    EXPECT_EQ(why.rfind("placement.rate", 0), 0u) << why;
+    const size_t at = why.find("widen inlet_radius to about ");
+    ASSERT_NE(at, std::string::npos) << why;
+    pl.inlet_radius = std::stod(why.substr(at + 28));
+    EXPECT_EQ(refusal(c.wall, ps, pl, {0, 0, -9.81}), "") << c.what;
+  }
 }
 
 // The message a refused placement gives ("" when it was not refused).
