@@ -153,7 +153,7 @@ TEST(StepPlan, PlannedStepsAreTheStepsARunTakes) {
           "material": {"restitution": 0.5, "friction": 0.3},
           "particle_contacts": true, "duration": 0.5, "fps": 20, "backend": "cpu"})",
       R"({"wall": "cylinder:r=3,h=6,segments=24", "particles": {"count": 80, "radius": 0.2},
-          "placement": {"kind": "pour", "rate": 400},
+          "placement": {"kind": "pour", "rate": 250},
           "duration": 0.4, "fps": 10, "backend": "cpu"})",
       R"({"wall": "wall1", "particles": {"count": 50, "radius": 1},
           "time_step": 0.002, "duration": 0.3, "fps": 10, "backend": "cpu"})",
