@@ -151,7 +151,6 @@ void rolling_resistance_stops_the_ball(ContactModel model) {
 // The wall's side of the contact has its own restitution: a ball of e = 0.2
 // bounces off a wall material of e = 0.9 at 0.9 of its speed.
 void wall_material_sets_the_wall_contact() {
-  const TriangleMesh box = make_box(10, 10, 10);
   DynamicsConfig cfg;
   cfg.gravity = {0, 0, 0};
   cfg.material.restitution = 0.2;
@@ -160,13 +159,7 @@ void wall_material_sets_the_wall_contact() {
   cfg.wall_material = cfg.material;
   cfg.wall_material.stiffness = 0;  // the particles' spring
   cfg.wall_material.restitution = 0.9;
-  auto s = make_sim(box, cfg, particles_at({{0, 0, 1}}, {{0, 0, -2}}, 0.5));
-  ASSERT_TRUE(s);
-  FrameStats st;
-  ASSERT_TRUE(s->advance(1.0, &st));
-  ParticleSet out;
-  ASSERT_TRUE(s->download(&out, nullptr));
-  EXPECT_NEAR(out.vz[0], 2 * 0.9, 0.03 * 2 * 0.9);
+  EXPECT_NEAR(rebound_speed(cfg), 2 * 0.9, 0.03 * 2 * 0.9);
 }
 
 // A ball on a plate vibrating up and down with amplitude A and frequency f:

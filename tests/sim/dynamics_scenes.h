@@ -9,6 +9,7 @@
 
 #include "sim/dynamics.h"
 #include "sim/particles.h"
+#include "sim/shapes.h"
 #include "tests/sim/gpu_suite.h"
 
 namespace collido::sim {
@@ -67,6 +68,18 @@ inline TriangleMesh floor_mesh(double h, int cells) {
     }
   for (uint32_t t = 0; t < m.triangles.size(); ++t) m.source_ids.push_back(t);
   return m;
+}
+
+// A ball of radius 0.5 dropped at 2 m/s on the floor of a 10 m box without
+// gravity: its upward speed 1 s later (2 e after one bounce).
+inline double rebound_speed(const DynamicsConfig& cfg) {
+  auto s = make_sim(make_box(10, 10, 10), cfg, particles_at({{0, 0, 1}}, {{0, 0, -2}}, 0.5));
+  if (!s) return 0;
+  FrameStats st;
+  EXPECT_TRUE(s->advance(1.0, &st));
+  ParticleSet out;
+  EXPECT_TRUE(s->download(&out, nullptr));
+  return out.vz[0];
 }
 
 }  // namespace collido::sim

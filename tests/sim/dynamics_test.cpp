@@ -244,20 +244,13 @@ void division_methods_push_once() {
 
 // Restitution: a ball dropped onto the floor without gravity leaves with e times its speed.
 void restitution_is_kept() {
-  const TriangleMesh box = make_box(10, 10, 10);
   for (double e : {0.3, 0.7, 1.0}) {
     DynamicsConfig cfg;
     cfg.gravity = {0, 0, 0};
     cfg.material.restitution = e;
     cfg.material.stiffness = 1e6;
-    auto s = make_sim(box, cfg, particles_at({{0, 0, 1}}, {{0, 0, -2}}, 0.5));
-    ASSERT_TRUE(s);
-    FrameStats st;
-    ASSERT_TRUE(s->advance(1.0, &st));
-    ParticleSet out;
-    ASSERT_TRUE(s->download(&out, nullptr));
     // The contact starts and ends between steps: a few per cent of the speed.
-    EXPECT_NEAR(out.vz[0], 2 * e, 0.03 * 2 * e) << "restitution " << e;
+    EXPECT_NEAR(rebound_speed(cfg), 2 * e, 0.03 * 2 * e) << "restitution " << e;
   }
 }
 
