@@ -26,6 +26,7 @@ const std::vector<FlagSpec> kFlags = {
     {"model", true, "linear | hertz_mindlin contact law (default linear)"},
     {"rolling", true, "rolling resistance coefficient (default 0: none)"},
     {"wall-motion", true, "none | rotate: the wall turns about its vertical axis (default none)"},
+    {"skin", true, "neighbour-list skin in m (default automatic; 0: search the grid every step)"},
     {"steps", true, "timed steps per configuration (default 50)"},
     {"warmup", true, "untimed steps first (default 5)"},
     {"threads", true, "CPU threads (default: all cores)"},
@@ -82,6 +83,8 @@ int bench_run(const Args& args) {
   const double rolling = p->get_double("rolling", 0, &err);
   if (!err.empty() || !(rolling >= 0 && rolling <= 1))
     return usage_error("bench run", "--rolling must be in [0, 1]");
+  const double skin = p->get_double("skin", -1, &err);
+  if (!err.empty() || !(skin >= -1 && skin <= 4)) return usage_error("bench run", "--skin must be in [0, 4] m");
   const std::string motion = p->get("wall-motion", "none");
   if (motion != "none" && motion != "rotate")
     return usage_error("bench run", "--wall-motion must be none or rotate");
@@ -114,8 +117,8 @@ int bench_run(const Args& args) {
               sim::to_string(model), friction, rolling, motion.c_str(), (long long)steps);
   std::printf(
       "| particles | pair contacts | ms/step | steps/s | particle-steps/s | wall contacts | pair "
-      "contacts | "
-      "device MB |\n|---:|:---:|---:|---:|---:|---:|---:|---:|\n");
+      "contacts | device MB | skin (radii) | list builds |\n"
+      "|---:|:---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
   struct Breakdown {
     uint64_t n;
     bool pairs;
@@ -133,6 +136,7 @@ int bench_run(const Args& args) {
       cfg.particle_contacts = with_pairs;
       cfg.material.friction = friction;
       cfg.material.rolling_friction = rolling;
+      cfg.neighbour_skin = skin;
       cfg.contact_model = model;
       // The linear spring of the earlier benchmarks; Hertz sizes its modulus itself.
       if (model == sim::ContactModel::kLinear) cfg.material.stiffness = 1e9;
@@ -150,6 +154,7 @@ int bench_run(const Args& args) {
       }
       const double dt = (*s)->time_step_info().spring_step;
       if (warmup && !(*s)->step(uint64_t(warmup), dt)) return kExitFailure;
+      (*s)->set_stage_timing(false);  // counts (list builds) from here
       const auto t0 = std::chrono::steady_clock::now();
       if (Status e = (*s)->step(uint64_t(steps), dt); !e) {
         std::fprintf(stderr, "collidoscope bench run: %s\n", e.message().c_str());
@@ -157,6 +162,7 @@ int bench_run(const Args& args) {
       }
       const double sec =
           std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      const uint64_t builds = (*s)->stage_times().neighbour_builds;
       sim::FrameStats st;
       (*s)->measure(&st);
       const double ms = 1e3 * sec / double(steps);
@@ -165,10 +171,12 @@ int bench_run(const Args& args) {
         (*s)->step(uint64_t(steps), dt);
         breakdown.push_back({n, with_pairs, (*s)->stage_times()});
       }
-      std::printf("| %llu | %s | %.4g | %.4g | %.3g | %llu | %llu | %.1f |\n",
+      const sim::TimeStepInfo& ts = (*s)->time_step_info();
+      std::printf("| %llu | %s | %.4g | %.4g | %.3g | %llu | %llu | %.1f | %.2g | %llu |\n",
                   (unsigned long long)n, with_pairs ? "yes" : "no", ms, 1e3 / ms,
                   double(n) * 1e3 / ms, (unsigned long long)st.wall_contacts,
-                  (unsigned long long)st.particle_contacts, double((*s)->device_bytes()) / 1e6);
+                  (unsigned long long)st.particle_contacts, double((*s)->device_bytes()) / 1e6,
+                  ts.neighbour_skin / ts.r_min, (unsigned long long)builds);
       std::fflush(stdout);
     }
   }

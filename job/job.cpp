@@ -127,7 +127,8 @@ json manifest(const JobResult& r, const scene::Scene* scene) {
   j["method"] = {{"method", r.method}, {"grid_length_m", r.grid_length}, {"automatic_choice", r.choice}};
   j["time_step"] = {{"stiffness_N_m", ts.stiffness},       {"damping_ratio", ts.damping_ratio},
                     {"critical_step_s", ts.critical_step}, {"spring_step_s", ts.spring_step},
-                    {"fixed_step_s", ts.explicit_step},    {"beyond_stable", ts.beyond_stable}};
+                    {"fixed_step_s", ts.explicit_step},    {"beyond_stable", ts.beyond_stable},
+                    {"neighbour_skin_m", ts.neighbour_skin}};
   const Cost& c = r.cost;
   j["cost"] = {{"total_s", c.total_s},
                {"prepare_s", c.prepare_s},

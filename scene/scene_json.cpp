@@ -291,6 +291,7 @@ void scale_lengths(Scene* s, double k) {
   pl.velocity = pl.velocity * k;
   s->dynamics.impact_speed *= k;
   s->dynamics.grid_length *= k;
+  if (s->dynamics.neighbour_skin > 0) s->dynamics.neighbour_skin *= k;
   sim::WallMotion& w = s->dynamics.wall_motion;
   w.center = w.center * k, w.velocity = w.velocity * k, w.amplitude *= k;
 }
@@ -305,7 +306,8 @@ Expected<Scene> parse_scene(const std::string& text) {
   COLLIDO_TRY(
       r.only({"wall", "particles", "placement", "gravity", "material", "duration", "fps", "method",
               "backend", "particle_contacts", "integrator", "time_step", "seed", "output",
-              "length_unit", "grid_length", "contact_model", "wall_material", "wall_motion"}));
+              "length_unit", "grid_length", "contact_model", "wall_material", "wall_motion",
+              "neighbour_skin"}));
   COLLIDO_TRY(r.string("length_unit", &s.length_unit));
   if (s.length_unit != "m" && s.length_unit != "cm" && s.length_unit != "mm")
     return invalid_argument("length_unit: \"" + s.length_unit + "\" is not m, cm or mm");
@@ -356,6 +358,8 @@ Expected<Scene> parse_scene(const std::string& text) {
     return invalid_argument("integrator: \"" + integrator +
                             "\" is not velocity_verlet or symplectic_euler");
   COLLIDO_TRY(r.number("time_step", &s.dynamics.time_step, 0, 1e3));
+  // A length, or absent / negative for the automatic skin (0: the grid every step).
+  COLLIDO_TRY(r.number("neighbour_skin", &s.dynamics.neighbour_skin, -1, 1e9));
   COLLIDO_TRY(r.integer("seed", &s.seed, 0, UINT64_MAX));
   if (r.has("output")) {
     ObjectReader o(r.at("output"), "output");
@@ -449,6 +453,7 @@ std::string to_json(const Scene& si) {
   j["particle_contacts"] = s.dynamics.particle_contacts;
   j["integrator"] = sim::to_string(s.dynamics.integrator);
   j["time_step"] = s.dynamics.time_step;
+  if (s.dynamics.neighbour_skin >= 0) j["neighbour_skin"] = s.dynamics.neighbour_skin;
   j["seed"] = s.seed;
   j["output"] = {{"vtp", s.vtp}};
   j["length_unit"] = s.length_unit;

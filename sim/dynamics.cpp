@@ -244,6 +244,8 @@ Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const Particl
   if (!(c.motion_fraction > 0 && c.motion_fraction <= 1))
     return invalid_argument("motion_fraction must lie in (0, 1]");
   if (!finite_nonneg(c.impact_speed)) return invalid_argument("impact_speed must be >= 0 m/s");
+  if (!std::isfinite(c.neighbour_skin))
+    return invalid_argument("neighbour_skin must be a length in m (or < 0 for automatic)");
   if (p.size() == 0) return invalid_argument("particles: a run needs at least one particle");
   if (p.size() > (size_t(1) << 31)) return invalid_argument("particles: more than 2^31 particles");
   for (size_t i = 0; i < p.size(); ++i) {
@@ -256,6 +258,11 @@ Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const Particl
     if (!finite_nonneg(p.release[i]))
       return invalid_argument("particle " + std::to_string(i) + ": release time must be >= 0 s");
   }
+  // A skin of many radii would list most of the particles as every one's neighbours.
+  const double r_max = *std::max_element(p.r.begin(), p.r.end());
+  if (c.neighbour_skin > 4 * r_max)
+    return invalid_argument("neighbour_skin: " + std::to_string(c.neighbour_skin) +
+                            " m is more than 4 particle radii");
   return Status::ok();
 }
 
@@ -406,6 +413,15 @@ TimeStepInfo contact_time_step(const DynamicsConfig& c, double r_min, double r_m
   ts.beyond_stable = c.time_step > ts.critical_step;
   ts.speed_bound = speed_bound(c, v_max, wall_box);
   ts.particle_contacts = c.particle_contacts;
+  if (c.particle_contacts) {
+    // A rebuild every ~10 steps at the fastest expected speed, within bounds
+    // that keep the lists short (large) and the rebuilds rare (small).
+    const double step = c.time_step > 0 ? c.time_step : ts.spring_step;
+    ts.neighbour_skin =
+        c.neighbour_skin >= 0
+            ? c.neighbour_skin
+            : std::clamp(20 * impact_speed(c, v_max, wall_box) * step, 0.1 * r_min, 0.5 * r_min);
+  }
   return ts;
 }
 

@@ -111,6 +111,12 @@ struct DynamicsConfig {
   // scene expects; 0 = estimated from the initial speeds and a fall across the wall's box.
   double impact_speed = 0;
   double grid_length = 0;     // wall cells, m; 0 = 2 r_max
+  // Particle-particle candidates are kept in a neighbour list of every pair
+  // within r_i + r_j + skin, rebuilt only when some particle has moved half the
+  // skin since the last build (or particles were released). m; < 0 =
+  // automatic (from the fastest expected speed and the step, within 0.1-0.5
+  // r_min); 0 = search the grid every step.
+  double neighbour_skin = -1;
   double domain_margin = -1;  // escape distance outside the wall's box, m; < 0 = automatic
   uint64_t max_dense_cells = 1ull << 24;
   // Threads of the CPU backend, owned by the caller; nullptr = default_pool().
@@ -157,6 +163,7 @@ struct TimeStepInfo {
   // speed_bound); with particle contacts only the total is bounded. 0 = unknown.
   double kinetic_bound = 0;
   bool particle_contacts = false;
+  double neighbour_skin = 0;  // m, as used (0: the grid is searched every step)
 };
 
 // What one frame ended with, for the stats file and the progress line.
@@ -189,6 +196,7 @@ struct FrameStats {
 // (each stage ends with a device sync, so the sum is a little above untimed steps).
 struct StepTimes {
   uint64_t steps = 0;
+  uint64_t neighbour_builds = 0;  // neighbour-list builds within those steps
   double drift_ms = 0, grid_ms = 0, pair_ms = 0, wall_ms = 0, kick_ms = 0;
 };
 

@@ -124,8 +124,8 @@ class DynamicsPipeline final : public Simulation {
     *st = FrameStats{};
     st->time = time_;
     if (n_ == 0) return backend_.status();
-    // The grid as the positions are now (symplectic Euler drifted after the last build).
-    if (cfg_.particle_contacts) build_particle_grid();
+    // Candidates as the positions are now (symplectic Euler drifted after the last step's).
+    if (cfg_.particle_contacts) update_pair_candidates();
     forces(0.0, /*measure=*/true, time_);
     kinematics_stats();
     double col[kStatColumns];
@@ -189,6 +189,7 @@ class DynamicsPipeline final : public Simulation {
     time_ = in.time;
     steps_ = in.steps;
     all_released_ = in.all_released;
+    nl_valid_ = false;  // built afresh for the restored positions
     backend_.sync();
     return backend_.status();
   }
@@ -280,8 +281,17 @@ class DynamicsPipeline final : public Simulation {
     if (cfg_.particle_contacts) {
       uint64_t cells = 0;
       // A dense table up to a few cells per particle: hashed buckets cost a filter on every read.
-      pgrid_ = make_grid(lo_, hi_, 2 * ts_.r_max,
+      nlist_ = ts_.neighbour_skin > 0;
+      skin_ = ts_.neighbour_skin;
+      pgrid_ = make_grid(lo_, hi_, 2 * ts_.r_max + skin_,
                          std::max<uint64_t>(cfg_.max_dense_cells, 8 * uint64_t(n_)), n_, &cells);
+      if (nlist_) {
+        backend_.resize(nl_start_, n_ + 1);
+        backend_.resize(x_ref_, std::max<size_t>(n_, 1));
+        backend_.resize(disp_, std::max<size_t>(n_, 1));
+        release_sorted_ = ps.release;
+        std::sort(release_sorted_.begin(), release_sorted_.end());
+      }
       backend_.resize(p_key_, std::max<size_t>(n_, 1));
       backend_.resize(p_idx_, std::max<size_t>(n_, 1));
       backend_.resize(p_key_sorted_, std::max<size_t>(n_, 1));
@@ -300,7 +310,7 @@ class DynamicsPipeline final : public Simulation {
     }
     // Forces of the initial state, so the first Verlet half kick has them.
     release(0.0);
-    if (cfg_.particle_contacts) build_particle_grid();
+    if (cfg_.particle_contacts) update_pair_candidates();
     forces(0.0, false, 0.0);
     if (rotation_) swap_history();
     speeds();
@@ -350,7 +360,7 @@ class DynamicsPipeline final : public Simulation {
     if (verlet) kick_drift(dt);
     lap(times_.drift_ms);
     if (cfg_.particle_contacts) {
-      build_particle_grid();
+      update_pair_candidates();
       lap(times_.grid_ms);
     }
     // Forces where the positions now are: after Verlet's drift, at the step's end.
@@ -453,6 +463,101 @@ class DynamicsPipeline final : public Simulation {
 
   void swap_history() { hist_in_ ^= 1; }
 
+  // Calls f(j) for every particle j != i in the 27 cells around i's whose
+  // float distance may lie within r_i + r_j + extra (the grid's sorted float
+  // copies; extra covers their rounding, and the skin when a list is built).
+  template <class F>
+  COLLIDO_HD static COLLIDO_FORCEINLINE void for_each_grid_candidate(
+      const GridSpec& pg, const uint32_t* start, const uint32_t* end, const uint32_t* sidx,
+      const PackedParticle* sp, float extra, uint32_t i, Vec3f xf, float rf, F&& f) {
+    int cx = 0, cy = 0, cz = 0;
+    if (!pg.cell_of(xf, cx, cy, cz)) return;
+    pg.for_each_neighbour(cx, cy, cz, 1, [&](uint64_t l, uint32_t b) {
+      for (uint32_t k = start[b], e = end[b]; k < e; ++k) {
+        const PackedParticle q = sp[k];
+        const float fx = xf.x - q.x, fy = xf.y - q.y, fz = xf.z - q.z, reach = rf + q.r + extra;
+        if (fx * fx + fy * fy + fz * fz >= reach * reach) continue;  // clearly apart (most)
+        const uint32_t j = sidx[k];
+        if (j == i) continue;
+        if (pg.hashed && !pg.holds(position(q), l)) continue;
+        f(j);
+      }
+    });
+  }
+
+  // The particle pairs' candidates for this step: the grid rebuilt (no list),
+  // or the neighbour list, rebuilt only when particles were released since the
+  // last build or one has moved half the skin (then every pair now touching
+  // was within r_i + r_j + skin at the build, so it is in the list).
+  void update_pair_candidates() {
+    if (!nlist_) {
+      build_particle_grid();
+      return;
+    }
+    const uint64_t released = released_by(time_);
+    bool rebuild = !nl_valid_ || released != nl_released_;
+    if (!rebuild) {
+      const ParticleArrays P = arrays();
+      const Vec3d* ref = x_ref_.data();
+      double* d2 = disp_.data();
+      backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+        const Vec3d d = P.x[i] - ref[i];
+        d2[i] = P.state[i] == kActive ? dot(d, d) : 0.0;
+      });
+      rebuild = 4 * backend_.reduce_max(d2, n_) > skin_ * skin_;
+    }
+    if (rebuild) build_neighbour_list();
+    nl_released_ = released;
+  }
+
+  // Particles whose release time has come by t (the release kernel's rule).
+  uint64_t released_by(double t) const {
+    return uint64_t(std::upper_bound(release_sorted_.begin(), release_sorted_.end(), t) -
+                    release_sorted_.begin());
+  }
+
+  // Every active pair within r_i + r_j + skin, per particle in ascending index:
+  // a count pass, a scan, a fill pass (each list sorted in place, a few dozen entries).
+  void build_neighbour_list() {
+    build_particle_grid();
+    const ParticleArrays P = arrays();
+    const GridSpec pg = pgrid_;
+    const uint32_t* start = cell_start_.data();
+    const uint32_t* end = cell_end_.data();
+    const uint32_t* sidx = p_idx_sorted_.data();
+    const PackedParticle* sp = sorted_.data();
+    const float extra = filter_slack_ + float(skin_) * 1.0001f;
+    uint32_t* count = nl_start_.data();
+    backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
+      uint32_t c = 0;
+      if (P.state[i] == kActive)
+        for_each_grid_candidate(pg, start, end, sidx, sp, extra, i, cast3<float>(P.x[i]),
+                                float(P.r[i]), [&](uint32_t) { ++c; });
+      count[i] = c;
+    });
+    backend_.fill(count + n_, 1, 0u);
+    const uint64_t total = backend_.exclusive_scan(count, n_ + 1);
+    if (total > nl_list_.size()) backend_.resize(nl_list_, size_t(total + total / 4 + 16));
+    const uint32_t* first = nl_start_.data();
+    uint32_t* list = nl_list_.data();
+    backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
+      if (P.state[i] != kActive) return;
+      const uint32_t s0 = first[i];
+      uint32_t c = s0;
+      for_each_grid_candidate(pg, start, end, sidx, sp, extra, i, cast3<float>(P.x[i]),
+                              float(P.r[i]), [&](uint32_t j) { list[c++] = j; });
+      for (uint32_t a = s0 + 1; a < c; ++a) {  // insertion sort: short lists
+        const uint32_t v = list[a];
+        uint32_t b = a;
+        for (; b > s0 && list[b - 1] > v; --b) list[b] = list[b - 1];
+        list[b] = v;
+      }
+    });
+    backend_.copy(x_ref_.data(), pos_.data(), n_ * sizeof(Vec3d));
+    nl_valid_ = true;
+    ++times_.neighbour_builds;
+  }
+
   void build_particle_grid() {
     const ParticleArrays P = arrays();
     const GridSpec g = pgrid_;
@@ -518,6 +623,9 @@ class DynamicsPipeline final : public Simulation {
     const uint32_t* sidx = p_idx_sorted_.data();
     const PackedParticle* sp = sorted_.data();
     const float slack = filter_slack_;
+    const bool list = nlist_;
+    const uint32_t* nl_start = nl_start_.data();
+    const uint32_t* nl = nl_list_.data();
     double* stats = scratch_.data();
     const size_t n = n_;
     const bool friction = law.mu > 0;
@@ -539,57 +647,57 @@ class DynamicsPipeline final : public Simulation {
       // No springs are kept without friction (the buffers are empty): no pointer into them.
       const FrictionSlot* old_slots = friction ? hin + size_t(i) * kPairSlots : nullptr;
       FrictionSlot* new_slots = friction ? hout + size_t(i) * kPairSlots : nullptr;
-      int cx = 0, cy = 0, cz = 0;
-      if (pg.cell_of(xf, cx, cy, cz)) {
-        pg.for_each_neighbour(cx, cy, cz, 1, [&](uint64_t l, uint32_t b) {
-          for (uint32_t k = start[b], e = end[b]; k < e; ++k) {
-            const PackedParticle q = sp[k];
-            const float fx = xf.x - q.x, fy = xf.y - q.y, fz = xf.z - q.z, reach = rf + q.r + slack;
-            if (fx * fx + fy * fy + fz * fz >= reach * reach)
-              continue;  // clearly apart (most neighbours)
-            const uint32_t j = sidx[k];
-            if (j == i) continue;
-            if (pg.hashed && !pg.holds(position(q), l)) continue;
-            const Vec3d xj = P.x[j];
-            const Vec3d d = xi - xj;
-            const double rs = r + P.r[j];
-            const double dist2 = dot(d, d);
-            if (!(dist2 < rs * rs)) continue;
-            const double dist = sqrt(dist2);
-            // Coincident centres: separate along z, opposite ways for the two.
-            const Vec3d nrm =
-                dist > 1e-12 * rs ? d * (1.0 / dist) : Vec3d{0, 0, i < j ? 1.0 : -1.0};
-            const double mj = 1.0 / P.inv_mass[j];
-            Vec3d vrel = vi - P.v[j];
-            if (friction) vrel = vrel + cross(wi, nrm * (-r)) - cross(P.w[j], nrm * P.r[j]);
-            Vec3d spring = friction ? find_spring(old_slots, kPairSlots, j) : Vec3d{0, 0, 0};
-            const double rj = P.r[j], r_eff = r * rj / rs;
-            const ContactForce cf =
-                contact_force(law, nrm, rs - dist, vrel, m * mj / (m + mj), r_eff, r, &spring, dt);
-            f = f + cf.f;
-            torque = torque + cf.torque;
-            if (rot && law.mu_roll > 0) {
-              const double ii = 0.4 * m * r * r, ij = 0.4 * mj * rj * rj;
-              torque = torque +
-                       rolling_torque(law, nrm, cf.fn, wi - P.w[j], r_eff, ii * ij / (ii + ij), dt);
-            }
-            elastic += 0.5 * cf.elastic;  // each side holds half the pair's springs
-            overlap_max = hd_max(overlap_max, (rs - dist) / r);
-            ++npair;
-            // Slots are counted on the measuring pass too (it writes none), so that the
-            // neighbours beyond kPairSlots reach the frame's statistics.
-            if (friction) {
-              if (slots < uint32_t(kPairSlots)) {
-                if (!measure)
-                  new_slots[slots] =
-                      FrictionSlot{j, float(spring.x), float(spring.y), float(spring.z)};
-                ++slots;
-              } else {
-                ++overflow;
-              }
-            }
+      // One candidate j: the exact test in double, then the contact's force.
+      auto touch = [&](uint32_t j) {
+        const Vec3d xj = P.x[j];
+        const Vec3d d = xi - xj;
+        const double rs = r + P.r[j];
+        const double dist2 = dot(d, d);
+        if (!(dist2 < rs * rs)) return;
+        const double dist = sqrt(dist2);
+        // Coincident centres: separate along z, opposite ways for the two.
+        const Vec3d nrm =
+            dist > 1e-12 * rs ? d * (1.0 / dist) : Vec3d{0, 0, i < j ? 1.0 : -1.0};
+        const double mj = 1.0 / P.inv_mass[j];
+        Vec3d vrel = vi - P.v[j];
+        if (friction) vrel = vrel + cross(wi, nrm * (-r)) - cross(P.w[j], nrm * P.r[j]);
+        Vec3d spring = friction ? find_spring(old_slots, kPairSlots, j) : Vec3d{0, 0, 0};
+        const double rj = P.r[j], r_eff = r * rj / rs;
+        const ContactForce cf =
+            contact_force(law, nrm, rs - dist, vrel, m * mj / (m + mj), r_eff, r, &spring, dt);
+        f = f + cf.f;
+        torque = torque + cf.torque;
+        if (rot && law.mu_roll > 0) {
+          const double ii = 0.4 * m * r * r, ij = 0.4 * mj * rj * rj;
+          torque = torque +
+                   rolling_torque(law, nrm, cf.fn, wi - P.w[j], r_eff, ii * ij / (ii + ij), dt);
+        }
+        elastic += 0.5 * cf.elastic;  // each side holds half the pair's springs
+        overlap_max = hd_max(overlap_max, (rs - dist) / r);
+        ++npair;
+        // Slots are counted on the measuring pass too (it writes none), so that the
+        // neighbours beyond kPairSlots reach the frame's statistics.
+        if (friction) {
+          if (slots < uint32_t(kPairSlots)) {
+            if (!measure)
+              new_slots[slots] =
+                  FrictionSlot{j, float(spring.x), float(spring.y), float(spring.z)};
+            ++slots;
+          } else {
+            ++overflow;
           }
-        });
+        }
+      };
+      if (list) {
+        // Ascending partner index (each list is sorted when built): the same
+        // contacts in the same order whenever the list was built, so a run
+        // resumed from a checkpoint repeats the original bit for bit.
+        for (uint32_t k = nl_start[i], e = nl_start[i + 1]; k < e; ++k) {
+          const uint32_t j = nl[k];
+          if (P.state[j] == kActive) touch(j);
+        }
+      } else {
+        for_each_grid_candidate(pg, start, end, sidx, sp, slack, i, xf, rf, touch);
       }
       P.flags[i] = npair ? uint8_t(kActive | kFlagParticleContact) : uint8_t(kActive);
       if (measure) {
@@ -764,6 +872,15 @@ class DynamicsPipeline final : public Simulation {
   int hist_in_ = 0;
   Buf<uint32_t> p_key_, p_idx_, p_key_sorted_, p_idx_sorted_, cell_start_, cell_end_;
   Buf<PackedParticle> sorted_;  // float copies in cell order, for the pair loop's first test
+  // The neighbour list (nlist_): per particle [nl_start_[i], nl_start_[i + 1]) of
+  // nl_list_, built at the positions x_ref_; disp_ holds each step's squared moves.
+  bool nlist_ = false, nl_valid_ = false;
+  double skin_ = 0;
+  uint64_t nl_released_ = 0;
+  std::vector<double> release_sorted_;  // host: release times in order, to count releases
+  Buf<uint32_t> nl_start_, nl_list_;
+  Buf<Vec3d> x_ref_;
+  Buf<double> disp_;
   float filter_slack_ = 0;
 };
 

@@ -401,6 +401,70 @@ void saved_state_continues_exactly() {
   EXPECT_FALSE(b->restore_state(saved));
 }
 TEST(Dynamics, SavedStateContinuesExactly) { saved_state_continues_exactly(); }
+
+// The neighbour list finds exactly the contacts a search of the grid finds:
+// every step, the list run's state is copied into a run that searches the grid
+// every step (neighbour_skin 0), and both measure it: the same pair and wall
+// contacts, the same particles touching, the same elastic energy. Dense
+// frictional scenes, one with radii from 0.5 to 1.5 and one that pours
+// (particles released while the list stands).
+void neighbour_list_finds_every_contact() {
+  const TriangleMesh wall = make_cylinder(50, 100, 40);
+  for (int scene = 0; scene < 3; ++scene) {
+    ParticleSet p = lattice(10, 10.5, -0.05, 1, 5.0, 7);  // 2.1 apart: colliding at once
+    if (scene == 1) {
+      SplitMix64 rng(9);
+      for (double& r : p.r) r = rng.uniform(0.5, 1.05);
+    }
+    DynamicsConfig cfg;
+    cfg.particle_contacts = true;
+    cfg.material.friction = 0.4;
+    cfg.material.restitution = 0.5;
+    if (scene == 2) {
+      // Released in 50 groups over the first 150 steps.
+      auto probe = make_sim(wall, cfg, p);
+      ASSERT_TRUE(probe);
+      const double step = probe->time_step_info().spring_step;
+      for (size_t i = 0; i < p.size(); ++i) p.release[i] = 3 * step * double(i % 50);
+    }
+    DynamicsConfig grid = cfg;
+    grid.neighbour_skin = 0;
+    auto listed = make_sim(wall, cfg, p);
+    auto searched = make_sim(wall, grid, p);
+    ASSERT_TRUE(listed && searched);
+    ASSERT_GT(listed->time_step_info().neighbour_skin, 0);
+    EXPECT_EQ(searched->time_step_info().neighbour_skin, 0);
+    listed->set_stage_timing(true);
+    const double dt = listed->time_step_info().spring_step;
+    uint64_t contacts = 0;
+    const int steps = 300;
+    for (int k = 0; k < steps; ++k) {
+      ASSERT_TRUE(listed->step(1, dt));
+      SimState state;
+      ASSERT_TRUE(listed->save_state(&state));
+      ASSERT_TRUE(searched->restore_state(state));
+      const FrameStats a = measure(*listed), b = measure(*searched);
+      ASSERT_EQ(a.particle_contacts, b.particle_contacts) << "scene " << scene << " step " << k;
+      ASSERT_EQ(a.wall_contacts, b.wall_contacts) << "scene " << scene << " step " << k;
+      ASSERT_EQ(a.active, b.active);
+      ASSERT_NEAR(a.elastic, b.elastic, 1e-9 * b.elastic) << "scene " << scene << " step " << k;
+      ParticleSet pa, pb;
+      std::vector<uint8_t> fa, fb;
+      ASSERT_TRUE(listed->download(&pa, &fa));
+      ASSERT_TRUE(searched->download(&pb, &fb));
+      ASSERT_EQ(fa, fb) << "scene " << scene << " step " << k;  // who touches whom, per particle
+      contacts += a.particle_contacts;
+    }
+    const uint64_t builds = listed->stage_times().neighbour_builds;
+    std::printf("scene %d: %llu pair contacts over %d steps, skin %.3g r, list built %llu times\n",
+                scene, (unsigned long long)contacts, steps,
+                listed->time_step_info().neighbour_skin / listed->time_step_info().r_min,
+                (unsigned long long)builds);
+    EXPECT_GT(contacts, uint64_t(steps / 2));
+    EXPECT_LT(builds, uint64_t(steps / 2));  // reused: the point of the skin
+  }
+}
+TEST(Dynamics, NeighbourListFindsEveryContactTheGridDoes) { neighbour_list_finds_every_contact(); }
 TEST(Dynamics, ElasticBoxKeepsItsEnergy) {
   elastic_box_energy();
 }
@@ -483,6 +547,9 @@ TEST_F(DynamicsCuda, DivisionMethodsPushOnceToo) {
   division_methods_push_once();
 }
 TEST_F(DynamicsCuda, SavedStateContinuesExactly) { saved_state_continues_exactly(); }
+TEST_F(DynamicsCuda, NeighbourListFindsEveryContactTheGridDoes) {
+  neighbour_list_finds_every_contact();
+}
 TEST_F(DynamicsCuda, FrictionTurnsSlidingIntoRolling) {
   friction_makes_it_roll();
 }
