@@ -1,0 +1,78 @@
+#!/usr/bin/env bash
+# Side by side on one core: `collidoscope bench run`'s block scene (particles of
+# radius 1 m on a cubic lattice of spacing 1.999 m standing on a box floor under
+# gravity; linear spring 1e9 N/m, restitution 0.5, friction 0.3 with tangential
+# history, 0.1 of the critical step) and the same scene in LIGGGHTS 3.8 (Debian's
+# package, installed here when missing): hooke/stiffness with kt = 2/7 kn and the
+# same damping, tangential history, primitive walls, the same step.
+# Usage: bash bench/liggghts_compare.sh BUILD_DIR [STEPS]   (repo root)
+set -euo pipefail
+build=${1:?BUILD_DIR}; steps=${2:-200}
+app="$build/app/collidoscope"
+if ! command -v liggghts >/dev/null; then
+  if [ "$(id -u)" = 0 ]; then DEBIAN_FRONTEND=noninteractive apt-get install -y liggghts >/dev/null
+  else echo "liggghts is not installed (sudo apt-get install liggghts)"; exit 77; fi
+fi
+work=$(mktemp -d); trap 'rm -rf "$work"' EXIT
+n=9680  # 22 x 22 x 20: whole layers, as bench run places them
+/usr/bin/python3 - "$work" "$n" "$steps" <<'PY'
+import math, sys
+work, n, steps = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+r, s, rho, k, e, mu, g = 1.0, 1.999, 2500.0, 1e9, 0.5, 0.3, 9.81
+side = math.ceil(round(n ** (1 / 3), 9))
+ext = side * s
+m = rho * 4 / 3 * math.pi * r ** 3
+meff = m / 2
+zeta = -math.log(e) / math.sqrt(math.pi ** 2 + math.log(e) ** 2)
+crit = 2 / math.sqrt(k / meff) * (math.sqrt(1 + zeta ** 2) - zeta)
+dt = 0.1 * crit  # bench run's step: step_fraction of the critical step
+gamma = 2 * zeta * math.sqrt(k / meff)  # LIGGGHTS multiplies it by the effective mass
+half = (ext + 4 * r) / 2
+with open(f"{work}/block.data", "w") as f:
+    f.write(f"LIGGGHTS block\n\n{n} atoms\n1 atom types\n\n{-half-1} {half+1} xlo xhi\n"
+            f"{-half-1} {half+1} ylo yhi\n-1 {ext * 1.5 + 6} zlo zhi\n\nAtoms\n\n")
+    k_ = 0
+    for z in range(side):
+        for y in range(side):
+            for x in range(side):
+                if k_ == n: break
+                k_ += 1
+                f.write(f"{k_} 1 {2*r} {rho} {-ext/2+(x+0.5)*s} {-ext/2+(y+0.5)*s} {r*0.999+z*s}\n")
+walls = "\n".join(
+    f"fix w{i} all wall/gran model hooke/stiffness tangential history primitive type 1 {p} {v}"
+    for i, (p, v) in enumerate([("xplane", -half), ("xplane", half), ("yplane", -half),
+                                ("yplane", half), ("zplane", 0.0)]))
+with open(f"{work}/in.block", "w") as f:
+    f.write(f"""atom_style granular
+atom_modify map array
+boundary f f f
+newton off
+communicate single vel yes
+units si
+read_data {work}/block.data
+neighbor 0.5 bin
+neigh_modify delay 0
+fix m1 all property/global kn peratomtypepair 1 {k}
+fix m2 all property/global kt peratomtypepair 1 {2 / 7 * k}
+fix m3 all property/global gamman peratomtypepair 1 {gamma}
+fix m4 all property/global gammat peratomtypepair 1 {gamma}
+fix m5 all property/global coefficientFriction peratomtypepair 1 {mu}
+pair_style gran model hooke/stiffness tangential history
+pair_coeff * *
+timestep {dt}
+fix gravi all gravity {g} vector 0.0 0.0 -1.0
+{walls}
+fix integr all nve/sphere
+thermo {steps}
+run 5
+run {steps}
+""")
+print(f"# {n} particles, step {dt:.6g} s, {steps} timed steps")
+PY
+echo "## LIGGGHTS $(dpkg-query -W -f='${Version}' liggghts 2>/dev/null), 1 process"
+(cd "$work" && liggghts -in in.block -log "$work/log.liggghts" >/dev/null)
+loop=$(grep "^Loop time" "$work/log.liggghts" | tail -1)
+echo "$loop"
+awk -v s="$steps" '{print "LIGGGHTS ms/step:", 1000 * $4 / s}' <<<"$loop"
+echo "## collidoscope bench run, 1 thread"
+"$app" bench run --counts $n --pairs on --steps "$steps" --threads 1 | grep -E "^\| $n"
