@@ -270,8 +270,9 @@ Status read_wall_motion(const json& m, Scene* s) {
   if (r.has("angular_speed") && r.has("rpm"))
     return invalid_argument("wall_motion: give angular_speed (rad/s) or rpm, not both");
   COLLIDO_TRY(r.number("angular_speed", &w.angular_speed, -1e4, 1e4));
+  // rpm within the same +-1e4 rad/s, so the document writes back (as angular_speed) and reads again.
   double rpm = 0;
-  COLLIDO_TRY(r.number("rpm", &rpm, -1e5, 1e5));
+  COLLIDO_TRY(r.number("rpm", &rpm, -1e4 * 60 / (2 * M_PI), 1e4 * 60 / (2 * M_PI)));
   if (r.has("rpm")) w.angular_speed = rpm * 2 * M_PI / 60;
   COLLIDO_TRY(r.vec3("velocity", &w.velocity, kMaxSpeed));
   COLLIDO_TRY(r.number("amplitude", &w.amplitude, 0, kMaxCoordinate));

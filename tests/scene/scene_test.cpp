@@ -20,7 +20,10 @@ const char* kFull = R"({
   "duration": 1.5, "fps": 20,
   "method": "circumcircle", "backend": "cpu",
   "particle_contacts": true, "integrator": "symplectic_euler", "time_step": 1e-5, "seed": 42,
-  "output": {"vtp": true}
+  "output": {"vtp": true},
+  "contact_model": "linear", "neighbour_skin": 0.2,
+  "wall_material": {"restitution": 0.3, "friction": 0.6, "rolling_friction": 0.01},
+  "wall_motion": {"kind": "rotate", "axis": [0, 0, 1], "center": [0, 0, 50], "rpm": 12}
 })";
 
 TEST(Scene, MinimalDocumentTakesDefaults) {
@@ -62,6 +65,9 @@ TEST(Scene, EveryKeyIsRead) {
   EXPECT_DOUBLE_EQ(s->dynamics.time_step, 1e-5);
   EXPECT_EQ(s->seed, 42u);
   EXPECT_TRUE(s->vtp);
+  EXPECT_DOUBLE_EQ(s->dynamics.neighbour_skin, 0.2);
+  EXPECT_DOUBLE_EQ(s->dynamics.wall_material.friction, 0.6);
+  EXPECT_DOUBLE_EQ(s->dynamics.wall_motion.angular_speed, 12 * 2 * M_PI / 60);
 }
 
 TEST(Scene, RoundTripThroughJson) {
