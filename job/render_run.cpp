@@ -56,13 +56,10 @@ Expected<std::vector<FrameFile>> list_frames(const std::string& run_dir) {
 
 // The bridge from the engine to the renderer. The wall in render coordinates:
 // world minus the render origin, in float.
-// The wall at its pose (world = pose.to_world(vertex)), in render coordinates.
-render::WallMesh to_render_wall(const sim::TriangleMesh& mesh, sim::Vec3d origin,
-                                const sim::WallPose& pose = {}) {
+render::WallMesh to_render_wall(const sim::TriangleMesh& mesh, sim::Vec3d origin) {
   render::WallMesh w;
   w.vertices.reserve(mesh.vertices.size() * 3);
-  for (const auto& vertex : mesh.vertices) {
-    const sim::Vec3d v = pose.moving ? pose.to_world(vertex) : vertex;
+  for (const auto& v : mesh.vertices) {
     w.vertices.push_back(float(v.x - origin.x));
     w.vertices.push_back(float(v.y - origin.y));
     w.vertices.push_back(float(v.z - origin.z));
@@ -71,6 +68,7 @@ render::WallMesh to_render_wall(const sim::TriangleMesh& mesh, sim::Vec3d origin
   for (const auto& t : mesh.triangles) w.indices.insert(w.indices.end(), t.begin(), t.end());
   return w;
 }
+
 
 // How the run's wall moves, from the scene it wrote beside its frames (none
 // when the run has no scene file, as with frames from elsewhere).
@@ -258,6 +256,20 @@ Status validate(const RenderSettings& s) {
   return Status::ok();
 }
 
+void wall_model_matrix(const sim::WallPose& pose, sim::Vec3d origin, float out[16]) {
+  const sim::Vec3d t = pose.rotate(origin - pose.c) + pose.c + pose.d - origin;
+  const sim::Vec3d rows[3] = {pose.r0, pose.r1, pose.r2};
+  const double shift[3] = {t.x, t.y, t.z};
+  for (int r = 0; r < 3; ++r) {
+    out[0 * 4 + r] = float(rows[r].x);
+    out[1 * 4 + r] = float(rows[r].y);
+    out[2 * 4 + r] = float(rows[r].z);
+    out[3 * 4 + r] = float(shift[r]);
+  }
+  out[3] = out[7] = out[11] = 0;
+  out[15] = 1;
+}
+
 Status render_run(const std::string& run_dir, const std::string& out_dir,
                   const RenderSettings& settings, const FrameProgress& progress,
                   const std::atomic<bool>* cancel, RenderOutcome* outcome) {
@@ -367,8 +379,7 @@ Status render_run(const std::string& run_dir, const std::string& out_dir,
       auto snap = i == 0 ? std::move(first) : sim::read_snapshot(frames[i].path);
       if (!snap) return snap.status();
       fill_particles(*snap, origin, &scene);
-      if (motion.moving() && !wall_mesh.vertices.empty())
-        scene.wall = to_render_wall(wall_mesh, origin, motion.pose(snap->time));
+      if (motion.moving()) wall_model_matrix(motion.pose(snap->time), origin, scene.wall_model);
       // One full turn over the run.
       if (ro.camera == render::CameraPreset::kOrbit)
         renderer->set_orbit_deg(360.0 * double(i) / double(frames.size()));

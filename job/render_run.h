@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "common/status.h"
+#include "sim/dynamics.h"
 
 namespace collido::job {
 
@@ -41,6 +42,11 @@ struct RenderOutcome {
   std::string mp4_encoder, webm_encoder, gl;
   double render_s = 0, encode_s = 0, png_s = 0, total_s = 0;
 };
+
+// A moving wall's pose as the renderer's column-major model matrix, in render
+// coordinates (world minus `origin`): the matrix takes v - origin to
+// pose.to_world(v) - origin, so the mesh is uploaded once and only this changes.
+void wall_model_matrix(const sim::WallPose& pose, sim::Vec3d origin, float out[16]);
 
 // Called after each frame is rendered with (frames done, frames in all).
 using FrameProgress = std::function<void(size_t, size_t)>;

@@ -581,9 +581,13 @@ Status Renderer::Impl::render(const Snapshot& s, Image* image) {
   gl.DepthFunc(GL_LESS);
   gl.DepthMask(GL_TRUE);
   const bool draw_wall = options.wall != WallStyle::kHidden && wall_corners > 0;
+  // The wall's own motion folded into its view matrix (rigid: normals turn with it).
+  Mat4 wall_model;
+  std::memcpy(wall_model.m, s.wall_model, sizeof wall_model.m);
+  const Mat4 wall_view = cam.view * wall_model;
   auto set_wall_uniforms = [&](const float* color, float opacity, float fresnel) {
     gl.UseProgram(wall_prog);
-    gl.UniformMatrix4fv(loc(wall_prog, "u_view"), 1, GL_FALSE, cam.view.m);
+    gl.UniformMatrix4fv(loc(wall_prog, "u_view"), 1, GL_FALSE, wall_view.m);
     gl.UniformMatrix4fv(loc(wall_prog, "u_proj"), 1, GL_FALSE, cam.proj.m);
     gl.Uniform3f(loc(wall_prog, "u_color"), color[0], color[1], color[2]);
     gl.Uniform3f(loc(wall_prog, "u_light"), light[0], light[1], light[2]);
@@ -652,7 +656,7 @@ Status Renderer::Impl::render(const Snapshot& s, Image* image) {
     gl.DepthMask(GL_FALSE);
     gl.DepthFunc(GL_LEQUAL);
     gl.UseProgram(edge_prog);
-    gl.UniformMatrix4fv(loc(edge_prog, "u_view"), 1, GL_FALSE, cam.view.m);
+    gl.UniformMatrix4fv(loc(edge_prog, "u_view"), 1, GL_FALSE, wall_view.m);
     gl.UniformMatrix4fv(loc(edge_prog, "u_proj"), 1, GL_FALSE, cam.proj.m);
     gl.Uniform4f(loc(edge_prog, "u_color"), 0.85f, 0.90f, 1.0f, options.shading ? 0.55f : 1.f);
     // Anti-aliased lines: the rims are the sharpest edges in the frame.

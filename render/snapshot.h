@@ -34,6 +34,10 @@ struct Snapshot {
   std::vector<uint8_t> contact;  // 1 when the particle touches the wall this frame
 
   WallMesh wall;
+  // Where the wall is drawn: a rigid motion applied to its vertices, column-major
+  // (as GL takes it), the identity for a still wall. A moving wall changes only
+  // this from frame to frame, so its mesh is uploaded and smoothed once.
+  float wall_model[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
 
   // The region the camera frames. Keep it constant over a run (the wall's box)
   // so the camera does not jump from frame to frame.

@@ -55,8 +55,7 @@ WallPose WallMotion::pose(double t, Vec3d origin) const {
   WallPose p;
   p.moving = moving();
   p.c = center - origin;
-  const double al = length(axis);
-  const Vec3d a = al > 0 ? axis * (1.0 / al) : Vec3d{0, 0, 1};
+  const Vec3d a = unit_axis();
   switch (kind) {
     case WallMotionKind::kRotate: {
       // Rodrigues: R = cos I + sin [a]x + (1 - cos) a a^T.
@@ -82,28 +81,35 @@ WallPose WallMotion::pose(double t, Vec3d origin) const {
   return p;
 }
 
+Vec3d WallMotion::unit_axis() const {
+  const double l = length(axis);
+  return l > 0 ? axis * (1.0 / l) : Vec3d{0, 0, 1};
+}
+
 namespace {
-// The corners of a box, for the motion's bounds.
-std::vector<Vec3d> corners(const Bounds3d& b) {
-  std::vector<Vec3d> out;
-  for (int i = 0; i < 8; ++i)
-    out.push_back({i & 1 ? b.hi.x : b.lo.x, i & 2 ? b.hi.y : b.lo.y, i & 4 ? b.hi.z : b.lo.z});
+// Where a box lies about an axis through `center`: the farthest corner's
+// distance from it, and the corners' span along it (the box is convex, so its
+// corners bound both).
+struct AxialReach {
+  double rho = 0, lo = 1e300, hi = -1e300;
+};
+AxialReach axial_reach(const Bounds3d& b, Vec3d center, Vec3d a) {
+  AxialReach out;
+  for (int i = 0; i < 8; ++i) {
+    const Vec3d d = Vec3d{i & 1 ? b.hi.x : b.lo.x, i & 2 ? b.hi.y : b.lo.y,
+                          i & 4 ? b.hi.z : b.lo.z} - center;
+    const double t = dot(d, a);
+    out.lo = std::min(out.lo, t), out.hi = std::max(out.hi, t);
+    out.rho = std::max(out.rho, length(d - a * t));
+  }
   return out;
 }
 }  // namespace
 
 double WallMotion::surface_speed(const Bounds3d& box) const {
   switch (kind) {
-    case WallMotionKind::kRotate: {
-      const double al = length(axis);
-      const Vec3d a = al > 0 ? axis * (1.0 / al) : Vec3d{0, 0, 1};
-      double rho = 0;
-      for (const Vec3d& q : corners(box)) {
-        const Vec3d d = q - center;
-        rho = std::max(rho, length(d - a * dot(d, a)));
-      }
-      return std::fabs(angular_speed) * rho;
-    }
+    case WallMotionKind::kRotate:
+      return std::fabs(angular_speed) * axial_reach(box, center, unit_axis()).rho;
     case WallMotionKind::kTranslate: return length(velocity);
     case WallMotionKind::kOscillate: return std::fabs(amplitude) * 2 * M_PI * std::fabs(frequency);
     default: return 0;
@@ -114,20 +120,14 @@ Bounds3d WallMotion::swept_box(const Bounds3d& box) const {
   if (kind != WallMotionKind::kRotate) return box;
   // Every point turns on a circle about the axis: the box of the cylinder
   // that holds the corners' circles.
-  const double al = length(axis);
-  const Vec3d a = al > 0 ? axis * (1.0 / al) : Vec3d{0, 0, 1};
-  double rho = 0, lo = 1e300, hi = -1e300;
-  for (const Vec3d& q : corners(box)) {
-    const Vec3d d = q - center;
-    const double t = dot(d, a);
-    lo = std::min(lo, t), hi = std::max(hi, t);
-    rho = std::max(rho, length(d - a * t));
-  }
+  const Vec3d a = unit_axis();
+  const AxialReach reach = axial_reach(box, center, a);
+  const double rho = reach.rho;
   Bounds3d out;
   const Vec3d ext{rho * std::sqrt(std::max(0.0, 1 - a.x * a.x)),
                   rho * std::sqrt(std::max(0.0, 1 - a.y * a.y)),
                   rho * std::sqrt(std::max(0.0, 1 - a.z * a.z))};
-  for (double t : {lo, hi}) {
+  for (double t : {reach.lo, reach.hi}) {
     const Vec3d p = center + a * t;
     out.grow(p - ext);
     out.grow(p + ext);
@@ -182,7 +182,8 @@ bool finite_nonneg(double v) {
 }
 
 // The material's coefficients; messages name the key under `where`.
-Status validate_material(const Material& m, const std::string& where, bool density) {
+Status validate_material(const Material& m, const std::string& where, bool density,
+                         ContactModel model) {
   if (density && (!(m.density > 0) || !std::isfinite(m.density)))
     return invalid_argument(where + ".density must be a positive density in kg/m^3");
   if (!(m.restitution > 0 && m.restitution <= 1))
@@ -200,6 +201,12 @@ Status validate_material(const Material& m, const std::string& where, bool densi
   if (!(m.poisson_ratio >= 0 && m.poisson_ratio <= 0.5))
     return invalid_argument(where + ".poisson_ratio must lie in [0, 0.5], got " +
                             std::to_string(m.poisson_ratio));
+  if (m.stiffness > 0 && m.youngs_modulus > 0)
+    return invalid_argument(where + ".stiffness: give stiffness or youngs_modulus, not both");
+  if (model == ContactModel::kHertzMindlin && m.stiffness > 0)
+    return invalid_argument(where +
+                            ".stiffness: the hertz_mindlin model takes youngs_modulus (Pa) and "
+                            "poisson_ratio, not a spring stiffness");
   return Status::ok();
 }
 
@@ -219,22 +226,23 @@ Status validate_motion(const WallMotion& w) {
   return Status::ok();
 }
 
+}  // namespace
+
+Status check_contact_settings(const DynamicsConfig& c) {
+  if (Status s = validate_material(c.material, "material", true, c.contact_model); !s) return s;
+  if (c.wall_material_set)
+    if (Status s = validate_material(c.wall_material, "wall_material", false, c.contact_model); !s) return s;
+  return validate_motion(c.wall_motion);
+}
+
+namespace {
+
 Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const ParticleSet& p) {
   if (wall.triangles.empty()) return invalid_argument("wall: the wall has no triangles");
   if (c.method == Method::kReference)
     return invalid_argument(
         "method: the dynamics prepares the wall as bin or a division method, not reference");
-  if (Status s = validate_material(c.material, "material", true); !s) return s;
-  if (c.wall_material_set)
-    if (Status s = validate_material(c.wall_material, "wall_material", false); !s) return s;
-  if (c.contact_model == ContactModel::kHertzMindlin &&
-      (c.material.stiffness > 0 || (c.wall_material_set && c.wall_material.stiffness > 0)))
-    return invalid_argument(
-        "material.stiffness: the hertz_mindlin model takes youngs_modulus (Pa) and "
-        "poisson_ratio, not a spring stiffness");
-  if (c.material.stiffness > 0 && c.material.youngs_modulus > 0)
-    return invalid_argument("material: give stiffness or youngs_modulus, not both");
-  if (Status s = validate_motion(c.wall_motion); !s) return s;
+  if (Status s = check_contact_settings(c); !s) return s;
   if (!std::isfinite(c.gravity.x) || !std::isfinite(c.gravity.y) || !std::isfinite(c.gravity.z))
     return invalid_argument("gravity must be finite");
   if (!finite_nonneg(c.time_step))

@@ -80,6 +80,7 @@ struct WallMotion {
   double amplitude = 0;      // oscillate: m, d(t) = axis amplitude sin(2 pi frequency t)
   double frequency = 0;      // oscillate: Hz
   bool moving() const { return kind != WallMotionKind::kNone; }
+  Vec3d unit_axis() const;  // axis normalised (z for a zero axis, which validation refuses)
   // The pose at time t, with `origin` subtracted from the centre (the engine's local frame).
   WallPose pose(double t, Vec3d origin = {0, 0, 0}) const;
   // The fastest any point of the wall moves (m/s), the wall's box given at time 0.
@@ -247,6 +248,12 @@ class Simulation {
   virtual uint64_t steps_taken() const = 0;
   virtual uint64_t device_bytes() const = 0;  // memory held by the backend
 };
+
+// The materials, the contact model and the wall's motion checked together (what
+// Simulation::create checks before anything else); the message names the key
+// ("wall_material.stiffness: ..."). The scene parser calls it too, so a scene
+// document is refused when it is read, not when its run starts.
+Status check_contact_settings(const DynamicsConfig& config);
 
 // What a frame says about the run's health: the three ways a setting fails.
 struct FrameWarnings {

@@ -21,6 +21,7 @@
 #include "job/subprocess.h"
 #include "sim/snapshot.h"
 #ifdef COLLIDO_HAVE_RENDER
+#include "job/render_run.h"
 #include "render/video.h"
 #endif
 
@@ -427,6 +428,37 @@ TEST(Job, SpecsRoundTripThroughJson) {
 }
 
 #ifdef COLLIDO_HAVE_RENDER
+// The renderer draws a moving wall through one model matrix: it must put every
+// vertex where the engine's pose does (a turn about an off-centre axis, an oscillation).
+TEST(RenderRun, WallModelMatrixPlacesTheWallWhereTheEngineDoes) {
+  sim::WallMotion turn;
+  turn.kind = sim::WallMotionKind::kRotate;
+  turn.axis = {0, 1, 1};
+  turn.center = {3, -2, 5};
+  turn.angular_speed = 0.7;
+  sim::WallMotion shake;
+  shake.kind = sim::WallMotionKind::kOscillate;
+  shake.axis = {0, 0, 2};
+  shake.amplitude = 0.4;
+  shake.frequency = 3;
+  const sim::Vec3d origin{10, 20, -4}, v{1.5, -2.5, 7};
+  for (const sim::WallMotion& m : {turn, shake}) {
+    const sim::WallPose pose = m.pose(0.9);
+    float mat[16];
+    wall_model_matrix(pose, origin, mat);
+    const sim::Vec3d r = v - origin;
+    const sim::Vec3d want = pose.to_world(v) - origin;
+    const double got[3] = {mat[0] * r.x + mat[4] * r.y + mat[8] * r.z + mat[12],
+                           mat[1] * r.x + mat[5] * r.y + mat[9] * r.z + mat[13],
+                           mat[2] * r.x + mat[6] * r.y + mat[10] * r.z + mat[14]};
+    EXPECT_NEAR(got[0], want.x, 1e-5);
+    EXPECT_NEAR(got[1], want.y, 1e-5);
+    EXPECT_NEAR(got[2], want.z, 1e-5);
+    EXPECT_EQ(mat[3], 0.f);
+    EXPECT_EQ(mat[15], 1.f);
+  }
+}
+
 TEST(Job, RenderedJobHasVideosAndALoopingGif) {
   const std::string dir = fresh_dir("render");
   JobSpec s = drop_spec(dir);
