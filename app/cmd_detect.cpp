@@ -22,7 +22,7 @@ const std::vector<FlagSpec> kFlags = {
     {"seed", true, "random seed for --particles N (default 1)"},
     {"radius", true, "radius of random particles (default 1)"},
     {"radius-range", true, "A:B radii uniform in [A, B] (overrides --radius)"},
-    {"method", true, "gravity | circumcircle | midpoint4 | bin | reference (default bin)"},
+    {"method", true, "gravity | circumcircle | midpoint4 | bin | bvh | reference (default bin)"},
     {"traversal", true, "particle | wall (default particle)"},
     {"precision", true, "exact (float, pairs near touching re-decided in double) | float (default exact)"},
     {"backend", true, "cpu | cuda (default cpu; cuda falls back to cpu with a note)"},

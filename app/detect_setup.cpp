@@ -29,7 +29,7 @@ int build_detect_setup(const ParsedArgs& args, const std::string& command, Detec
   cfg.pool = out->pool.get();
   if (args.has("method") && !sim::parse_method(args.get("method"), &cfg.method))
     return usage_error(command, "unknown --method '" + args.get("method") +
-                                    "' (gravity, circumcircle, midpoint4, bin, reference)");
+                                    "' (gravity, circumcircle, midpoint4, bin, bvh, reference)");
   if (args.has("traversal") && !sim::parse_traversal(args.get("traversal"), &cfg.traversal))
     return usage_error(command, "unknown --traversal '" + args.get("traversal") + "' (particle, wall)");
   if (args.has("precision") && !sim::parse_precision(args.get("precision"), &cfg.precision))

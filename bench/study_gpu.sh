@@ -1,19 +1,20 @@
 #!/usr/bin/env bash
 # The full study and the GPU test suites on the GPU machine, as docs/study.md
-# reports them. Usage (repo root, with the carried prefix of gtest/nlohmann):
-#   bash bench/study_gpu.sh OUT_DIR [tests|study-walls|study-meshes|study-dynamics|bench]...
+# reports them. Usage (repo root, with the carried prefix of gtest/nlohmann
+# that bench/make_gpu_carry.sh unpacks):
+#   bash bench/study_gpu.sh OUT_DIR [tests|study-walls|study-meshes|study-dynamics|bench|bench-large]...
 set -uo pipefail
 out=${1:?OUT_DIR}; shift
 cmake -S . -B build-dev -DCMAKE_BUILD_TYPE=Release -DCMAKE_PREFIX_PATH="$PWD/gpu-carry/prefix" \
   -DCOLLIDO_CUDA=ON -DCMAKE_CUDA_ARCHITECTURES=90 -DCOLLIDO_WITH_RENDER=OFF \
   -DCOLLIDO_WITH_MESH_IMPORT=OFF -DCOLLIDO_WITH_SERVICE=OFF >"$out/cmake.log" 2>&1 || { tail -20 "$out/cmake.log"; exit 1; }
 targets=(collidoscope)
-for step in "$@"; do [ "$step" = tests ] && targets+=(detect_test dynamics_test contact_models_test); done
+for step in "$@"; do [ "$step" = tests ] && targets+=(detect_test bvh_test dynamics_test contact_models_test); done
 cmake --build build-dev -j16 --target "${targets[@]}" >"$out/build.log" 2>&1 || { grep -m20 error "$out/build.log"; exit 1; }
 for step in "$@"; do
   case $step in
     tests)
-      (build-dev/tests/sim/detect_test; build-dev/tests/sim/dynamics_test; build-dev/tests/sim/contact_models_test) >"$out/gpu_tests.log" 2>&1
+      (build-dev/tests/sim/detect_test; build-dev/tests/sim/bvh_test; build-dev/tests/sim/dynamics_test; build-dev/tests/sim/contact_models_test) >"$out/gpu_tests.log" 2>&1
       grep -E "PASSED|FAILED|^\[  FAILED" "$out/gpu_tests.log" ;;
     study-walls)  # the paper's walls up to 10^6 particles
       build-dev/app/collidoscope study --backend cuda --only detect --scenes wall1,wall2 --out "$out/walls" \
@@ -27,6 +28,16 @@ for step in "$@"; do
     study-dynamics)
       build-dev/app/collidoscope study --backend cpu --only dynamics --out "$out/dynamics" >"$out/study_dynamics.log" 2>&1
       tail -4 "$out/study_dynamics.log" ;;
+    bench-large)  # #18: large meshes, bin / circumcircle / bvh, 10^5..10^7 particles half near the surface
+      for w in tests/data/meshes/counter_unitsmm_trimesh_83750tri.stl \
+               "cylinder:r=150,h=30,segments=20000+sphere:r=10,subdivisions=6,dz=15" \
+               "sphere:r=500,subdivisions=8" wall1 "sphere:r=50,subdivisions=6"; do
+        check=100000; [ "$w" = "sphere:r=500,subdivisions=8" ] && check=0
+        build-dev/app/collidoscope bench detect --backend cuda --wall "$w" --min 100000 --max 10000000 \
+          --methods bin,circumcircle,bvh --traversals particle --precisions exact --near-surface 0.5 \
+          --repeats 10 --check-max $check
+      done >"$out/bench_large.txt" 2>&1
+      grep -E "^# bench|^\| (bin|circumcircle|bvh) \|" "$out/bench_large.txt" ;;
     bench)
       for w in wall1 tests/data/meshes/teapot_trimesh.stl; do
         build-dev/app/collidoscope bench detect --backend cuda --wall "$w" --min 1000000 --max 1000000 \

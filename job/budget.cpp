@@ -39,7 +39,10 @@ WorkEstimate estimate_work(const sim::TriangleMesh& wall, const sim::DynamicsCon
                            uint64_t particles, double r_max) {
   WorkEstimate e;
   const double cell = config.grid_length > 0 ? config.grid_length : 2 * r_max;
-  if (config.method == sim::Method::kBin) {
+  if (config.method == sim::Method::kBvh) {
+    // The tree holds each triangle once, and fewer nodes than triangles: no grid.
+    e.pieces = double(wall.triangles.size());
+  } else if (config.method == sim::Method::kBin) {
     // The bin preparation visits every cell of each triangle's box grown by r_max.
     const double grow = r_max + cell;
     for (size_t t = 0; t < wall.triangles.size(); ++t) {

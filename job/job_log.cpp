@@ -110,7 +110,7 @@ Status validate(const JobInputs& in) {
   for (const auto& [name, v] : nonneg)
     if (!std::isfinite(v) || v < 0) return invalid_argument(std::string(name) + " must be >= 0");
   if (in.r_min > in.r_max) return invalid_argument("r_min must be <= r_max");
-  if (!known(in.method, {"bin", "gravity", "circumcircle", "midpoint4"}))
+  if (!known(in.method, {"bin", "bvh", "gravity", "circumcircle", "midpoint4"}))
     return invalid_argument("method must be bin, gravity, circumcircle or midpoint4");
   if (!known(in.placement, {"fill", "pour", "jet"}))
     return invalid_argument("placement must be fill, pour or jet");

@@ -25,7 +25,7 @@ struct JobInputs {
   double wall_area = 0;         // m^2
   double box[3] = {0, 0, 0};    // m: the wall's bounding-box sides
   double r_min = 0, r_max = 0;  // m
-  std::string method = "bin";   // bin, gravity, circumcircle, midpoint4
+  std::string method = "bin";   // bin, bvh, gravity, circumcircle, midpoint4
   std::string placement = "fill";  // fill, pour, jet
   double release_s = 0;            // s: when an inlet releases its last particle (0 for fill)
   bool particle_contacts = false;

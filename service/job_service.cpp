@@ -234,6 +234,9 @@ Status JobService::seed() {
       {"bin", "method",
        "No division: each wall triangle is binned into every grid cell it reaches and tested "
        "exactly. The default, exact and usually fastest."},
+      {"bvh", "method",
+       "No division: a bounding volume hierarchy over the wall's own triangles, walked from "
+       "each particle. Exact; made for large CAD meshes that mix slivers with tiny facets."},
       {"gravity", "method",
        "The paper's division by longest-edge bisection; each piece is stood in for by a "
        "sphere at its centroid (approximate)."},

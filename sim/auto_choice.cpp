@@ -10,7 +10,7 @@
 namespace collido::sim {
 
 std::vector<Method> auto_method_candidates(const TriangleMesh& mesh, double r_max, Backend backend) {
-  std::vector<Method> out{Method::kBin};
+  std::vector<Method> out{Method::kBin, Method::kBvh};
   if (backend != Backend::kCuda || mesh.triangles.empty() || !(r_max > 0)) return out;
   const double cell = 2 * r_max;
   const double mean_area = mesh_area(mesh) / static_cast<double>(mesh.triangles.size());
@@ -128,6 +128,10 @@ Expected<AutoChoice> choose_detection(const TriangleMesh& mesh, const Particles&
     grids.push_back(base.grid_length);
   AutoChoice choice;
   for (Method m : methods) {
+    if (m == Method::kBvh) {  // no grid, no wall traversal: one candidate
+      choice.candidates.push_back(AutoCandidate{m, Traversal::kParticle, 0, 0, 0, {}});
+      continue;
+    }
     // bin reads its own cell (particle traversal); the paper's pieces are timed both ways.
     std::vector<Traversal> traversals{Traversal::kParticle};
     if (m != Method::kBin && req.method && !req.particle_traversal_only) traversals.push_back(Traversal::kWall);
@@ -152,19 +156,27 @@ Expected<AutoChoice> choose_detection(const TriangleMesh& mesh, const Particles&
     return invalid_argument("automatic choice: no candidate could be prepared (" +
                             choice.candidates.front().error + ")");
   choice.method = best->method, choice.traversal = best->traversal, choice.grid_length = best->grid_length;
+  // "bin/particle with grid 2 r_max", or "bvh/particle" (no grid).
+  auto setting = [&](const AutoCandidate& c, const char* grid_word) {
+    std::string s = std::string(to_string(c.method)) + "/" + to_string(c.traversal);
+    if (c.grid_length > 0) {
+      char g[48];
+      std::snprintf(g, sizeof g, "%s%.3g r_max", grid_word, c.grid_length / base.r_max);
+      s += g;
+    }
+    return s;
+  };
   char line[160];
-  std::snprintf(line, sizeof line, "%s/%s with grid %.3g r_max (%.3g ms a frame on %zu particles); tried:",
-                to_string(best->method), to_string(best->traversal), best->grid_length / base.r_max,
-                best->frame_ms, sample.size());
-  choice.reason = line;
+  std::snprintf(line, sizeof line, " (%.3g ms a frame on %zu particles); tried:", best->frame_ms,
+                sample.size());
+  choice.reason = setting(*best, " with grid ") + line;
   for (const auto& c : choice.candidates) {
     if (!c.error.empty()) {
       choice.reason += std::string(" ") + to_string(c.method) + " refused;";
       continue;
     }
-    std::snprintf(line, sizeof line, " %s/%s %.3g r_max %.3g ms;", to_string(c.method), to_string(c.traversal),
-                  c.grid_length / base.r_max, c.frame_ms);
-    choice.reason += line;
+    std::snprintf(line, sizeof line, " %.3g ms;", c.frame_ms);
+    choice.reason += " " + setting(c, " ") + line;
   }
   choice.reason.pop_back();
   return choice;

@@ -14,6 +14,10 @@ namespace collido::sim {
 
 class CpuBackend {
  public:
+  // A per-particle walk reads a copy of the particles reordered by the sort:
+  // a thread stalls on the scattered read where a copying loop overlaps many
+  // (20 % of a frame on the counter mesh, sim/detect_pipeline.h, bvh).
+  static constexpr bool kWalksReadReorderedCopy = true;
   // The pool that runs this backend's loops (nullptr: default_pool()).
   void set_pool(ThreadPool* pool) { pool_ = pool ? pool : &default_pool(); }
 

@@ -42,6 +42,10 @@ __global__ void __launch_bounds__(256, 2) for_each_kernel_heavy(uint32_t n, F f)
 
 class CudaBackend {
  public:
+  // A per-particle walk reads its particle through the sorted index: other
+  // warps hide the scattered read, and a reordered copy would cost 16 bytes
+  // of device memory a particle (sim/detect_pipeline.h, bvh).
+  static constexpr bool kWalksReadReorderedCopy = false;
   // Device memory that grows but never shrinks, so frames reuse it.
   template <class T>
   class Buffer {

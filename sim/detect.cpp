@@ -17,6 +17,7 @@ const char* to_string(Method m) {
     case Method::kMidpoint4: return "midpoint4";
     case Method::kBin: return "bin";
     case Method::kReference: return "reference";
+    case Method::kBvh: return "bvh";
   }
   return "?";
 }
@@ -25,7 +26,8 @@ const char* to_string(Backend b) { return b == Backend::kCuda ? "cuda" : "cpu"; 
 const char* to_string(Precision p) { return p == Precision::kFloat ? "float" : "exact"; }
 
 bool parse_method(const std::string& s, Method* out) {
-  for (Method m : {Method::kGravity, Method::kCircumcircle, Method::kMidpoint4, Method::kBin, Method::kReference})
+  for (Method m : {Method::kGravity, Method::kCircumcircle, Method::kMidpoint4, Method::kBin, Method::kReference,
+                   Method::kBvh})
     if (s == to_string(m)) return *out = m, true;
   return false;
 }
@@ -148,6 +150,9 @@ Expected<std::unique_ptr<Detector>> Detector::create(const TriangleMesh& mesh, c
     if (mesh.triangles.empty()) return invalid_argument("the wall has no triangles");
     return std::unique_ptr<Detector>(new ReferenceDetector(mesh, config));
   }
+  if (config.method == Method::kBvh && config.traversal == Traversal::kWall)
+    return invalid_argument(
+        "the bvh method walks its tree from each particle: use the particle traversal");
   if (config.backend == Backend::kCuda) {
 #if defined(COLLIDO_HAVE_CUDA)
     return make_cuda_detector(mesh, config, max_particles);

@@ -21,6 +21,7 @@ enum class Method {
   kMidpoint4,     // paper: four-way midpoint division
   kBin,           // no division: original triangles binned into every cell they reach
   kReference,     // exact brute force in double precision (the test oracle)
+  kBvh,           // no division: a bounding volume hierarchy over the original triangles
 };
 enum class Traversal { kParticle, kWall };
 enum class Backend { kCpu, kCuda };
@@ -97,7 +98,9 @@ struct PrepareInfo {
   uint64_t cells = 0;    // cells of the domain box
   uint32_t buckets = 0;  // table entries actually stored
   bool hashed = false;
-  uint64_t bin_entries = 0;  // bin: (cell, triangle) pairs stored
+  uint64_t bin_entries = 0;  // bin: (cell, triangle) pairs stored; bvh: leaves
+  uint64_t bvh_nodes = 0;    // bvh: inner nodes of the tree
+  int bvh_depth = 0;         // bvh: levels to the deepest leaf
   double prepare_ms = 0;
   uint64_t device_bytes = 0;  // scratch and prepared data held by the backend
 };

@@ -73,8 +73,21 @@ class GridDetector final : public Detector {
     const auto t_frame = clock();
     lap_start_ = t_frame;
     const bool bin = cfg_.method == Method::kBin;
+    const bool bvh = cfg_.method == Method::kBvh;
     const bool wall = cfg_.traversal == Traversal::kWall;
-    if (bin && !wall) {
+    if (bvh) {
+      hash_and_sort(out);
+      if (cfg_.collect_contacts) {
+        for (bool fits = false; !fits; fits = pairs_fit()) {
+          reset_pairs();
+          bvh_particle_traversal(true);
+        }
+      } else {
+        reset_pairs();
+        bvh_particle_traversal(false);
+      }
+      lap(out->times.traverse_ms);
+    } else if (bin && !wall) {
       if (cfg_.collect_contacts) {
         for (bool fits = false; !fits; fits = pairs_fit()) {
           reset_pairs();
@@ -99,7 +112,7 @@ class GridDetector final : public Detector {
       lap(out->times.traverse_ms);
     }
     // Contacts as (particle, original) pairs, deduplicated with the smallest distance.
-    const bool from_pairs = !(bin && !wall);
+    const bool from_pairs = !(bin && !wall) && !bvh;
     uint32_t unique = 0;
     if (from_pairs || cfg_.collect_contacts) {
       unique = backend_.dedup_min(pair_key_.data(), pair_dist_.data(), pair_count_host_,
@@ -178,7 +191,8 @@ class GridDetector final : public Detector {
       backend_.resize(p_idx_, capacity_);
       backend_.resize(p_key_sorted_, capacity_);
       backend_.resize(p_idx_sorted_, capacity_);
-      backend_.resize(sorted_particles_, capacity_);
+      if (cfg_.method != Method::kBvh || B::kWalksReadReorderedCopy)
+        backend_.resize(sorted_particles_, capacity_);
       if (cfg_.traversal == Traversal::kWall) {
         backend_.resize(p_cell_start_, wall_.grid.buckets);
         backend_.resize(p_cell_end_, wall_.grid.buckets);
@@ -187,7 +201,8 @@ class GridDetector final : public Detector {
     // Both precisions size the error band (float counts the pairs it decides in it).
     wall_scale_ = wall_band_scale(mesh, wall_.origin);
     if (created_precision_ == Precision::kExact) prepare_exact(mesh);
-    grow_pairs(std::max<size_t>(capacity_ / 4, 4096));
+    // bvh counts without pairs: its buffer grows when a frame first collects them.
+    grow_pairs(cfg_.method == Method::kBvh ? 4096 : std::max<size_t>(capacity_ / 4, 4096));
     backend_.resize(pair_counter_, 2);
     backend_.sync();
     if (Status e = backend_.status(); !e) return e;
@@ -196,13 +211,16 @@ class GridDetector final : public Detector {
     return Status::ok();
   }
 
-  // The exact filter's data: every original triangle in world double, and the
-  // scale of the wall's local coordinates that sizes the float error band.
+  // The exact filter's data: the wall as the mesh holds it, world double
+  // vertices and each triangle's three indices (the same corners as 72-byte
+  // triangles, in about a third of the memory: vertices are shared; only
+  // pairs in the band read them).
   void prepare_exact(const TriangleMesh& mesh) {
-    std::vector<TriangleD> host(mesh.triangles.size());
-    for (size_t t = 0; t < host.size(); ++t)
-      host[t] = {mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2)};
-    WallIndex<B>::upload(backend_, tris_exact_, host);
+    WallIndex<B>::upload(backend_, vertices_exact_, mesh.vertices);
+    std::vector<uint32_t> corners(3 * mesh.triangles.size());
+    for (size_t t = 0; t < mesh.triangles.size(); ++t)
+      for (int k = 0; k < 3; ++k) corners[3 * t + k] = mesh.triangles[t][k];
+    WallIndex<B>::upload(backend_, corners_exact_, corners);
     backend_.resize(particles_d_, std::max<size_t>(capacity_, 1));
   }
   bool exact() const { return cfg_.precision == Precision::kExact; }
@@ -213,7 +231,8 @@ class GridDetector final : public Detector {
   // double predicate. Returns the contact and its distance in *dist.
   struct Narrow {
     const ParticleD* pd;
-    const TriangleD* td;
+    const Vec3d* vd;       // world double vertices
+    const uint32_t* cd;    // three vertex indices per original triangle
     float wall_scale;
     bool exact;
     COLLIDO_HD COLLIDO_FORCEINLINE bool decide(const PackedParticle& p, float d2, uint32_t i,
@@ -232,13 +251,15 @@ class GridDetector final : public Detector {
         return d2 < p.r * p.r;
       }
       double e2 = 0;
-      if (!exact_touch(pd[i], td[orig], &e2)) return false;
+      const TriangleD t{vd[cd[3 * orig]], vd[cd[3 * orig + 1]], vd[cd[3 * orig + 2]]};
+      if (!exact_touch(pd[i], t, &e2)) return false;
       *dist = static_cast<float>(sqrt(e2));
       return true;
     }
   };
   Narrow narrow() {
-    return {particles_d_.data(), tris_exact_.data(), wall_scale_, exact()};
+    return {particles_d_.data(), vertices_exact_.data(), corners_exact_.data(), wall_scale_,
+            exact()};
   }
   uint32_t* band_counter() { return pair_counter_.data() + 1; }
 
@@ -251,13 +272,28 @@ class GridDetector final : public Detector {
     const PackedParticle* P = particles_.data();
     uint32_t* key = p_key_.data();
     uint32_t* idx = p_idx_.data();
-    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
-      int x = 0, y = 0, z = 0;
-      key[i] = g.cell_of(position(P[i]), x, y, z) ? g.bucket(g.linear(x, y, z)) : kInvalidBucket;
-      idx[i] = i;
-    });
+    if (cfg_.method == Method::kBvh) {
+      // Along a space-filling curve: neighbouring threads walk the same nodes.
+      const MortonFrame mf = wall_.morton;
+      backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+        key[i] = mf.key(position(P[i]));
+        idx[i] = i;
+      });
+    } else {
+      backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+        int x = 0, y = 0, z = 0;
+        key[i] = g.cell_of(position(P[i]), x, y, z) ? g.bucket(g.linear(x, y, z)) : kInvalidBucket;
+        idx[i] = i;
+      });
+    }
     lap(out->times.hash_ms);
     backend_.sort_pairs(key, idx, p_key_sorted_.data(), p_idx_sorted_.data(), n_);
+    // The tree's walk reads each particle once: through the sorted index where
+    // the backend hides scattered reads, else from a reordered copy.
+    if (cfg_.method == Method::kBvh && !B::kWalksReadReorderedCopy) {
+      lap(out->times.sort_ms);
+      return;
+    }
     // Reorder the particles by cell so neighbouring threads read neighbouring memory.
     const uint32_t* sidx = p_idx_sorted_.data();
     PackedParticle* SP = sorted_particles_.data();
@@ -334,6 +370,41 @@ class GridDetector final : public Detector {
             if (collect) out.push(i, t, d);
           }
         }
+      }
+      counts[i] = n;
+      if (band) atomic_add_u32(band_total, band);
+    });
+  }
+
+  // bvh: a thread per particle, in Morton order, walks the tree; each
+  // original triangle sits in one leaf, so every pair is met once.
+  void bvh_particle_traversal(bool collect) {
+    constexpr bool copy = B::kWalksReadReorderedCopy;
+    const PackedParticle* P = copy ? sorted_particles_.data() : particles_.data();
+    const uint32_t* skey = p_key_sorted_.data();
+    const uint32_t* sidx = p_idx_sorted_.data();
+    const BvhNode* nodes = wall_.bvh_nodes.data();
+    const PlanarTriangle* T = wall_.tris.data();
+    const uint32_t* orig = wall_.tri_original.data();
+    // Float's error band around the radius, at most (particles farther out have no key).
+    const float extra = wall_.bvh_reach - static_cast<float>(cfg_.r_max);
+    uint32_t* counts = counts_.data();
+    const PairSink out = sink();
+    const Narrow nw = narrow();
+    uint32_t* band_total = band_counter();
+    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t j) {
+      const uint32_t i = sidx[j];
+      uint32_t n = 0, band = 0;
+      if (skey[j] != kInvalidMorton) {
+        const PackedParticle p = P[copy ? j : i];
+        const Vec3f c = position(p);
+        bvh_for_each_near(nodes, c, p.r + extra, [&](uint32_t k) {
+          float d = 0;
+          if (nw.decide(p, point_triangle_dist2(c, T[k]), i, orig[k], &d, &band)) {
+            ++n;
+            if (collect) out.push(i, orig[k], d);
+          }
+        });
       }
       counts[i] = n;
       if (band) atomic_add_u32(band_total, band);
@@ -485,7 +556,8 @@ class GridDetector final : public Detector {
   std::vector<ParticleD> staging_d_;     // the same in world double (precision exact)
   float wall_scale_ = 0;                 // sizes the float error band (wall_band_scale)
   Buf<ParticleD> particles_d_;
-  Buf<TriangleD> tris_exact_;            // original triangles, world double, mesh order
+  Buf<Vec3d> vertices_exact_;            // the mesh's vertices, world double
+  Buf<uint32_t> corners_exact_;          // three vertex indices per triangle, mesh order
 
   WallIndex<B> wall_;
 

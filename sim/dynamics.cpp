@@ -241,7 +241,7 @@ Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const Particl
   if (wall.triangles.empty()) return invalid_argument("wall: the wall has no triangles");
   if (c.method == Method::kReference)
     return invalid_argument(
-        "method: the dynamics prepares the wall as bin or a division method, not reference");
+        "method: the dynamics prepares the wall as bin, bvh or a division method, not reference");
   if (Status s = check_contact_settings(c); !s) return s;
   if (!std::isfinite(c.gravity.x) || !std::isfinite(c.gravity.y) || !std::isfinite(c.gravity.z))
     return invalid_argument("gravity must be finite");

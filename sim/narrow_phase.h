@@ -154,8 +154,9 @@ namespace collido::sim {
 // 10^4 times longer than wide) accurate to float rounding of the coordinates
 // instead of failing in the cancellations of the 3D formulas. Detection uses
 // the float form; contact forces the double one (sim/contact_force.h).
+// 16-byte aligned (48 bytes in float): the GPU reads it as three vector loads.
 template <class T>
-struct PlanarTriangleT {
+struct alignas(16) PlanarTriangleT {
   Vec3T<T> a, e1, n;
   T b1, c1, c2;  // b = (b1, 0), c = (c1, c2) with c2 >= 0; c2 == 0: degenerate (a segment)
 };

@@ -9,9 +9,11 @@
 #include <cmath>
 #include <vector>
 
+#include "sim/bvh.h"
 #include "sim/contact_force.h"
 #include "sim/detect.h"
 #include "sim/divide.h"
+#include "sim/exact_distance.h"
 #include "sim/grid.h"
 #include "sim/narrow_phase.h"
 
@@ -58,6 +60,8 @@ struct WallView {
   GridSpec g;
   int reach = 0;
   bool bin = true;
+  const BvhNode* bvh = nullptr;  // bvh: the tree (the other layouts: null)
+  float bvh_reach = 0;           // bvh: how far from a centre boxes are visited
   const PlanarTriangle* tris = nullptr;
   const uint32_t* original = nullptr;  // pieces: original triangle (mesh index) of each piece
   const uint64_t* tri_cell = nullptr;  // pieces: cell of each piece
@@ -72,6 +76,10 @@ struct WallView {
   // the contacts, the caller tests distance.
   template <class F>
   COLLIDO_HD COLLIDO_FORCEINLINE void for_each_candidate(Vec3f p, F&& f) const {
+    if (bvh) {
+      bvh_for_each_near(bvh, p, bvh_reach, [&](uint32_t k) { f(k, original[k]); });
+      return;
+    }
     int x = 0, y = 0, z = 0;
     if (!g.cell_of(p, x, y, z)) return;
     if (bin) {
@@ -115,6 +123,7 @@ class WallIndex {
     // walls far from the world origin (coordinates near 1e4 with r = 1).
     origin = box.center();
     info->triangles_original = mesh.triangles.size();
+    if (method == Method::kBvh) return prepare_bvh(backend, mesh, box, info);
     return method == Method::kBin ? prepare_bin(backend, mesh, box, cell, info)
                                   : prepare_pieces(backend, mesh, cell, info);
   }
@@ -125,7 +134,10 @@ class WallIndex {
     v.reach = reach;
     v.bin = method_ == Method::kBin;
     v.tris = tris.data();
-    if (v.bin) {
+    if (method_ == Method::kBvh) {
+      v.bin = false;
+      v.bvh = bvh_nodes.data(), v.bvh_reach = bvh_reach, v.original = tri_original.data();
+    } else if (v.bin) {
       v.bin_start = bin_start.data(), v.bin_tri = bin_tri.data(), v.bin_cell = bin_cell.data();
     } else {
       v.original = tri_original.data(), v.tri_cell = tri_cell.data();
@@ -203,6 +215,54 @@ class WallIndex {
     upload(backend, tri_cell, cell_sorted);
     upload(backend, tri_start, start);
     upload(backend, tri_end, end);
+    return Status::ok();
+  }
+
+  // bvh: the tree over the original triangles (sim/bvh.h), built on the host;
+  // the triangles stored in leaf order with their mesh index. A grid over the
+  // wall's box (cells of 2 r_max) is kept only to say where particles may
+  // touch: the Morton frame that orders a frame's particles covers it.
+  Status prepare_bvh(B& backend, const TriangleMesh& mesh, const Bounds3d& box, PrepareInfo* info) {
+    const size_t m = mesh.triangles.size();
+    if (m > kBvhMaxTriangles)
+      return invalid_argument("the bvh method holds at most " + std::to_string(kBvhMaxTriangles) +
+                              " triangles; this wall has " + std::to_string(m));
+    info->triangles_used = m;
+    reach = 0;
+    // Boxes grow by far more than float's rounding of a box distance in the
+    // local frame, and queries reach past r_max by far more than twice float's
+    // error band of the narrow phase there (sim/exact_distance.h: 8 ulps of
+    // the coordinates and the wall's scale), so the walk never loses a pair
+    // the decision would take.
+    const Vec3d ext = box.extent();
+    const double size = std::fabs(ext.x) + std::fabs(ext.y) + std::fabs(ext.z) + r_max_ +
+                        wall_band_scale(mesh, origin);
+    const double margin = 1e-6 * size;
+    bvh_reach = static_cast<float>(r_max_ * (1 + 1e-5) + 1e-5 * size);
+    BvhBuild built = build_bvh(mesh, origin, r_max_, margin);
+    info->bvh_nodes = built.nodes.size();
+    info->bvh_depth = built.depth;
+    info->bin_entries = built.leaves;
+    std::vector<PlanarTriangle> host_tris(m);
+    std::vector<PlanarTriangleD> host_tris_d(double_ ? m : 0);
+    for (size_t k = 0; k < m; ++k) {
+      const uint32_t t = built.order[k];
+      host_tris[k] = make_planar(mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2), origin);
+      if (double_)
+        host_tris_d[k] =
+            make_planar<double>(mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2), origin);
+    }
+    upload(backend, tris, host_tris);
+    if (double_) upload(backend, tris_d, host_tris_d);
+    upload(backend, tri_original, built.order);
+    upload(backend, bvh_nodes, built.nodes);
+    // Particles farther than the reach from the wall's box touch nothing.
+    const double pad = bvh_reach + margin;
+    morton.lo = cast3<float>(box.lo - origin - Vec3d{pad, pad, pad});
+    morton.hi = cast3<float>(box.hi - origin + Vec3d{pad, pad, pad});
+    const Vec3f e = morton.hi - morton.lo;
+    morton.scale = 1024.f / hd_max(hd_max(e.x, e.y), hd_max(e.z, 1e-30f));
+    info->cells = 0;
     return Status::ok();
   }
 
@@ -315,6 +375,9 @@ class WallIndex {
   Buf<uint64_t> tri_cell;
   Buf<uint32_t> bin_start, bin_tri;
   Buf<uint64_t> bin_cell;
+  Buf<BvhNode> bvh_nodes;
+  float bvh_reach = 0;
+  MortonFrame morton;  // bvh: orders a frame's particles along the wall
 
  private:
   Method method_ = Method::kBin;

@@ -17,20 +17,22 @@ TEST(AutoChoice, PicksTheFastestCandidateAndSaysWhy) {
   base.r_max = 1;
   auto c = choose_detection(wall, p, base, AutoRequest{});
   ASSERT_TRUE(c) << c.status().message();
-  // The CPU times bin at the four grid lengths (division never won there).
-  ASSERT_EQ(c->candidates.size(), 4u);
+  // The CPU times bin at the four grid lengths (division never won there) and the tree once.
+  ASSERT_EQ(c->candidates.size(), 5u);
   for (const auto& k : c->candidates) {
-    EXPECT_EQ(k.method, Method::kBin);
+    EXPECT_EQ(k.method, &k == &c->candidates.back() ? Method::kBvh : Method::kBin);
     EXPECT_TRUE(k.error.empty()) << k.error;
     EXPECT_GE(k.frame_ms, 0);
   }
+  EXPECT_EQ(c->candidates.back().grid_length, 0.0) << "the tree has no grid";
   double best = 1e300;
   for (const auto& k : c->candidates) best = std::min(best, k.frame_ms);
   bool chosen_is_best = false;
   for (const auto& k : c->candidates)
     chosen_is_best |= k.grid_length == c->grid_length && k.method == c->method && k.frame_ms == best;
   EXPECT_TRUE(chosen_is_best);
-  EXPECT_NE(c->reason.find("bin/particle"), std::string::npos) << c->reason;
+  EXPECT_NE(c->reason.find("bin/particle 1 r_max"), std::string::npos) << c->reason;
+  EXPECT_NE(c->reason.find("bvh/particle "), std::string::npos) << c->reason;
   EXPECT_NE(c->reason.find("tried"), std::string::npos) << c->reason;
   // What it picked gives the reference's contacts.
   DetectConfig cfg = base;
@@ -62,15 +64,16 @@ TEST(AutoChoice, AFixedMethodOrGridIsKept) {
   c = choose_detection(wall, p, base, only_method);
   ASSERT_TRUE(c);
   EXPECT_DOUBLE_EQ(c->grid_length, 3);
-  EXPECT_EQ(c->candidates.size(), 1u);  // CPU: bin only, at the given grid
+  EXPECT_EQ(c->candidates.size(), 2u);  // CPU: bin at the given grid, and the tree
 }
 
-// Division is worth timing only on the GPU and for triangles large against the radius.
+// Division is worth timing only on the GPU and for triangles large against
+// the radius; bin and the tree always.
 TEST(AutoChoice, DivisionIsACandidateOnlyWhereItCanWin) {
   const TriangleMesh wall = make_cylinder(50, 100, 40);
-  EXPECT_EQ(auto_method_candidates(wall, 1, Backend::kCpu).size(), 1u);
-  EXPECT_EQ(auto_method_candidates(wall, 1, Backend::kCuda).size(), 2u);
-  EXPECT_EQ(auto_method_candidates(make_sphere(1, 4), 1, Backend::kCuda).size(), 1u);
+  EXPECT_EQ(auto_method_candidates(wall, 1, Backend::kCpu).size(), 2u);
+  EXPECT_EQ(auto_method_candidates(wall, 1, Backend::kCuda).size(), 3u);
+  EXPECT_EQ(auto_method_candidates(make_sphere(1, 4), 1, Backend::kCuda).size(), 2u);
 }
 
 }  // namespace

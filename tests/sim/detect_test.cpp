@@ -25,7 +25,8 @@ struct Combo {
 const Combo kCombos[] = {{Method::kBin, Traversal::kParticle},          {Method::kBin, Traversal::kWall},
                          {Method::kGravity, Traversal::kParticle},      {Method::kGravity, Traversal::kWall},
                          {Method::kCircumcircle, Traversal::kParticle}, {Method::kCircumcircle, Traversal::kWall},
-                         {Method::kMidpoint4, Traversal::kParticle},    {Method::kMidpoint4, Traversal::kWall}};
+                         {Method::kMidpoint4, Traversal::kParticle},    {Method::kMidpoint4, Traversal::kWall},
+                         {Method::kBvh, Traversal::kParticle}};
 
 DetectResult run(const TriangleMesh& mesh, const Particles& p, DetectConfig cfg) {
   auto det = Detector::create(mesh, cfg, p.size());
@@ -282,7 +283,8 @@ void float_precision_flags_its_doubts() {
   rc.backend = Backend::kCpu;
   const DetectResult ref = run(wall, p, rc);
   for (const Combo& c : {Combo{Method::kBin, Traversal::kParticle},
-                         Combo{Method::kCircumcircle, Traversal::kWall}}) {
+                         Combo{Method::kCircumcircle, Traversal::kWall},
+                         Combo{Method::kBvh, Traversal::kParticle}}) {
     DetectConfig mc = cfg;
     mc.method = c.method, mc.traversal = c.traversal, mc.precision = Precision::kFloat;
     const DetectResult fl = run(wall, p, mc);
