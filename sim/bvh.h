@@ -57,41 +57,38 @@ COLLIDO_HD COLLIDO_FORCEINLINE float box_dist2(Vec3f p, float lox, float loy, fl
 // Calls f(k) for every triangle slot k of a leaf whose box lies within `reach`
 // of p (boxes are closed: a box exactly at `reach` is visited). A superset of
 // the triangles within `reach`; the caller tests distance.
+// The walk descends through inner nodes until it holds a leaf, and only then
+// tests the leaf's triangles (Aila and Laine's "while-while"): the threads of
+// a GPU warp reach their leaves' loops together instead of idling while one
+// of them tests triangles. The stack holds inner nodes and leaves, at most
+// one entry per level.
 template <class F>
 COLLIDO_HD COLLIDO_FORCEINLINE void bvh_for_each_near(const BvhNode* nodes, Vec3f p, float reach,
                                                       F&& f) {
   uint32_t stack[kBvhStackDepth];
   int top = 0;
   const float reach2 = reach * reach;
-  uint32_t node = 0;
+  uint32_t item = 0;  // the root, an inner node
   for (;;) {
-    const BvhNode n = nodes[node];
-    const bool hit0 = box_dist2(p, n.lo0x, n.lo0y, n.lo0z, n.hi0x, n.hi0y, n.hi0z) <= reach2;
-    const bool hit1 = box_dist2(p, n.lo1x, n.lo1y, n.lo1z, n.hi1x, n.hi1y, n.hi1z) <= reach2;
-    uint32_t next = kBvhLeafBit;  // none yet
-    const uint32_t children[2] = {n.child0, n.child1};
-    const bool hits[2] = {hit0, hit1};
-#if defined(__CUDA_ARCH__)
-#pragma unroll
-#endif
-    for (int c = 0; c < 2; ++c) {
-      if (!hits[c]) continue;
-      const uint32_t ch = children[c];
-      if (ch & kBvhLeafBit) {
-        const uint32_t first = (ch & ~kBvhLeafBit) >> kBvhLeafCountBits;
-        const uint32_t end = first + (ch & (kBvhMaxLeaf - 1)) + 1;
-        for (uint32_t k = first; k < end; ++k) f(k);
-      } else if (next == kBvhLeafBit) {
-        next = ch;
+    while (!(item & kBvhLeafBit)) {
+      const BvhNode n = nodes[item];
+      const bool hit0 = box_dist2(p, n.lo0x, n.lo0y, n.lo0z, n.hi0x, n.hi0y, n.hi0z) <= reach2;
+      const bool hit1 = box_dist2(p, n.lo1x, n.lo1y, n.lo1z, n.hi1x, n.hi1y, n.hi1z) <= reach2;
+      if (hit0 && hit1) {
+        item = n.child0;
+        stack[top++] = n.child1;
+      } else if (hit0 || hit1) {
+        item = hit0 ? n.child0 : n.child1;
       } else {
-        stack[top++] = ch;
+        if (top == 0) return;
+        item = stack[--top];
       }
     }
-    if (next == kBvhLeafBit) {
-      if (top == 0) return;
-      next = stack[--top];
-    }
-    node = next;
+    const uint32_t first = (item & ~kBvhLeafBit) >> kBvhLeafCountBits;
+    const uint32_t end = first + (item & (kBvhMaxLeaf - 1)) + 1;
+    for (uint32_t k = first; k < end; ++k) f(k);
+    if (top == 0) return;
+    item = stack[--top];
   }
 }
 
