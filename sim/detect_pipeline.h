@@ -225,20 +225,22 @@ class GridDetector final : public Detector {
   }
   bool exact() const { return cfg_.precision == Precision::kExact; }
 
-  // Decides a float candidate pair (particle i at p, the candidate's original
-  // triangle `orig`, float squared distance d2): outside float's error band
-  // the float answer stands; inside it, precision exact asks the contract's
-  // double predicate. Returns the contact and its distance in *dist.
+  // Decides a float candidate pair (particle i at p, the candidate t whose
+  // original triangle is `orig`) from their float distance: outside float's
+  // error band the float answer stands; inside it, precision exact asks the
+  // contract's double predicate. Returns the contact and its distance in *dist.
   struct Narrow {
     const ParticleD* pd;
     const Vec3d* vd;       // world double vertices
     const uint32_t* cd;    // three vertex indices per original triangle
     float wall_scale;
     bool exact;
-    COLLIDO_HD COLLIDO_FORCEINLINE bool decide(const PackedParticle& p, float d2, uint32_t i,
-                                               uint32_t orig, float* dist, uint32_t* band) const {
+    COLLIDO_HD COLLIDO_FORCEINLINE bool decide(const PackedParticle& p, const PlanarTriangle& t,
+                                               uint32_t i, uint32_t orig, float* dist,
+                                               uint32_t* band) const {
       const float delta = float_band(p.x, p.y, p.z, p.r, wall_scale);
       const float hi = p.r + delta;
+      const float d2 = point_triangle_dist2(position(p), t, hi * hi);
       if (!(d2 < hi * hi)) return false;
       const float lo = p.r - delta;
       if (lo > 0.f && d2 < lo * lo) {
@@ -251,8 +253,8 @@ class GridDetector final : public Detector {
         return d2 < p.r * p.r;
       }
       double e2 = 0;
-      const TriangleD t{vd[cd[3 * orig]], vd[cd[3 * orig + 1]], vd[cd[3 * orig + 2]]};
-      if (!exact_touch(pd[i], t, &e2)) return false;
+      const TriangleD world{vd[cd[3 * orig]], vd[cd[3 * orig + 1]], vd[cd[3 * orig + 2]]};
+      if (!exact_touch(pd[i], world, &e2)) return false;
       *dist = static_cast<float>(sqrt(e2));
       return true;
     }
@@ -365,7 +367,7 @@ class GridDetector final : public Detector {
           if (g.hashed && cellk[k] != l) continue;
           const uint32_t t = tri[k];
           float d = 0;
-          if (nw.decide(p, point_triangle_dist2(position(p), T[t]), i, t, &d, &band)) {
+          if (nw.decide(p, T[t], i, t, &d, &band)) {
             ++n;
             if (collect) out.push(i, t, d);
           }
@@ -400,7 +402,7 @@ class GridDetector final : public Detector {
         const Vec3f c = position(p);
         bvh_for_each_near(nodes, c, p.r + extra, [&](uint32_t k) {
           float d = 0;
-          if (nw.decide(p, point_triangle_dist2(c, T[k]), i, orig[k], &d, &band)) {
+          if (nw.decide(p, T[k], i, orig[k], &d, &band)) {
             ++n;
             if (collect) out.push(i, orig[k], d);
           }
@@ -435,7 +437,7 @@ class GridDetector final : public Detector {
         const PackedParticle p = SP[j];
         if (g.hashed && !g.holds(position(p), l)) continue;
         float d = 0;
-        if (nw.decide(p, point_triangle_dist2(position(p), tr), sidx[j], t, &d, &band))
+        if (nw.decide(p, tr, sidx[j], t, &d, &band))
           out.push(sidx[j], t, d);
       }
       if (band) atomic_add_u32(band_total, band);
@@ -473,7 +475,7 @@ class GridDetector final : public Detector {
         for (uint32_t k = tstart[b], e = tend[b]; k < e; ++k) {
           if (g.hashed && tcell[k] != l) continue;
           float d = 0;
-          if (nw.decide(p, point_triangle_dist2(c, T[k]), i, orig[k], &d, &band))
+          if (nw.decide(p, T[k], i, orig[k], &d, &band))
             out.push(i, orig[k], d);
         }
       });
@@ -508,7 +510,7 @@ class GridDetector final : public Detector {
           const PackedParticle p = SP[j];
           if (g.hashed && !g.holds(position(p), l)) continue;
           float d = 0;
-          if (nw.decide(p, point_triangle_dist2(position(p), tr), sidx[j], o, &d, &band))
+          if (nw.decide(p, tr, sidx[j], o, &d, &band))
             out.push(sidx[j], o, d);
         }
       });

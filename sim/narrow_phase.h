@@ -212,11 +212,18 @@ COLLIDO_HD COLLIDO_FORCEINLINE float segment_dist2_2d(float u, float v, float su
   return x * x + y * y;
 }
 
-// Squared distance from p (same local frame) to the prepared triangle.
-COLLIDO_HD COLLIDO_FORCEINLINE float point_triangle_dist2(Vec3f p, const PlanarTriangle& t) {
+// Squared distance from p (same local frame) to the prepared triangle. With
+// `below`, a point whose distance to the triangle's plane alone reaches it
+// returns that (a lower bound of the distance, >= below) without the edge
+// tests: a caller asking "closer than sqrt(below)?" gets the same answer for
+// less work, and the distance itself wherever it is below.
+COLLIDO_HD COLLIDO_FORCEINLINE float point_triangle_dist2(Vec3f p, const PlanarTriangle& t,
+                                                          float below = INFINITY) {
   const Vec3f ap = p - t.a;
+  const float h = dot(ap, t.n);
+  if (h * h >= below) return h * h;
   const Vec3f e2 = cross(t.n, t.e1);
-  const float u = dot(ap, t.e1), v = dot(ap, e2), h = dot(ap, t.n);
+  const float u = dot(ap, t.e1), v = dot(ap, e2);
   // Inside when left of all three counter-clockwise edges (a->b is the u axis).
   if (t.c2 > 0.f && v >= 0.f && (t.c1 - t.b1) * v - t.c2 * (u - t.b1) >= 0.f &&
       t.c2 * u - t.c1 * v >= 0.f)
