@@ -112,6 +112,7 @@ std::string detect_summary_json(const DetectSetup& s, const sim::PrepareInfo& in
     << sim::to_string(s.config.precision) << "\",\"backend\":\""
     << sim::to_string(s.config.backend) << "\",\"grid_length\":" << info.grid_length
     << ",\"cells\":" << info.cells << ",\"hashed_grid\":" << (info.hashed ? "true" : "false")
+    << ",\"tree_nodes\":" << info.bvh_nodes << ",\"tree_depth\":" << info.bvh_depth
     << ",\"contacts\":" << r.contact_count << ",\"colliding_particles\":" << r.colliding_particles
     << ",\"band_pairs\":" << r.band_pairs
     << ",\"area_error\":" << info.area_error << ",\"time_ms\":{\"prepare\":" << info.prepare_ms
@@ -135,9 +136,14 @@ std::string detect_summary_text(const DetectSetup& s, const sim::PrepareInfo& in
                 sim::to_string(s.config.method), sim::to_string(s.config.traversal),
                 sim::to_string(s.config.precision), sim::to_string(s.config.backend), info.triangles_used);
   o << line;
-  std::snprintf(line, sizeof line, "particles   %zu, r_max %g; grid length %g, %llu cells%s\n", s.particles.size(),
-                s.config.r_max, info.grid_length, static_cast<unsigned long long>(info.cells),
-                info.hashed ? " (hashed)" : "");
+  if (s.config.method == sim::Method::kBvh)
+    std::snprintf(line, sizeof line, "particles   %zu, r_max %g; a tree of %llu nodes, %d levels deep\n",
+                  s.particles.size(), s.config.r_max, static_cast<unsigned long long>(info.bvh_nodes),
+                  info.bvh_depth);
+  else
+    std::snprintf(line, sizeof line, "particles   %zu, r_max %g; grid length %g, %llu cells%s\n", s.particles.size(),
+                  s.config.r_max, info.grid_length, static_cast<unsigned long long>(info.cells),
+                  info.hashed ? " (hashed)" : "");
   o << line;
   std::snprintf(line, sizeof line, "contacts    %llu, colliding particles %llu; %llu pairs %s\n",
                 static_cast<unsigned long long>(r.contact_count),

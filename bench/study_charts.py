@@ -31,7 +31,7 @@ from matplotlib.ticker import FuncFormatter  # noqa: E402
 
 DPI = 110
 METHOD_COLOR = {"reference": "black", "gravity": "C1", "circumcircle": "C0",
-                "midpoint4": "C2", "bin": "C3"}
+                "midpoint4": "C2", "bin": "C3", "bvh": "C4"}
 TRAVERSAL_MARKER = {"particle": "o", "wall": "s"}
 # Ordered from benign to worst, so a cell with several rows shows the worst one.
 VERDICTS = [("stable", "#2ca02c"), ("loses_contacts", "#9467bd"),

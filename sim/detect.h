@@ -98,7 +98,7 @@ struct PrepareInfo {
   uint64_t cells = 0;    // cells of the domain box
   uint32_t buckets = 0;  // table entries actually stored
   bool hashed = false;
-  uint64_t bin_entries = 0;  // bin: (cell, triangle) pairs stored; bvh: leaves
+  uint64_t bin_entries = 0;  // bin: (cell, triangle) pairs stored
   uint64_t bvh_nodes = 0;    // bvh: inner nodes of the tree
   int bvh_depth = 0;         // bvh: levels to the deepest leaf
   double prepare_ms = 0;

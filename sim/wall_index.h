@@ -242,7 +242,6 @@ class WallIndex {
     BvhBuild built = build_bvh(mesh, origin, r_max_, margin);
     info->bvh_nodes = built.nodes.size();
     info->bvh_depth = built.depth;
-    info->bin_entries = built.leaves;
     std::vector<PlanarTriangle> host_tris(m);
     std::vector<PlanarTriangleD> host_tris_d(double_ ? m : 0);
     for (size_t k = 0; k < m; ++k) {
@@ -263,6 +262,7 @@ class WallIndex {
     const Vec3f e = morton.hi - morton.lo;
     morton.scale = 1024.f / hd_max(hd_max(e.x, e.y), hd_max(e.z, 1e-30f));
     info->cells = 0;
+    info->grid_length = 0;  // no grid
     return Status::ok();
   }
 

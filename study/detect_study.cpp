@@ -80,7 +80,7 @@ Status run_detect_study(const StudyOptions& o, std::vector<DetectRow>* rows) {
   }
   const int repeats = o.quick ? 5 : 9;
   const sim::Method methods[] = {sim::Method::kBin, sim::Method::kGravity, sim::Method::kCircumcircle,
-                                 sim::Method::kMidpoint4};
+                                 sim::Method::kMidpoint4, sim::Method::kBvh};
   for (const Scene& sc : *scenes) {
     if (!o.scenes.empty() && std::find(o.scenes.begin(), o.scenes.end(), sc.name) == o.scenes.end()) continue;
     // The particle sets and the reference's contacts, once per scene.
@@ -121,6 +121,10 @@ Status run_detect_study(const StudyOptions& o, std::vector<DetectRow>* rows) {
       for (sim::Traversal tr : {sim::Traversal::kParticle, sim::Traversal::kWall})
         for (double gf : sim::kAutoGridFactors) {
           if (o.quick && gf != 2 && (m == sim::Method::kGravity || m == sim::Method::kMidpoint4)) continue;
+          // The tree has no grid and walks from the particles: one setting, grid 0.
+          const bool tree = m == sim::Method::kBvh;
+          if (tree && (tr == sim::Traversal::kWall || gf != sim::kAutoGridFactors[0])) continue;
+          if (tree) gf = 0;
           sim::DetectConfig cfg;
           cfg.method = m, cfg.traversal = tr, cfg.backend = o.backend, cfg.pool = o.pool;
           cfg.r_max = sc.r_hi, cfg.grid_length = gf * sc.r_hi;
@@ -163,8 +167,8 @@ Status run_detect_study(const StudyOptions& o, std::vector<DetectRow>* rows) {
             (void)(*det)->set_precision(sim::Precision::kExact);
           }
           if (o.progress)
-            o.progress("  " + sc.name + ": " + sim::to_string(m) + "/" + sim::to_string(tr) + " grid " +
-                       std::to_string(gf).substr(0, 3) + " r_max");
+            o.progress("  " + sc.name + ": " + sim::to_string(m) + "/" + sim::to_string(tr) +
+                       (gf > 0 ? " grid " + std::to_string(gf).substr(0, 3) + " r_max" : ""));
         }
     // What the automatic choice picks for each set, marked on the matching row.
     for (const Set& s : sets) {
