@@ -75,27 +75,23 @@ class GridDetector final : public Detector {
     const bool bin = cfg_.method == Method::kBin;
     const bool bvh = cfg_.method == Method::kBvh;
     const bool wall = cfg_.traversal == Traversal::kWall;
-    if (bvh) {
-      hash_and_sort(out);
+    if (bvh || (bin && !wall)) {
+      // The walks that count per particle themselves (no sort for bin: a particle reads its cell).
+      if (bvh) hash_and_sort(out);
+      auto walk = [&](bool collect) {
+        if (bvh)
+          bvh_particle_traversal(collect);
+        else
+          bin_particle_traversal(collect);
+      };
       if (cfg_.collect_contacts) {
         for (bool fits = false; !fits; fits = pairs_fit()) {
           reset_pairs();
-          bvh_particle_traversal(true);
+          walk(true);
         }
       } else {
         reset_pairs();
-        bvh_particle_traversal(false);
-      }
-      lap(out->times.traverse_ms);
-    } else if (bin && !wall) {
-      if (cfg_.collect_contacts) {
-        for (bool fits = false; !fits; fits = pairs_fit()) {
-          reset_pairs();
-          bin_particle_traversal(true);
-        }
-      } else {
-        reset_pairs();
-        bin_particle_traversal(false);
+        walk(false);
       }
       lap(out->times.traverse_ms);
     } else {

@@ -244,13 +244,7 @@ class WallIndex {
     info->bvh_depth = built.depth;
     std::vector<PlanarTriangle> host_tris(m);
     std::vector<PlanarTriangleD> host_tris_d(double_ ? m : 0);
-    for (size_t k = 0; k < m; ++k) {
-      const uint32_t t = built.order[k];
-      host_tris[k] = make_planar(mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2), origin);
-      if (double_)
-        host_tris_d[k] =
-            make_planar<double>(mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2), origin);
-    }
+    for (size_t k = 0; k < m; ++k) set_planar(mesh, built.order[k], k, host_tris, host_tris_d);
     upload(backend, tris, host_tris);
     if (double_) upload(backend, tris_d, host_tris_d);
     upload(backend, tri_original, built.order);
@@ -287,10 +281,7 @@ class WallIndex {
       host_corners[t] = {cast3<float>(mesh.corner(t, 0) - origin),
                          cast3<float>(mesh.corner(t, 1) - origin),
                          cast3<float>(mesh.corner(t, 2) - origin)};
-      host_tris[t] = make_planar(mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2), origin);
-      if (double_)
-        host_tris_d[t] =
-            make_planar<double>(mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2), origin);
+      set_planar(mesh, t, t, host_tris, host_tris_d);
     }
     upload(backend, tris, host_tris);
     if (double_) upload(backend, tris_d, host_tris_d);
@@ -357,6 +348,14 @@ class WallIndex {
                              g.origin.z + (z + 0.5f) * g.cell};
           if (triangle_box_overlap(t.a, t.b, t.c, centre, Vec3f{h, h, h})) f(g.linear(x, y, z));
         }
+  }
+
+  // Mesh triangle t in narrow-phase form at `slot`, and in double too when kept.
+  void set_planar(const TriangleMesh& mesh, size_t t, size_t slot, std::vector<PlanarTriangle>& f,
+                  std::vector<PlanarTriangleD>& d) const {
+    const Vec3d a = mesh.corner(t, 0), b = mesh.corner(t, 1), c = mesh.corner(t, 2);
+    f[slot] = make_planar(a, b, c, origin);
+    if (double_) d[slot] = make_planar<double>(a, b, c, origin);
   }
 
   template <class T>
