@@ -217,6 +217,66 @@ class Builder {
   std::vector<Deferred>* deferred_;
 };
 
+// A child slot of a binary node: its code and its (float, already rounded) box.
+struct Slot {
+  uint32_t code;
+  float lo[3], hi[3];
+};
+
+Slot slot_of(const BvhNode& n, int c) {
+  return c == 0 ? Slot{n.child0, {n.lo0x, n.lo0y, n.lo0z}, {n.hi0x, n.hi0y, n.hi0z}}
+                : Slot{n.child1, {n.lo1x, n.lo1y, n.lo1z}, {n.hi1x, n.hi1y, n.hi1z}};
+}
+
+double surface(const Slot& s) {
+  if (!(s.lo[0] <= s.hi[0])) return -1;  // the empty slot
+  const double x = double(s.hi[0]) - s.lo[0], y = double(s.hi[1]) - s.lo[1],
+               z = double(s.hi[2]) - s.lo[2];
+  return x * y + y * z + z * x;
+}
+
+// Collapses the binary subtree at `node` into wide nodes: the node's two
+// children are opened, largest box first, until four slots are filled or
+// only leaves are left; the slots keep their left-to-right order.
+uint32_t collapse(const std::vector<BvhNode>& binary, uint32_t node, int depth, BvhBuild* out) {
+  Slot slots[4] = {slot_of(binary[node], 0), slot_of(binary[node], 1)};
+  int n = 2;
+  while (n < 4) {
+    int open = -1;
+    double largest = -1;
+    for (int k = 0; k < n; ++k)
+      if (!(slots[k].code & kBvhLeafBit) && surface(slots[k]) > largest) open = k, largest = surface(slots[k]);
+    if (open < 0) break;
+    const BvhNode& b = binary[slots[open].code];
+    for (int k = n; k > open + 1; --k) slots[k] = slots[k - 1];
+    slots[open] = slot_of(b, 0);
+    slots[open + 1] = slot_of(b, 1);
+    ++n;
+  }
+  const uint32_t index = static_cast<uint32_t>(out->wide.size());
+  out->wide.emplace_back();
+  uint32_t codes[4];
+  for (int k = 0; k < n; ++k) {
+    if (slots[k].code & kBvhLeafBit) {
+      codes[k] = slots[k].code;
+      out->wide_depth = std::max(out->wide_depth, depth + 1);
+    } else {
+      codes[k] = collapse(binary, slots[k].code, depth + 1, out);
+    }
+  }
+  BvhWideNode& w = out->wide[index];  // after the recursion, which grows the vector
+  for (int k = 0; k < 4; ++k) {
+    const bool used = k < n;
+    const float inf = std::numeric_limits<float>::infinity();
+    w.lo_x[k] = used ? slots[k].lo[0] : inf, w.lo_y[k] = used ? slots[k].lo[1] : inf;
+    w.lo_z[k] = used ? slots[k].lo[2] : inf;
+    w.hi_x[k] = used ? slots[k].hi[0] : -inf, w.hi_y[k] = used ? slots[k].hi[1] : -inf;
+    w.hi_z[k] = used ? slots[k].hi[2] : -inf;
+    w.child[k] = used ? codes[k] : bvh_leaf(0, 1);
+  }
+  return index;
+}
+
 }  // namespace
 
 BvhBuild build_bvh(const TriangleMesh& mesh, Vec3d origin, double reach, double margin,
@@ -266,6 +326,8 @@ BvhBuild build_bvh(const TriangleMesh& mesh, Vec3d origin, double reach, double 
     out.depth = std::max(out.depth, parts[k].depth);
     out.leaves += parts[k].leaves;
   }
+  out.wide.reserve(out.nodes.size() / 2 + 1);
+  collapse(out.nodes, 0, 0, &out);
   out.order.resize(m);
   for (size_t k = 0; k < m; ++k) out.order[k] = items[k].triangle;
   return out;

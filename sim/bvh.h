@@ -5,10 +5,12 @@
 // every cell it reaches and division cuts it into particle-size pieces,
 // while a tree adapts its boxes to the mesh (docs/benchmarks.md, "Large meshes").
 //
-// Layout: a binary tree whose node holds both children's boxes (Aila and
-// Laine's layout), 64 bytes read as four 16-byte vectors, so one load tests
-// two boxes. A child is an inner node's index or, with the top bit set, a leaf:
-// a run of up to kBvhMaxLeaf triangles in the reordered triangle array.
+// Layout: the tree is built binary (each node holds both children's boxes,
+// Aila and Laine's layout) and then collapsed into a 4-wide tree whose node
+// holds its four children's boxes as arrays (112 bytes, seven 16-byte loads):
+// half the levels, so a walk waits on half as many dependent loads. A child
+// is an inner node's index or, with the top bit set, a leaf: a run of up to
+// kBvhMaxLeaf triangles in the reordered triangle array.
 #pragma once
 
 #include <cstdint>
@@ -41,6 +43,15 @@ struct alignas(16) BvhNode {
 };
 static_assert(sizeof(BvhNode) == 64, "a node is four 16-byte loads");
 
+// The walked form: four children a node; an empty slot has an inverted box.
+struct alignas(16) BvhWideNode {
+  float lo_x[4], lo_y[4], lo_z[4], hi_x[4], hi_y[4], hi_z[4];
+  uint32_t child[4];
+};
+static_assert(sizeof(BvhWideNode) == 112, "a wide node is seven 16-byte loads");
+// A wide walk pushes at most three entries a level.
+inline constexpr int kBvhWideStackDepth = 3 * kBvhStackDepth;
+
 COLLIDO_HD COLLIDO_FORCEINLINE uint32_t bvh_leaf(uint32_t first, uint32_t count) {
   return kBvhLeafBit | (first << kBvhLeafCountBits) | (count - 1);
 }
@@ -63,26 +74,33 @@ COLLIDO_HD COLLIDO_FORCEINLINE float box_dist2(Vec3f p, float lox, float loy, fl
 // of them tests triangles. The stack holds inner nodes and leaves, at most
 // one entry per level.
 template <class F>
-COLLIDO_HD COLLIDO_FORCEINLINE void bvh_for_each_near(const BvhNode* nodes, Vec3f p, float reach,
-                                                      F&& f) {
-  uint32_t stack[kBvhStackDepth];
+COLLIDO_HD COLLIDO_FORCEINLINE void bvh_for_each_near(const BvhWideNode* nodes, Vec3f p,
+                                                      float reach, F&& f) {
+  uint32_t stack[kBvhWideStackDepth];
   int top = 0;
   const float reach2 = reach * reach;
   uint32_t item = 0;  // the root, an inner node
   for (;;) {
     while (!(item & kBvhLeafBit)) {
-      const BvhNode n = nodes[item];
-      const bool hit0 = box_dist2(p, n.lo0x, n.lo0y, n.lo0z, n.hi0x, n.hi0y, n.hi0z) <= reach2;
-      const bool hit1 = box_dist2(p, n.lo1x, n.lo1y, n.lo1z, n.hi1x, n.hi1y, n.hi1z) <= reach2;
-      if (hit0 && hit1) {
-        item = n.child0;
-        stack[top++] = n.child1;
-      } else if (hit0 || hit1) {
-        item = hit0 ? n.child0 : n.child1;
-      } else {
-        if (top == 0) return;
-        item = stack[--top];
+      const BvhWideNode n = nodes[item];
+      uint32_t next = 0;
+      bool have = false;  // next holds the first child in reach
+#if defined(__CUDA_ARCH__)
+#pragma unroll
+#endif
+      for (int c = 0; c < 4; ++c) {
+        if (box_dist2(p, n.lo_x[c], n.lo_y[c], n.lo_z[c], n.hi_x[c], n.hi_y[c], n.hi_z[c]) > reach2)
+          continue;
+        if (!have)
+          next = n.child[c], have = true;
+        else
+          stack[top++] = n.child[c];
       }
+      if (!have) {
+        if (top == 0) return;
+        next = stack[--top];
+      }
+      item = next;
     }
     const uint32_t first = (item & ~kBvhLeafBit) >> kBvhLeafCountBits;
     const uint32_t end = first + (item & (kBvhMaxLeaf - 1)) + 1;
@@ -121,9 +139,11 @@ struct MortonFrame {
 
 // The tree over a wall's triangles, in the wall's local frame.
 struct BvhBuild {
-  std::vector<BvhNode> nodes;   // nodes[0] is the root
-  std::vector<uint32_t> order;  // triangle slot -> mesh triangle index
-  int depth = 0;                // levels of the deepest leaf
+  std::vector<BvhNode> nodes;      // binary, nodes[0] is the root
+  std::vector<BvhWideNode> wide;   // the same tree four-wide, wide[0] is the root: what walks read
+  std::vector<uint32_t> order;     // triangle slot -> mesh triangle index
+  int depth = 0;                   // levels of the deepest leaf (binary)
+  int wide_depth = 0;              // the same in the wide tree
   uint32_t leaves = 0;
 };
 

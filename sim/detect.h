@@ -99,8 +99,8 @@ struct PrepareInfo {
   uint32_t buckets = 0;  // table entries actually stored
   bool hashed = false;
   uint64_t bin_entries = 0;  // bin: (cell, triangle) pairs stored
-  uint64_t bvh_nodes = 0;    // bvh: inner nodes of the tree
-  int bvh_depth = 0;         // bvh: levels to the deepest leaf
+  uint64_t bvh_nodes = 0;    // bvh: nodes of the (four-wide) tree
+  int bvh_depth = 0;         // bvh: its levels to the deepest leaf
   double prepare_ms = 0;
   uint64_t device_bytes = 0;  // scratch and prepared data held by the backend
 };

@@ -381,7 +381,7 @@ class GridDetector final : public Detector {
     const PackedParticle* P = copy ? sorted_particles_.data() : particles_.data();
     const uint32_t* skey = p_key_sorted_.data();
     const uint32_t* sidx = p_idx_sorted_.data();
-    const BvhNode* nodes = wall_.bvh_nodes.data();
+    const BvhWideNode* nodes = wall_.bvh_nodes.data();
     const PlanarTriangle* T = wall_.tris.data();
     const uint32_t* orig = wall_.tri_original.data();
     // Float's error band around the radius, at most (particles farther out have no key).

@@ -60,7 +60,7 @@ struct WallView {
   GridSpec g;
   int reach = 0;
   bool bin = true;
-  const BvhNode* bvh = nullptr;  // bvh: the tree (the other layouts: null)
+  const BvhWideNode* bvh = nullptr;  // bvh: the tree (the other layouts: null)
   float bvh_reach = 0;           // bvh: how far from a centre boxes are visited
   const PlanarTriangle* tris = nullptr;
   const uint32_t* original = nullptr;  // pieces: original triangle (mesh index) of each piece
@@ -240,15 +240,15 @@ class WallIndex {
     const double margin = 1e-6 * size;
     bvh_reach = static_cast<float>(r_max_ * (1 + 1e-5) + 1e-5 * size);
     BvhBuild built = build_bvh(mesh, origin, r_max_, margin);
-    info->bvh_nodes = built.nodes.size();
-    info->bvh_depth = built.depth;
+    info->bvh_nodes = built.wide.size();
+    info->bvh_depth = built.wide_depth;
     std::vector<PlanarTriangle> host_tris(m);
     std::vector<PlanarTriangleD> host_tris_d(double_ ? m : 0);
     for (size_t k = 0; k < m; ++k) set_planar(mesh, built.order[k], k, host_tris, host_tris_d);
     upload(backend, tris, host_tris);
     if (double_) upload(backend, tris_d, host_tris_d);
     upload(backend, tri_original, built.order);
-    upload(backend, bvh_nodes, built.nodes);
+    upload(backend, bvh_nodes, built.wide);
     // Particles farther than the reach from the wall's box touch nothing.
     const double pad = bvh_reach + margin;
     morton.lo = cast3<float>(box.lo - origin - Vec3d{pad, pad, pad});
@@ -374,7 +374,7 @@ class WallIndex {
   Buf<uint64_t> tri_cell;
   Buf<uint32_t> bin_start, bin_tri;
   Buf<uint64_t> bin_cell;
-  Buf<BvhNode> bvh_nodes;
+  Buf<BvhWideNode> bvh_nodes;  // the four-wide tree
   float bvh_reach = 0;
   MortonFrame morton;  // bvh: orders a frame's particles along the wall
 

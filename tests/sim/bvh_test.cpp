@@ -65,6 +65,38 @@ void walk(const TriangleMesh& mesh, Vec3d origin, const BvhBuild& b, uint32_t no
   }
 }
 
+// The same checks on the four-wide tree the walks read.
+void walk_wide(const TriangleMesh& mesh, Vec3d origin, const BvhBuild& b, uint32_t node, int depth,
+               Walked* w, std::vector<uint32_t>* below) {
+  ASSERT_LT(node, b.wide.size());
+  ASSERT_LT(depth, kBvhStackDepth);
+  w->depth = std::max(w->depth, depth);
+  const BvhWideNode& n = b.wide[node];
+  for (int c = 0; c < 4; ++c) {
+    if (n.lo_x[c] > n.hi_x[c]) continue;  // an empty slot
+    std::vector<uint32_t> slots;
+    if (n.child[c] & kBvhLeafBit) {
+      const uint32_t first = (n.child[c] & ~kBvhLeafBit) >> kBvhLeafCountBits;
+      const uint32_t count = (n.child[c] & (kBvhMaxLeaf - 1)) + 1;
+      ASSERT_LE(first + count, b.order.size());
+      for (uint32_t k = first; k < first + count; ++k) slots.push_back(k), ++w->seen[k];
+    } else {
+      walk_wide(mesh, origin, b, n.child[c], depth + 1, w, &slots);
+    }
+    const float lo[3] = {n.lo_x[c], n.lo_y[c], n.lo_z[c]}, hi[3] = {n.hi_x[c], n.hi_y[c], n.hi_z[c]};
+    for (uint32_t k : slots)
+      for (int v = 0; v < 3; ++v) {
+        const Vec3d p = mesh.corner(b.order[k], v) - origin;
+        const double q[3] = {p.x, p.y, p.z};
+        for (int a = 0; a < 3; ++a) {
+          ASSERT_LE(lo[a], q[a]) << "wide node " << node << " child " << c;
+          ASSERT_GE(hi[a], q[a]) << "wide node " << node << " child " << c;
+        }
+      }
+    if (below) below->insert(below->end(), slots.begin(), slots.end());
+  }
+}
+
 void expect_sound_tree(const TriangleMesh& mesh, double reach, const std::string& what) {
   const Vec3d origin = mesh_bounds(mesh).center();
   const BvhBuild b = build_bvh(mesh, origin, reach, 0.0);
@@ -78,6 +110,13 @@ void expect_sound_tree(const TriangleMesh& mesh, double reach, const std::string
   for (size_t k = 0; k < w.seen.size(); ++k) ASSERT_EQ(w.seen[k], 1) << what << ": slot " << k;
   EXPECT_LE(b.depth, w.depth + 1) << what;  // leaves sit one level below their node
   EXPECT_LT(b.depth, kBvhStackDepth) << what;
+  // The wide tree holds the same leaves, in fewer levels.
+  Walked ww;
+  ww.seen.assign(mesh.triangles.size(), 0);
+  walk_wide(mesh, origin, b, 0, 0, &ww, nullptr);
+  for (size_t k = 0; k < ww.seen.size(); ++k) ASSERT_EQ(ww.seen[k], 1) << what << ": wide, slot " << k;
+  EXPECT_LE(b.wide_depth, std::max(b.depth, 1)) << what;  // a one-leaf tree still has a root
+  EXPECT_LE(b.wide.size(), b.nodes.size()) << what;
 }
 
 TEST(Bvh, EveryTriangleInOneLeafUnderBoxesThatHoldIt) {
@@ -107,6 +146,8 @@ TEST(Bvh, SubtreesBuiltInParallelGiveOneTree) {
   EXPECT_EQ(a.order, b.order);
   ASSERT_EQ(a.nodes.size(), b.nodes.size());
   EXPECT_EQ(std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(BvhNode)), 0);
+  ASSERT_EQ(a.wide.size(), b.wide.size());
+  EXPECT_EQ(std::memcmp(a.wide.data(), b.wide.data(), a.wide.size() * sizeof(BvhWideNode)), 0);
   EXPECT_EQ(a.depth, b.depth);
   EXPECT_EQ(a.leaves, b.leaves);
 }
@@ -155,7 +196,7 @@ TEST(Bvh, WalkVisitsEveryTriangleWithinReach) {
   for (size_t i = 0; i < probe.size(); ++i) {
     const Vec3f p = cast3<float>(Vec3d{probe.x[i], probe.y[i], probe.z[i]} - origin);
     std::set<uint32_t> walked;
-    bvh_for_each_near(b.nodes.data(), p, reach, [&](uint32_t k) {
+    bvh_for_each_near(b.wide.data(), p, reach, [&](uint32_t k) {
       EXPECT_TRUE(walked.insert(b.order[k]).second) << "a triangle visited twice";
     });
     for (size_t t = 0; t < mesh.triangles.size(); ++t) {
