@@ -326,7 +326,7 @@ Expected<Scene> parse_scene(const std::string& text) {
   if (!s.method_auto && (!sim::parse_method(method, &s.dynamics.method) ||
                          s.dynamics.method == sim::Method::kReference))
     return invalid_argument("method: \"" + method +
-                            "\" is not auto, bin, gravity, circumcircle or midpoint4");
+                            "\" is not auto, bin, bvh, gravity, circumcircle or midpoint4");
   // The wall grid's cell edge: a length (in the scene's unit), or "auto"; absent = 2 r_max.
   if (r.has("grid_length") && r.at("grid_length").is_string()) {
     if (r.at("grid_length").get<std::string>() != "auto")

@@ -101,6 +101,19 @@ TEST(Scene, MethodAndGridLengthMayBeAutomatic) {
   EXPECT_DOUBLE_EQ(mm->dynamics.grid_length, 0.003);
 }
 
+// The tree over the wall's triangles is a method a scene may name, and writes back as one.
+TEST(Scene, TheTreeMethodIsNamedAndWrittenBack) {
+  auto s = parse_scene(R"({"wall": "wall1", "method": "bvh"})");
+  ASSERT_TRUE(s) << s.status().message();
+  EXPECT_EQ(s->dynamics.method, sim::Method::kBvh);
+  auto back = parse_scene(to_json(*s));
+  ASSERT_TRUE(back) << back.status().message();
+  EXPECT_EQ(back->dynamics.method, sim::Method::kBvh);
+  auto bad = parse_scene(R"({"wall": "wall1", "method": "octree"})");
+  ASSERT_FALSE(bad);
+  EXPECT_NE(bad.status().message().find("bvh"), std::string::npos) << bad.status().message();
+}
+
 TEST(Scene, ErrorsNameTheKey) {
   expect_error(R"({"wall": "wall1", "colour": "red"})", "colour: unknown key");
   expect_error(R"({"wall": "wall1", "particles": {"radus": 1}})", "particles.radus: unknown key");
