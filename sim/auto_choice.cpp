@@ -156,12 +156,14 @@ Expected<AutoChoice> choose_detection(const TriangleMesh& mesh, const Particles&
     return invalid_argument("automatic choice: no candidate could be prepared (" +
                             choice.candidates.front().error + ")");
   choice.method = best->method, choice.traversal = best->traversal, choice.grid_length = best->grid_length;
-  // "bin/particle with grid 2 r_max", or "bvh/particle" (no grid).
+  // "bin/particle with grid 2 r_max" (0 is the detector's default, 2 r_max),
+  // or "bvh/particle" (no grid).
   auto setting = [&](const AutoCandidate& c, const char* grid_word) {
     std::string s = std::string(to_string(c.method)) + "/" + to_string(c.traversal);
-    if (c.grid_length > 0) {
+    if (c.method != Method::kBvh) {
       char g[48];
-      std::snprintf(g, sizeof g, "%s%.3g r_max", grid_word, c.grid_length / base.r_max);
+      const double grid = c.grid_length > 0 ? c.grid_length : 2 * base.r_max;
+      std::snprintf(g, sizeof g, "%s%.3g r_max", grid_word, grid / base.r_max);
       s += g;
     }
     return s;

@@ -65,6 +65,8 @@ TEST(AutoChoice, AFixedMethodOrGridIsKept) {
   ASSERT_TRUE(c);
   EXPECT_DOUBLE_EQ(c->grid_length, 3);
   EXPECT_EQ(c->candidates.size(), 2u);  // CPU: bin at the given grid, and the tree
+  EXPECT_NE(c->reason.find("bin/particle 3 r_max"), std::string::npos) << c->reason;
+  EXPECT_NE(c->reason.find("bvh/particle "), std::string::npos) << c->reason;
 }
 
 // Division is worth timing only on the GPU and for triangles large against
