@@ -28,14 +28,15 @@ for step in "$@"; do
     study-dynamics)
       build-dev/app/collidoscope study --backend cpu --only dynamics --out "$out/dynamics" >"$out/study_dynamics.log" 2>&1
       tail -4 "$out/study_dynamics.log" ;;
-    bench-large)  # #18: large meshes, bin / circumcircle / bvh, 10^5..10^7 particles half near the surface
-      for w in tests/data/meshes/counter_unitsmm_trimesh_83750tri.stl \
-               "cylinder:r=150,h=30,segments=20000+sphere:r=10,subdivisions=6,dz=15" \
-               "sphere:r=500,subdivisions=8" wall1 "sphere:r=50,subdivisions=6"; do
-        check=100000; [ "$w" = "sphere:r=500,subdivisions=8" ] && check=0
-        build-dev/app/collidoscope bench detect --backend cuda --wall "$w" --min 100000 --max 10000000 \
-          --methods bin,circumcircle,bvh --traversals particle --precisions exact --near-surface 0.5 \
-          --repeats 10 --check-max $check
+    bench-large)  # #18: large meshes, 10^5..10^7 particles, half near the surface and all uniform
+      python3 bench/tile_stl.py tests/data/meshes/counter_unitsmm_trimesh_83750tri.stl /tmp/counter_x12.stl 4 3
+      for near in 0.5 0; do
+        for w in tests/data/meshes/counter_unitsmm_trimesh_83750tri.stl /tmp/counter_x12.stl \
+                 "sphere:r=500,subdivisions=8" wall1 "sphere:r=50,subdivisions=6" tests/data/meshes/teapot_trimesh.stl; do
+          m=bin,bvh; case $w in *x12*|*subdivisions=8*) ;; *) m=bin,circumcircle,bvh;; esac
+          build-dev/app/collidoscope bench detect --backend cuda --wall "$w" --min 100000 --max 10000000 \
+            --methods $m --traversals particle --precisions exact --near-surface $near --repeats 10 --check-max 0
+        done
       done >"$out/bench_large.txt" 2>&1
       grep -E "^# bench|^\| (bin|circumcircle|bvh) \|" "$out/bench_large.txt" ;;
     bench)

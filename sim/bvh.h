@@ -27,14 +27,16 @@ inline constexpr uint32_t kBvhLeafBit = 0x80000000u;
 inline constexpr int kBvhLeafCountBits = 4;
 inline constexpr uint32_t kBvhMaxLeaf = 1u << kBvhLeafCountBits;  // triangles per leaf, at most
 inline constexpr uint32_t kBvhMaxTriangles = 1u << (31 - kBvhLeafCountBits);
-// The builder keeps every path under this many levels, so a walk's stack never overflows:
-// splits below kBvhSahDepth are object medians, which halve the count, so no
-// path grows past kBvhSahDepth + log2(kBvhMaxTriangles) levels.
+// The builder keeps every path under this many levels, so the walk's stack
+// (three entries a level, kBvhWideStackDepth) never overflows: splits below
+// kBvhSahDepth are object medians, which halve the count, so no path grows
+// past kBvhSahDepth + log2(kBvhMaxTriangles) levels.
 inline constexpr int kBvhStackDepth = 64;
 inline constexpr int kBvhSahDepth = 32;
 static_assert(kBvhSahDepth + 31 - kBvhLeafCountBits < kBvhStackDepth,
               "the stack must hold the deepest path");
 
+// The built form: a binary node with both children's boxes.
 struct alignas(16) BvhNode {
   float lo0x, lo0y, lo0z, hi0x;
   float hi0y, hi0z, lo1x, lo1y;
