@@ -60,6 +60,10 @@ struct DetectConfig {
   uint64_t max_dense_cells = 1ull << 24;
   // Threads of the CPU backend, owned by the caller; nullptr = default_pool().
   ThreadPool* pool = nullptr;
+  // Candidate (particle, triangle) pairs one frame may hold, 24 bytes each of
+  // scratch (at most 2^31): a frame that finds more is refused with an error
+  // instead of a wrong contact count.
+  uint64_t max_frame_pairs = 1ull << 30;
 };
 
 // One contact: particle index, the triangle's id in the input file, centre distance.

@@ -107,6 +107,13 @@ class GridDetector final : public Detector {
       }
       lap(out->times.traverse_ms);
     }
+    if (pair_overflow_) {
+      pair_overflow_ = false;
+      return resource_exhausted(
+          "this frame has more than " + std::to_string(pair_limit()) +
+          " candidate (particle, triangle) pairs, the most a frame may hold (24 bytes each): "
+          "use the bin or bvh method, or fewer or smaller particles");
+    }
     // Contacts as (particle, original) pairs, deduplicated with the smallest distance.
     const bool from_pairs = !(bin && !wall) && !bvh;
     uint32_t unique = 0;
@@ -198,8 +205,9 @@ class GridDetector final : public Detector {
     wall_scale_ = wall_band_scale(mesh, wall_.origin);
     if (created_precision_ == Precision::kExact) prepare_exact(mesh);
     // bvh counts without pairs: its buffer grows when a frame first collects them.
-    grow_pairs(cfg_.method == Method::kBvh ? 4096 : std::max<size_t>(capacity_ / 4, 4096));
-    backend_.resize(pair_counter_, 2);
+    grow_pairs(std::min<size_t>(
+        cfg_.method == Method::kBvh ? 4096 : std::max<size_t>(capacity_ / 4, 4096), pair_limit()));
+    backend_.resize(pair_counter_, 3);
     backend_.sync();
     if (Status e = backend_.status(); !e) return e;
     info_.prepare_ms = ms(t0, clock());
@@ -304,13 +312,26 @@ class GridDetector final : public Detector {
     }
   }
 
-  void reset_pairs() { backend_.fill(pair_counter_.data(), 2, 0u); }
+  // The pair counter, the band counter and the overflow flag.
+  void reset_pairs() { backend_.fill(pair_counter_.data(), 3, 0u); }
+  // The most pairs a frame may hold: the config's, within the 32-bit counter's
+  // half range (a counter that passed it is flagged before it could wrap).
+  uint32_t pair_limit() const {
+    return static_cast<uint32_t>(std::min<uint64_t>(cfg_.max_frame_pairs, 1ull << 31));
+  }
+  // True when the frame's pairs fit (or overflowed: pair_overflow_, the frame
+  // fails); else the buffer grows and the traversal must run again.
   bool pairs_fit() {
-    uint32_t c = 0;
-    backend_.to_host(&c, pair_counter_.data(), sizeof c);
-    pair_count_host_ = c;
-    if (c <= pair_capacity_) return true;
-    grow_pairs(size_t(c) + c / 4);
+    uint32_t c[3] = {0, 0, 0};
+    backend_.to_host(c, pair_counter_.data(), sizeof c);
+    pair_count_host_ = c[0];
+    if (c[2] || c[0] > pair_limit()) {
+      pair_overflow_ = true;
+      pair_count_host_ = 0;
+      return true;
+    }
+    if (c[0] <= pair_capacity_) return true;
+    grow_pairs(std::min<size_t>(size_t(c[0]) + c[0] / 4, pair_limit()));
     return false;
   }
   void grow_pairs(size_t cap) {
@@ -325,19 +346,21 @@ class GridDetector final : public Detector {
   struct PairSink {
     uint64_t* key;
     float* dist;
-    uint32_t* counter;
-    uint32_t capacity;
+    uint32_t* counter;  // [0] pairs offered, [2] set when they passed the limit
+    uint32_t capacity, limit;
     COLLIDO_HD COLLIDO_FORCEINLINE void push(uint32_t particle, uint32_t tri, float d) const {
       const uint32_t slot = atomic_add_u32(counter, 1u);
       if (slot < capacity) {
         key[slot] = (uint64_t(particle) << 32) | tri;
         dist[slot] = d;
+      } else if (slot >= limit) {
+        counter[2] = 1u;  // every value up to the wrap passes here first
       }
     }
   };
   PairSink sink() {
     return {pair_key_.data(), pair_dist_.data(), pair_counter_.data(),
-            static_cast<uint32_t>(pair_capacity_)};
+            static_cast<uint32_t>(pair_capacity_), pair_limit()};
   }
 
   // bin, particle traversal: a thread per particle reads its own cell's list.
@@ -567,6 +590,7 @@ class GridDetector final : public Detector {
   Buf<uint32_t> pair_counter_;
   size_t pair_capacity_ = 0;
   uint32_t pair_count_host_ = 0;
+  bool pair_overflow_ = false;  // the frame's pairs passed pair_limit()
 };
 
 }  // namespace collido::sim

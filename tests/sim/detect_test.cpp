@@ -300,6 +300,33 @@ void float_precision_flags_its_doubts() {
   }
 }
 
+// A frame whose candidate pairs pass the most a frame may hold fails with a
+// clear error instead of a wrong count; counting alone (bin, bvh) holds no pairs.
+void more_pairs_than_a_frame_may_hold() {
+  const TriangleMesh wall = make_cylinder(50, 100, 40);
+  const Particles p = particles_touching(wall, 600, 1, 1, 1e-3, 4);
+  for (const Combo& c : kCombos) {
+    DetectConfig cfg;
+    cfg.r_max = 1, cfg.method = c.method, cfg.traversal = c.traversal, cfg.max_frame_pairs = 100;
+    cfg.backend = backend_under_test();
+    auto det = Detector::create(wall, cfg, p.size());
+    ASSERT_TRUE(det) << det.status().message();
+    ASSERT_TRUE((*det)->set_particles(p));
+    DetectResult r;
+    const Status s = (*det)->detect(&r);
+    ASSERT_FALSE(s) << to_string(c.method) << "/" << to_string(c.traversal);
+    EXPECT_EQ(s.code(), ErrorCode::kResourceExhausted);
+    EXPECT_NE(s.message().find("more than 100 candidate"), std::string::npos) << s.message();
+    // The detector stays usable: the next frame is judged afresh.
+    EXPECT_FALSE((*det)->detect(&r));
+    if ((c.method == Method::kBin || c.method == Method::kBvh) && c.traversal == Traversal::kParticle) {
+      (*det)->set_frame_options(/*collect_contacts=*/false, false);
+      ASSERT_TRUE((*det)->detect(&r)) << "counting alone holds no pairs";
+      EXPECT_GT(r.contact_count, 100u);
+    }
+  }
+}
+
 // The float distance never strays from the exact one by more than a quarter
 // of the band the filter trusts it outside of: slivers, far from the origin,
 // a large wall, a third-party mesh, particles near and exactly near touching.
@@ -343,6 +370,7 @@ TEST(Detect, FloatErrorStaysInsideTheBand) {
 
 TEST(Detect, ThirdPartyMeshesNearTouchingMatchTheReference) { third_party_meshes_near_touching(); }
 TEST(Detect, FloatPrecisionFlagsItsDoubts) { float_precision_flags_its_doubts(); }
+TEST(Detect, AFrameWithMorePairsThanItMayHoldIsRefused) { more_pairs_than_a_frame_may_hold(); }
 TEST(Detect, TwentyRandomScenesMatchTheReference) { twenty_random_scenes(); }
 TEST(Detect, AdversarialPlacementsMatchTheReference) { adversarial_placements(); }
 TEST(Detect, SliversAndZeroAreaTrianglesInTheInput) { slivers_and_zero_area(); }
@@ -363,6 +391,7 @@ TEST_F(DetectCuda, OtherGridLengthsStayExact) { other_grid_lengths(); }
 TEST_F(DetectCuda, ParticlesOutsideTheGridAndEmptyFrames) { outside_and_empty(); }
 TEST_F(DetectCuda, ThirdPartyMeshesNearTouchingMatchTheReference) { third_party_meshes_near_touching(); }
 TEST_F(DetectCuda, FloatPrecisionFlagsItsDoubts) { float_precision_flags_its_doubts(); }
+TEST_F(DetectCuda, AFrameWithMorePairsThanItMayHoldIsRefused) { more_pairs_than_a_frame_may_hold(); }
 
 TEST_F(DetectCuda, GpuAndCpuCountsAgreeOnALargeScene) {
   const TriangleMesh wall = make_cylinder(50, 100, 40);
