@@ -1,5 +1,6 @@
 #include "job/job.h"
 
+#include "sim/accuracy.h"
 #include "sim/auto_choice.h"
 
 #include <chrono>
@@ -296,15 +297,26 @@ class JobRunner {
     return Status::ok();
   }
 
-  // method / grid_length "auto": time the candidates on the placed particles
-  // and run the fastest; the choice and the times behind it are noted and kept.
+  // method / grid_length "auto": time the candidates where the particles will
+  // meet the wall and run the fastest; the choice and the times behind it are
+  // noted and kept. A fill is timed as placed. A pour or a jet starts at its
+  // inlet, away from the wall it will spend the run on, so it is timed on as
+  // many particles of its sizes, half within 1.5 r_max of the wall and half
+  // in the wall's box (the benchmarks' placement).
   Status choose_wall_representation(const sim::ParticleSet& placed) {
     sim::DynamicsConfig& d = scene_.dynamics;
     if (scene_.method_auto || scene_.grid_auto) {
       sim::Particles p;
-      p.resize(placed.size());
-      for (size_t i = 0; i < placed.size(); ++i)
-        p.x[i] = placed.x[i], p.y[i] = placed.y[i], p.z[i] = placed.z[i], p.r[i] = placed.r[i];
+      const bool inlet = scene_.placement.kind != sim::PlacementKind::kFill;
+      if (inlet) {
+        p = sim::particles_near_surface(wall_, placed.size(), scene_.particles.r_min,
+                                        scene_.particles.r_max, 0.5, 1.5 * scene_.particles.r_max,
+                                        scene_.seed);
+      } else {
+        p.resize(placed.size());
+        for (size_t i = 0; i < placed.size(); ++i)
+          p.x[i] = placed.x[i], p.y[i] = placed.y[i], p.z[i] = placed.z[i], p.r[i] = placed.r[i];
+      }
       sim::DetectConfig base;
       base.backend = d.backend, base.pool = d.pool, base.r_max = scene_.particles.r_max;
       base.method = d.method, base.grid_length = d.grid_length;
@@ -315,8 +327,12 @@ class JobRunner {
       if (!choice) return choice.status();
       d.method = choice->method;
       if (scene_.grid_auto) d.grid_length = choice->grid_length;
-      result_.choice = choice->reason;
-      note("automatic choice: " + choice->reason);
+      result_.choice = (inlet ? "timed near the wall, where the " +
+                                    std::string(sim::to_string(scene_.placement.kind)) +
+                                    "'s particles go: "
+                              : std::string()) +
+                       choice->reason;
+      note("automatic choice: " + result_.choice);
     }
     result_.method = sim::to_string(d.method);
     return Status::ok();

@@ -408,6 +408,32 @@ TEST(Job, AHopperInMillimetresRunsAsInMetres) {
   EXPECT_EQ(manifest["scene_length_unit"], "mm");
 }
 
+// method: auto for a pour is timed where its particles go (near the wall),
+// not at its inlet, and says so; a fill is timed as placed.
+TEST(Job, AutomaticChoiceForAPourIsTimedNearTheWall) {
+  for (const bool pour : {true, false}) {
+    const std::string dir = fresh_dir(pour ? "auto_pour" : "auto_fill");
+    JobSpec spec = drop_spec(dir);
+    spec.scene_json = pour ? R"({
+      "wall": "box:x=6,y=6,z=6", "particles": {"count": 64, "radius": 0.3},
+      "placement": {"kind": "pour", "inlet": [0, 0, 5], "inlet_radius": 2, "rate": 50},
+      "material": {"stiffness": 1e5}, "duration": 0.1, "fps": 20, "backend": "cpu",
+      "method": "auto"})"
+                           : R"({
+      "wall": "box:x=6,y=6,z=6", "particles": {"count": 64, "radius": 0.3},
+      "placement": {"kind": "fill", "region": {"min": [-2, -2, 1], "max": [2, 2, 5]}},
+      "material": {"stiffness": 1e5}, "duration": 0.1, "fps": 20, "backend": "cpu",
+      "method": "auto"})";
+    const JobResult r = run_job(spec, Hooks{});
+    ASSERT_TRUE(r.status) << r.status.message();
+    const json m = json::parse(read_file(dir + "/result.json"));
+    const std::string choice = m["method"]["automatic_choice"];
+    EXPECT_EQ(choice.rfind("timed near the wall, where the pour's particles go: ", 0) == 0, pour)
+        << choice;
+    EXPECT_NE(choice.find("bvh/particle"), std::string::npos) << choice;  // a candidate
+  }
+}
+
 TEST(Job, SpecsRoundTripThroughJson) {
   JobSpec s = drop_spec("/tmp/x", 3);
   s.render = true;
