@@ -136,7 +136,7 @@ std::string detect_summary_text(const DetectSetup& s, const sim::PrepareInfo& in
                 sim::to_string(s.config.method), sim::to_string(s.config.traversal),
                 sim::to_string(s.config.precision), sim::to_string(s.config.backend), info.triangles_used);
   o << line;
-  if (s.config.method == sim::Method::kBvh)
+  if (info.bvh_nodes)  // the tree: no grid to describe
     std::snprintf(line, sizeof line, "particles   %zu, r_max %g; a tree of %llu nodes, %d levels deep\n",
                   s.particles.size(), s.config.r_max, static_cast<unsigned long long>(info.bvh_nodes),
                   info.bvh_depth);

@@ -128,7 +128,7 @@ Expected<AutoChoice> choose_detection(const TriangleMesh& mesh, const Particles&
     grids.push_back(base.grid_length);
   AutoChoice choice;
   for (Method m : methods) {
-    if (m == Method::kBvh) {  // no grid, no wall traversal: one candidate
+    if (!uses_grid(m)) {  // the tree: no grid, no wall traversal, one candidate
       choice.candidates.push_back(AutoCandidate{m, Traversal::kParticle, 0, 0, 0, {}});
       continue;
     }
@@ -160,7 +160,7 @@ Expected<AutoChoice> choose_detection(const TriangleMesh& mesh, const Particles&
   // or "bvh/particle" (no grid).
   auto setting = [&](const AutoCandidate& c, const char* grid_word) {
     std::string s = std::string(to_string(c.method)) + "/" + to_string(c.traversal);
-    if (c.method != Method::kBvh) {
+    if (uses_grid(c.method)) {
       char g[48];
       const double grid = c.grid_length > 0 ? c.grid_length : 2 * base.r_max;
       std::snprintf(g, sizeof g, "%s%.3g r_max", grid_word, grid / base.r_max);

@@ -10,26 +10,10 @@ namespace collido::sim {
 
 namespace {
 
-struct Box {
-  Vec3d lo{std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
-           std::numeric_limits<double>::infinity()};
-  Vec3d hi{-std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity(),
-           -std::numeric_limits<double>::infinity()};
-  void grow(const Box& b) {
-    lo = {std::min(lo.x, b.lo.x), std::min(lo.y, b.lo.y), std::min(lo.z, b.lo.z)};
-    hi = {std::max(hi.x, b.hi.x), std::max(hi.y, b.hi.y), std::max(hi.z, b.hi.z)};
-  }
-  void grow(Vec3d p) {
-    lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
-    hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
-  }
-  bool empty() const { return !(lo.x <= hi.x); }
-};
-
 double axis(Vec3d v, int a) { return a == 0 ? v.x : (a == 1 ? v.y : v.z); }
 
 struct Item {
-  Box box;
+  Bounds3d box;
   Vec3d centre;
   uint32_t triangle;
 };
@@ -58,10 +42,10 @@ class Builder {
         deferred_(deferred) {}
 
   // Builds [b, e); returns the child code (node index or leaf) and its box in *box.
-  uint32_t build(size_t b, size_t e, int depth, Box* box) {
-    Box bounds, centres;
+  uint32_t build(size_t b, size_t e, int depth, Bounds3d* box) {
+    Bounds3d bounds, centres;
     for (size_t i = b; i < e; ++i) {
-      bounds.grow(items_[i].box);
+      bounds.merge(items_[i].box);
       centres.grow(items_[i].centre);
     }
     *box = bounds;
@@ -82,7 +66,7 @@ class Builder {
     }
     const uint32_t index = static_cast<uint32_t>(out_->nodes.size());
     out_->nodes.emplace_back();
-    Box lb, rb;
+    Bounds3d lb, rb;
     // A deferred child lists exactly one range, at the list's size before it was built.
     const size_t left_entry = deferred_ ? deferred_->size() : 0;
     const uint32_t left = build(b, mid, depth + 1, &lb);
@@ -97,9 +81,9 @@ class Builder {
   static constexpr uint32_t kDeferredCode = 0xFFFFFFFFu;
 
   // Writes child slot `c` of `node`: its code and its box, rounded outward to float and grown.
-  void set_child(BvhNode& node, int c, uint32_t code, const Box& b) const {
+  void set_child(BvhNode& node, int c, uint32_t code, const Bounds3d& b) const {
     float v[6];
-    if (b.empty()) {  // never visited
+    if (b.empty) {  // never visited
       v[0] = v[1] = v[2] = std::numeric_limits<float>::infinity();
       v[3] = v[4] = v[5] = -std::numeric_limits<float>::infinity();
     } else {
@@ -130,8 +114,8 @@ class Builder {
   }
 
   // The volume of points within reach_ of the box: how likely a query visits it.
-  double measure(const Box& b) const {
-    if (b.empty()) return 0;
+  double measure(const Bounds3d& b) const {
+    if (b.empty) return 0;
     const double x = b.hi.x - b.lo.x, y = b.hi.y - b.lo.y, z = b.hi.z - b.lo.z, r = reach_;
     constexpr double kPi = 3.14159265358979323846;
     return x * y * z + 2 * r * (x * y + y * z + z * x) + kPi * r * r * (x + y + z) +
@@ -145,7 +129,7 @@ class Builder {
   }
 
   // Object median along the centres' longest axis.
-  size_t median_split(size_t b, size_t e, const Box& centres) {
+  size_t median_split(size_t b, size_t e, const Bounds3d& centres) {
     const Vec3d ext = centres.hi - centres.lo;
     const int a = ext.x >= ext.y && ext.x >= ext.z ? 0 : (ext.y >= ext.z ? 1 : 2);
     const size_t mid = b + (e - b) / 2;
@@ -159,7 +143,7 @@ class Builder {
 
   // The cheapest of the binned planes on all three axes; false when the
   // centres coincide (no plane separates them).
-  bool sah_split(size_t b, size_t e, const Box& bounds, const Box& centres, size_t* mid,
+  bool sah_split(size_t b, size_t e, const Bounds3d& bounds, const Bounds3d& centres, size_t* mid,
                  double* cost) {
     double best = std::numeric_limits<double>::infinity();
     int best_axis = -1, best_plane = 0;
@@ -168,27 +152,27 @@ class Builder {
       const double lo = axis(centres.lo, a), ext = axis(centres.hi, a) - lo;
       if (!(ext > 0)) continue;
       const double scale = kBins * (1 - 1e-9) / ext;
-      Box bin_box[kBins];
+      Bounds3d bin_box[kBins];
       size_t bin_count[kBins] = {};
       for (size_t i = b; i < e; ++i) {
         const int k = std::min(kBins - 1, static_cast<int>((axis(items_[i].centre, a) - lo) * scale));
-        bin_box[k].grow(items_[i].box);
+        bin_box[k].merge(items_[i].box);
         ++bin_count[k];
       }
       double right_measure[kBins];
       size_t right_count[kBins];
-      Box acc;
+      Bounds3d acc;
       size_t cnt = 0;
       for (int k = kBins - 1; k > 0; --k) {
-        acc.grow(bin_box[k]);
+        acc.merge(bin_box[k]);
         cnt += bin_count[k];
         right_measure[k] = measure(acc);
         right_count[k] = cnt;
       }
-      acc = Box{};
+      acc = Bounds3d{};
       cnt = 0;
       for (int k = 0; k < kBins - 1; ++k) {
-        acc.grow(bin_box[k]);
+        acc.merge(bin_box[k]);
         cnt += bin_count[k];
         if (cnt == 0 || right_count[k + 1] == 0) continue;
         const double c = kNodeCost + kTriangleCost *
@@ -297,7 +281,7 @@ BvhBuild build_bvh(const TriangleMesh& mesh, Vec3d origin, double reach, double 
   const size_t defer = std::max<size_t>(4096, m / 256);
   std::vector<Deferred> deferred;
   Builder builder(items, reach, margin, &out, defer, &deferred);
-  Box box, empty;
+  Bounds3d box, empty;
   // The first node build() makes is the root (index 0); a wall small enough
   // for one leaf gets a root above it whose other slot is never visited.
   const uint32_t top = m ? builder.build(0, m, 0, &box) : bvh_leaf(0, 1);
@@ -310,7 +294,7 @@ BvhBuild build_bvh(const TriangleMesh& mesh, Vec3d origin, double reach, double 
   std::vector<uint32_t> part_top(deferred.size());
   cpu_parallel_for(pool ? *pool : default_pool(), deferred.size(), [&](uint32_t k) {
     Builder sub(items, reach, margin, &parts[k]);
-    Box unused;
+    Bounds3d unused;
     part_top[k] = sub.build(deferred[k].b, deferred[k].e, deferred[k].depth, &unused);
   }, 1);
   for (size_t k = 0; k < deferred.size(); ++k) {

@@ -23,6 +23,10 @@ enum class Method {
   kReference,     // exact brute force in double precision (the test oracle)
   kBvh,           // no division: a bounding volume hierarchy over the original triangles
 };
+// Whether a method lays a grid over the wall (cells of grid_length) and
+// offers both traversals: all but the tree, which walks from each particle,
+// and the reference, which tests every triangle.
+inline bool uses_grid(Method m) { return m != Method::kBvh && m != Method::kReference; }
 enum class Traversal { kParticle, kWall };
 enum class Backend { kCpu, kCuda };
 // How a float method decides a pair: `exact` re-decides in double every pair

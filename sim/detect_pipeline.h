@@ -201,8 +201,6 @@ class GridDetector final : public Detector {
         backend_.resize(p_cell_end_, wall_.grid.buckets);
       }
     }
-    // Both precisions size the error band (float counts the pairs it decides in it).
-    wall_scale_ = wall_band_scale(mesh, wall_.origin);
     if (created_precision_ == Precision::kExact) prepare_exact(mesh);
     // bvh counts without pairs: its buffer grows when a frame first collects them.
     grow_pairs(std::min<size_t>(
@@ -264,7 +262,8 @@ class GridDetector final : public Detector {
     }
   };
   Narrow narrow() {
-    return {particles_d_.data(), vertices_exact_.data(), corners_exact_.data(), wall_scale_,
+    // Both precisions size the error band (float counts the pairs it decides in it).
+    return {particles_d_.data(), vertices_exact_.data(), corners_exact_.data(), wall_.band_scale,
             exact()};
   }
   uint32_t* band_counter() { return pair_counter_.data() + 1; }
@@ -575,7 +574,6 @@ class GridDetector final : public Detector {
   std::vector<uint32_t> source_ids_;
   std::vector<PackedParticle> staging_;  // host copy of a frame's particles, reused
   std::vector<ParticleD> staging_d_;     // the same in world double (precision exact)
-  float wall_scale_ = 0;                 // sizes the float error band (wall_band_scale)
   Buf<ParticleD> particles_d_;
   Buf<Vec3d> vertices_exact_;            // the mesh's vertices, world double
   Buf<uint32_t> corners_exact_;          // three vertex indices per triangle, mesh order

@@ -28,6 +28,9 @@ struct Bounds3d {
   Vec3d lo{0, 0, 0}, hi{0, 0, 0};
   bool empty = true;
   void grow(Vec3d p);
+  void merge(const Bounds3d& b) {  // the union (an empty b changes nothing)
+    if (!b.empty) grow(b.lo), grow(b.hi);
+  }
   Vec3d center() const { return (lo + hi) * 0.5; }
   Vec3d extent() const { return hi - lo; }
 };

@@ -122,6 +122,7 @@ class WallIndex {
     // The local frame's origin at the wall's centre keeps float precision for
     // walls far from the world origin (coordinates near 1e4 with r = 1).
     origin = box.center();
+    band_scale = wall_band_scale(mesh, origin);
     info->triangles_original = mesh.triangles.size();
     if (method == Method::kBvh) return prepare_bvh(backend, mesh, box, info);
     return method == Method::kBin ? prepare_bin(backend, mesh, box, cell, info)
@@ -236,7 +237,7 @@ class WallIndex {
     // the decision would take.
     const Vec3d ext = box.extent();
     const double size = std::fabs(ext.x) + std::fabs(ext.y) + std::fabs(ext.z) + r_max_ +
-                        wall_band_scale(mesh, origin);
+                        band_scale;
     const double margin = 1e-6 * size;
     bvh_reach = static_cast<float>(r_max_ * (1 + 1e-5) + 1e-5 * size);
     BvhBuild built = build_bvh(mesh, origin, r_max_, margin);
@@ -367,6 +368,7 @@ class WallIndex {
   GridSpec grid;
   int reach = 1;
   Vec3d origin{0, 0, 0};
+  float band_scale = 0;  // the wall's wall_band_scale in this frame: sizes float's error band
   Buf<PlanarTriangle> tris;     // narrow-phase form
   Buf<PlanarTriangleD> tris_d;  // the same in double, for contact forces (when asked for)
   Buf<TriangleF> corners;       // bin preparation only

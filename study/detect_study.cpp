@@ -121,10 +121,11 @@ Status run_detect_study(const StudyOptions& o, std::vector<DetectRow>* rows) {
       for (sim::Traversal tr : {sim::Traversal::kParticle, sim::Traversal::kWall})
         for (double gf : sim::kAutoGridFactors) {
           if (o.quick && gf != 2 && (m == sim::Method::kGravity || m == sim::Method::kMidpoint4)) continue;
-          // The tree has no grid and walks from the particles: one setting, grid 0.
-          const bool tree = m == sim::Method::kBvh;
-          if (tree && (tr == sim::Traversal::kWall || gf != sim::kAutoGridFactors[0])) continue;
-          if (tree) gf = 0;
+          // A method without a grid (the tree) walks from the particles: one setting, grid 0.
+          if (!sim::uses_grid(m)) {
+            if (tr == sim::Traversal::kWall || gf != sim::kAutoGridFactors[0]) continue;
+            gf = 0;
+          }
           sim::DetectConfig cfg;
           cfg.method = m, cfg.traversal = tr, cfg.backend = o.backend, cfg.pool = o.pool;
           cfg.r_max = sc.r_hi, cfg.grid_length = gf * sc.r_hi;
