@@ -27,6 +27,9 @@ const std::vector<FlagSpec> kFlags = {
     {"rolling", true, "rolling resistance coefficient (default 0: none)"},
     {"wall-motion", true, "none | rotate: the wall turns about its vertical axis (default none)"},
     {"skin", true, "neighbour-list skin in m (default automatic; 0: search the grid every step)"},
+    {"pairs-once", true,
+     "auto | on | off: a listed pair's force evaluated once, or by both particles (default auto: "
+     "the backend's choice)"},
     {"steps", true, "timed steps per configuration (default 50)"},
     {"warmup", true, "untimed steps first (default 5)"},
     {"threads", true, "CPU threads (default: all cores)"},
@@ -88,6 +91,10 @@ int bench_run(const Args& args) {
   const std::string motion = p->get("wall-motion", "none");
   if (motion != "none" && motion != "rotate")
     return usage_error("bench run", "--wall-motion must be none or rotate");
+  const std::string once = p->get("pairs-once", "auto");
+  if (once != "auto" && once != "on" && once != "off")
+    return usage_error("bench run", "--pairs-once must be auto, on or off");
+  const int pairs_once = once == "auto" ? -1 : once == "on" ? 1 : 0;
   sim::ThreadPool pool{int(threads)};
   const std::string pairs = p->get("pairs", "both");
   std::vector<bool> pair_modes;
@@ -137,6 +144,7 @@ int bench_run(const Args& args) {
       cfg.material.friction = friction;
       cfg.material.rolling_friction = rolling;
       cfg.neighbour_skin = skin;
+      cfg.pairs_once = pairs_once;
       cfg.contact_model = model;
       // The linear spring of the earlier benchmarks; Hertz sizes its modulus itself.
       if (model == sim::ContactModel::kLinear) cfg.material.stiffness = 1e9;

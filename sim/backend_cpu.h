@@ -18,6 +18,9 @@ class CpuBackend {
   // a thread stalls on the scattered read where a copying loop overlaps many
   // (20 % of a frame on the counter mesh, sim/detect_pipeline.h, bvh).
   static constexpr bool kWalksReadReorderedCopy = true;
+  // Pair forces from a neighbour list are evaluated once per pair and gathered
+  // (sim/dynamics_pipeline.h): the contact arithmetic is most of a step here.
+  static constexpr bool kPairForcesOncePerPair = true;
   // The pool that runs this backend's loops (nullptr: default_pool()).
   void set_pool(ThreadPool* pool) { pool_ = pool ? pool : &default_pool(); }
 

@@ -46,6 +46,9 @@ class CudaBackend {
   // warps hide the scattered read, and a reordered copy would cost 16 bytes
   // of device memory a particle (sim/detect_pipeline.h, bvh).
   static constexpr bool kWalksReadReorderedCopy = false;
+  // Pair forces from a neighbour list are evaluated by both particles: records
+  // between two passes cost the GPU more memory traffic than the arithmetic saved.
+  static constexpr bool kPairForcesOncePerPair = false;
   // Device memory that grows but never shrinks, so frames reuse it.
   template <class T>
   class Buffer {

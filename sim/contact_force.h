@@ -177,12 +177,15 @@ COLLIDO_HD COLLIDO_FORCEINLINE ContactForce contact_force(const ContactLaw& law,
   out.torque = Vec3d{0, 0, 0};
   if (law.mu > 0) {
     const Vec3d vt = vrel - n * vn;
-    // Carry the spring into the current tangent plane, keeping its length.
+    // Carry the spring into the current tangent plane, keeping its length
+    // (one square root: the ratio of the squared lengths).
     Vec3d s = *spring;
-    const double len = length(s);
-    s = s - n * dot(s, n);
-    const double len2 = length(s);
-    if (len2 > 0) s = s * (len / len2);
+    const double len2 = dot(s, s);
+    if (len2 > 0) {
+      s = s - n * dot(s, n);
+      const double proj2 = dot(s, s);
+      if (proj2 > 0) s = s * hd_sqrt(len2 / proj2);
+    }
     s = s + vt * dt;
     Vec3d ft = s * (-kt) - vt * gamma_t;
     const double ftn = length(ft), limit = law.mu * (fn > 0 ? fn : 0);

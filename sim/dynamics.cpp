@@ -254,6 +254,8 @@ Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const Particl
   if (!finite_nonneg(c.impact_speed)) return invalid_argument("impact_speed must be >= 0 m/s");
   if (!std::isfinite(c.neighbour_skin))
     return invalid_argument("neighbour_skin must be a length in m (or < 0 for automatic)");
+  if (c.pairs_once < -1 || c.pairs_once > 1)
+    return invalid_argument("pairs_once must be -1 (the backend's choice), 0 or 1");
   if (p.size() == 0) return invalid_argument("particles: a run needs at least one particle");
   if (p.size() > (size_t(1) << 31)) return invalid_argument("particles: more than 2^31 particles");
   for (size_t i = 0; i < p.size(); ++i) {

@@ -118,6 +118,12 @@ struct DynamicsConfig {
   // automatic (from the fastest expected speed and the step, within 0.1-0.5
   // r_min); 0 = search the grid every step.
   double neighbour_skin = -1;
+  // With a neighbour list, how a pair's force is evaluated: once per pair, its
+  // result then gathered by both particles (Newton's third law: half the
+  // contact arithmetic, a pass and a record per listed pair more), or by each
+  // of the two particles for itself. -1: the backend's faster way; 0: each
+  // particle; 1: once per pair. The trajectories are the same bit for bit.
+  int pairs_once = -1;
   double domain_margin = -1;  // escape distance outside the wall's box, m; < 0 = automatic
   uint64_t max_dense_cells = 1ull << 24;
   // Threads of the CPU backend, owned by the caller; nullptr = default_pool().

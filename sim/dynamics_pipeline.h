@@ -241,18 +241,18 @@ class DynamicsPipeline final : public Simulation {
     release_host_ = ps.release;
     last_release_ = n_ ? *std::max_element(ps.release.begin(), ps.release.end()) : 0.0;
     std::vector<Vec3d> p(n_), v(n_);
-    std::vector<double> inv_mass(n_);
+    std::vector<double> mass(n_);
     std::vector<uint8_t> state(n_);
     for (size_t i = 0; i < n_; ++i) {
       p[i] = Vec3d{ps.x[i], ps.y[i], ps.z[i]} - wall_.origin;
       v[i] = {ps.vx[i], ps.vy[i], ps.vz[i]};
-      inv_mass[i] = 1.0 / (cfg_.material.density * 4.0 / 3.0 * M_PI * ps.r[i] * ps.r[i] * ps.r[i]);
+      mass[i] = cfg_.material.density * 4.0 / 3.0 * M_PI * ps.r[i] * ps.r[i] * ps.r[i];
       state[i] = ps.release[i] > 0 ? kWaiting : kActive;
     }
     upload(pos_, p);
     upload(vel_, v);
     upload(radius_, ps.r);
-    upload(inv_mass_, inv_mass);
+    upload(mass_, mass);
     upload(release_, ps.release);
     upload(state_, state);
     backend_.resize(flags_, std::max<size_t>(n_, 1));
@@ -286,7 +286,16 @@ class DynamicsPipeline final : public Simulation {
       pgrid_ = make_grid(lo_, hi_, 2 * ts_.r_max + skin_,
                          std::max<uint64_t>(cfg_.max_dense_cells, 8 * uint64_t(n_)), n_, &cells);
       if (nlist_) {
+        once_ = cfg_.pairs_once < 0 ? B::kPairForcesOncePerPair : cfg_.pairs_once == 1;
         backend_.resize(nl_start_, n_ + 1);
+        backend_.resize(lo_start_, n_ + 1);
+        // A moving wall moves under particles that stand still: its candidates
+        // are searched every step.
+        wall_list_ = !cfg_.wall_motion.moving();
+        if (wall_list_) {
+          backend_.resize(wl_start_, n_ + 1);
+          backend_.resize(wl_count_, std::max<size_t>(n_, 1));
+        }
         backend_.resize(x_ref_, std::max<size_t>(n_, 1));
         backend_.resize(disp_, std::max<size_t>(n_, 1));
         release_sorted_ = ps.release;
@@ -335,12 +344,12 @@ class DynamicsPipeline final : public Simulation {
   // The per-particle arrays as plain pointers, for the loop bodies to capture by value.
   struct ParticleArrays {
     Vec3d *x, *v, *w, *acc, *alpha;  // position (local frame), velocity, spin, accelerations
-    double *r, *inv_mass;
+    double *r, *mass;
     uint8_t *state, *flags;
   };
   ParticleArrays arrays() {
     return {pos_.data(),    vel_.data(),      omega_.data(), acc_.data(),  alpha_.data(),
-            radius_.data(), inv_mass_.data(), state_.data(), flags_.data()};
+            radius_.data(), mass_.data(), state_.data(), flags_.data()};
   }
 
   template <class T>
@@ -391,6 +400,7 @@ class DynamicsPipeline final : public Simulation {
   }
 
   void release(double t) {
+    released_at_ = t;
     uint8_t* state = state_.data();
     const double* rel = release_.data();
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
@@ -494,7 +504,9 @@ class DynamicsPipeline final : public Simulation {
       build_particle_grid();
       return;
     }
-    const uint64_t released = released_by(time_);
+    // Those the release kernel has let go: the measuring pass comes after a
+    // step's time has advanced and before the next step releases at it.
+    const uint64_t released = released_by(released_at_);
     bool rebuild = !nl_valid_ || released != nl_released_;
     if (!rebuild) {
       const ParticleArrays P = arrays();
@@ -516,8 +528,13 @@ class DynamicsPipeline final : public Simulation {
                     release_sorted_.begin());
   }
 
-  // Every active pair within r_i + r_j + skin, per particle in ascending index:
-  // a count pass, a scan, a fill pass (each list sorted in place, a few dozen entries).
+  // Every active pair within r_i + r_j + skin: per particle its partners of
+  // larger index (the upper list) and of smaller index (the lower list, with
+  // where each pair sits in the partner's upper list), both in ascending index.
+  // A count pass, two scans, a fill pass per list (each sorted in place, a few
+  // dozen entries). The candidate test is symmetric in i and j (the same float
+  // copies, one sum of radii, cells found alike), so every lower entry is found
+  // in its partner's upper list.
   void build_neighbour_list() {
     build_particle_grid();
     const ParticleArrays P = arrays();
@@ -527,35 +544,144 @@ class DynamicsPipeline final : public Simulation {
     const uint32_t* sidx = p_idx_sorted_.data();
     const PackedParticle* sp = sorted_.data();
     const float extra = filter_slack_ + float(skin_) * 1.0001f;
-    uint32_t* count = nl_start_.data();
+    uint32_t* up_count = nl_start_.data();
+    uint32_t* lo_count = lo_start_.data();
     backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
-      uint32_t c = 0;
+      uint32_t up = 0, lo = 0;
       if (P.state[i] == kActive)
         for_each_grid_candidate(pg, start, end, sidx, sp, extra, i, cast3<float>(P.x[i]),
-                                float(P.r[i]), [&](uint32_t) { ++c; });
-      count[i] = c;
+                                float(P.r[i]), [&](uint32_t j) { j > i ? ++up : ++lo; });
+      up_count[i] = up;
+      lo_count[i] = lo;
     });
-    backend_.fill(count + n_, 1, 0u);
-    const uint64_t total = backend_.exclusive_scan(count, n_ + 1);
-    if (total > nl_list_.size()) backend_.resize(nl_list_, size_t(total + total / 4 + 16));
-    const uint32_t* first = nl_start_.data();
-    uint32_t* list = nl_list_.data();
+    backend_.fill(up_count + n_, 1, 0u);
+    backend_.fill(lo_count + n_, 1, 0u);
+    const uint64_t up_total = backend_.exclusive_scan(up_count, n_ + 1);
+    const uint64_t lo_total = backend_.exclusive_scan(lo_count, n_ + 1);
+    if (up_total > nl_list_.size()) {
+      const size_t cap = size_t(up_total + up_total / 4 + 16);
+      backend_.resize(nl_list_, cap);
+      if (once_) {
+        backend_.resize(rec_f_, cap);
+        backend_.resize(rec_touched_, cap);
+        if (rotation_) backend_.resize(rec_torque_, cap);
+        if (rotation_ && pair_law_.mu_roll > 0) backend_.resize(rec_roll_, cap);
+      }
+    }
+    if (lo_total > lo_j_.size()) {
+      backend_.resize(lo_j_, size_t(lo_total + lo_total / 4 + 16));
+      if (once_) backend_.resize(lo_rec_, lo_j_.size());
+    }
+    const uint32_t* up_first = nl_start_.data();
+    const uint32_t* lo_first = lo_start_.data();
+    uint32_t* up_list = nl_list_.data();
     backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
       if (P.state[i] != kActive) return;
-      const uint32_t s0 = first[i];
+      const uint32_t s0 = up_first[i];
       uint32_t c = s0;
       for_each_grid_candidate(pg, start, end, sidx, sp, extra, i, cast3<float>(P.x[i]),
-                              float(P.r[i]), [&](uint32_t j) { list[c++] = j; });
+                              float(P.r[i]), [&](uint32_t j) {
+                                if (j > i) up_list[c++] = j;
+                              });
       for (uint32_t a = s0 + 1; a < c; ++a) {  // insertion sort: short lists
-        const uint32_t v = list[a];
+        const uint32_t v = up_list[a];
         uint32_t b = a;
-        for (; b > s0 && list[b - 1] > v; --b) list[b] = list[b - 1];
-        list[b] = v;
+        for (; b > s0 && up_list[b - 1] > v; --b) up_list[b] = up_list[b - 1];
+        up_list[b] = v;
       }
     });
+    uint32_t* lo_j = lo_j_.data();
+    uint32_t* lo_rec = lo_rec_.data();
+    const bool once = once_;  // the records' places are needed only to gather them
+    backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
+      if (P.state[i] != kActive) return;
+      const uint32_t s0 = lo_first[i];
+      uint32_t c = s0;
+      for_each_grid_candidate(pg, start, end, sidx, sp, extra, i, cast3<float>(P.x[i]),
+                              float(P.r[i]), [&](uint32_t j) {
+                                if (j > i) return;
+                                lo_j[c] = j;
+                                if (once) {  // i's place in j's sorted upper list
+                                  uint32_t lo = up_first[j], hi = up_first[j + 1];
+                                  while (lo < hi) {
+                                    const uint32_t mid = lo + (hi - lo) / 2;
+                                    if (up_list[mid] < i) lo = mid + 1; else hi = mid;
+                                  }
+                                  lo_rec[c] = lo;
+                                }
+                                ++c;
+                              });
+      for (uint32_t a = s0 + 1; a < c; ++a) {  // insertion sort by partner
+        const uint32_t v = lo_j[a], q = once ? lo_rec[a] : 0;
+        uint32_t b = a;
+        for (; b > s0 && lo_j[b - 1] > v; --b) {
+          lo_j[b] = lo_j[b - 1];
+          if (once) lo_rec[b] = lo_rec[b - 1];
+        }
+        lo_j[b] = v;
+        if (once) lo_rec[b] = q;
+      }
+    });
+    if (wall_list_) build_wall_lists();
     backend_.copy(x_ref_.data(), pos_.data(), n_ * sizeof(Vec3d));
     nl_valid_ = true;
     ++times_.neighbour_builds;
+  }
+
+  // Calls f(k) for each wall triangle or piece k within `reach` of x (repeats
+  // included), the candidates within e of x tested in double.
+  template <class F>
+  COLLIDO_HD static COLLIDO_FORCEINLINE void wall_near(const WallView& wall,
+                                                       const PlanarTriangleD* tris_d, Vec3d x,
+                                                       double reach, float e, F&& f) {
+    wall.for_each_candidate_near(cast3<float>(x), e, [&](uint32_t k) {
+      Vec3d q;
+      double h = 0;
+      bool face = false;
+      if (closest_point_planar(x, tris_d[k], &q, &h, &face) < reach * reach) f(k);
+    });
+  }
+
+  // Every wall triangle (or piece) within r + skin / 2 of each particle now:
+  // until the list is rebuilt no particle moves half the skin, so every
+  // contact it can have is listed. Candidates from the cells (or the tree)
+  // around the particle's reach, then the exact distance in double; a count
+  // pass over-counts repeats, the fill pass keeps each triangle once.
+  void build_wall_lists() {
+    const ParticleArrays P = arrays();
+    const WallView wall = wall_.view();
+    const PlanarTriangleD* tris_d = wall_.tris_d.data();
+    const double half_skin = 0.5 * skin_ * 1.0001;
+    const float e = float(half_skin) * 1.0001f;
+    uint32_t* start = wl_start_.data();
+    uint32_t* count = wl_count_.data();
+    backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
+      uint32_t c = 0;
+      if (P.state[i] == kActive)
+        wall_near(wall, tris_d, P.x[i], P.r[i] + half_skin, e, [&](uint32_t) { ++c; });
+      start[i] = c;
+    });
+    backend_.fill(start + n_, 1, 0u);
+    const uint64_t total = backend_.exclusive_scan(start, n_ + 1);
+    if (total > wl_list_.size()) backend_.resize(wl_list_, size_t(total + total / 4 + 16));
+    uint32_t* list = wl_list_.data();
+    backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
+      const uint32_t s0 = start[i];
+      uint32_t c = s0;
+      if (P.state[i] == kActive)
+        wall_near(wall, tris_d, P.x[i], P.r[i] + half_skin, e, [&](uint32_t k) {
+          // In ascending k, each once: the contacts arrive in one order whenever
+          // the list was built (the wall's forces are summed in that order).
+          uint32_t a = c;
+          for (; a > s0 && list[a - 1] > k; --a) {
+          }
+          if (a > s0 && list[a - 1] == k) return;
+          for (uint32_t b = c; b > a; --b) list[b] = list[b - 1];
+          list[a] = k;
+          ++c;
+        });
+      count[i] = c - s0;
+    });
   }
 
   void build_particle_grid() {
@@ -595,7 +721,12 @@ class DynamicsPipeline final : public Simulation {
   // The laps time a step's stages; the measuring pass is not a step.
   void forces(double dt, bool measure, double t) {
     if (cfg_.particle_contacts) {
-      pair_forces(dt, measure);
+      if (once_ && !measure) {
+        pair_records(dt);
+        pair_gather();
+      } else {
+        pair_forces(dt, measure);
+      }
       if (!measure) lap(times_.pair_ms);
     }
     wall_forces(dt, measure, wall_pose(t));
@@ -608,6 +739,128 @@ class DynamicsPipeline final : public Simulation {
     for (int s = 0; s < k && slots[s].key != kNoKey; ++s)
       if (slots[s].key == key) return Vec3d{slots[s].sx, slots[s].sy, slots[s].sz};
     return Vec3d{0, 0, 0};
+  }
+
+  // One touching pair as particle i sees it (d = x_i - x_j, |d|^2 = dist2 <
+  // rs^2; *spring: the pair's tangential spring as i sees it, in and out).
+  // Every quantity is an odd function of the pair's orientation, evaluated so
+  // that rounding keeps it odd: j's view of the pair is i's with every vector
+  // negated exactly, so evaluating a pair once (pair_records) or from both
+  // sides (pair_forces) gives the same bits, and momentum is kept exactly.
+  struct PairContact {
+    ContactForce cf;  // on i; cf.torque is per metre of lever: i's torque is it times r_i, j's times r_j
+    Vec3d roll;       // rolling torque on i (j's is its negative)
+  };
+  COLLIDO_HD static COLLIDO_FORCEINLINE PairContact pair_contact(
+      const ContactLaw& law, bool rot, const ParticleArrays& P, uint32_t i, uint32_t j, Vec3d vi,
+      Vec3d wi, double r, double m, Vec3d d, double dist2, double rs, Vec3d* spring, double dt) {
+    const double dist = sqrt(dist2);
+    // Coincident centres: separate along z, opposite ways for the two.
+    const Vec3d nrm = dist > 1e-12 * rs ? d * (1.0 / dist) : Vec3d{0, 0, i < j ? 1.0 : -1.0};
+    const double mj = P.mass[j], rj = P.r[j];
+    // i's surface point against j's: (v_i - v_j) - (w_i x n r_i + w_j x n r_j).
+    Vec3d vrel = vi - P.v[j];
+    if (law.mu > 0) vrel = vrel - (cross(wi, nrm * r) + cross(P.w[j], nrm * rj));
+    const double r_eff = r * rj / rs;
+    PairContact out;
+    out.cf = contact_force(law, nrm, rs - dist, vrel, m * mj / (m + mj), r_eff, 1.0, spring, dt);
+    out.roll = Vec3d{0, 0, 0};
+    if (rot && law.mu_roll > 0) {
+      const double ii = 0.4 * m * r * r, ij = 0.4 * mj * rj * rj;
+      out.roll = rolling_torque(law, nrm, out.cf.fn, wi - P.w[j], r_eff, ii * ij / (ii + ij), dt);
+    }
+    return out;
+  }
+
+  // Pair forces once per pair, first pass: each particle evaluates the pairs
+  // of its upper list (partners of larger index) and records, per listed pair,
+  // whether it touches and the contact's force, torque per metre and rolling
+  // torque as the lower particle sees them; it keeps the pair's spring.
+  void pair_records(double dt) {
+    const ParticleArrays P = arrays();
+    const ContactLaw law = pair_law_;
+    const bool rot = rotation_;
+    const bool friction = law.mu > 0, rolling = rot && law.mu_roll > 0;
+    const FrictionSlot* hin = pair_hist_[hist_in_].data();
+    FrictionSlot* hout = pair_hist_[hist_in_ ^ 1].data();
+    const uint32_t* nl_start = nl_start_.data();
+    const uint32_t* nl = nl_list_.data();
+    Vec3d* rec_f = rec_f_.data();
+    Vec3d* rec_t = rec_torque_.data();
+    Vec3d* rec_roll = rec_roll_.data();
+    uint8_t* touched = rec_touched_.data();
+    backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
+      const uint32_t k0 = nl_start[i], k1 = nl_start[i + 1];
+      if (P.state[i] != kActive) {
+        for (uint32_t k = k0; k < k1; ++k) touched[k] = 0;
+        return;
+      }
+      const Vec3d xi = P.x[i], vi = P.v[i];
+      const Vec3d wi = rot ? P.w[i] : Vec3d{0, 0, 0};
+      const double r = P.r[i], m = P.mass[i];
+      const FrictionSlot* old_slots = friction ? hin + size_t(i) * kPairSlots : nullptr;
+      FrictionSlot* new_slots = friction ? hout + size_t(i) * kPairSlots : nullptr;
+      uint32_t slots = 0;
+      for (uint32_t k = k0; k < k1; ++k) {
+        const uint32_t j = nl[k];
+        touched[k] = 0;
+        if (P.state[j] != kActive) continue;
+        const Vec3d d = xi - P.x[j];
+        const double rs = r + P.r[j];
+        const double dist2 = dot(d, d);
+        if (!(dist2 < rs * rs)) continue;
+        Vec3d spring = friction ? find_spring(old_slots, kPairSlots, j) : Vec3d{0, 0, 0};
+        const PairContact c = pair_contact(law, rot, P, i, j, vi, wi, r, m, d, dist2, rs, &spring, dt);
+        touched[k] = 1;
+        rec_f[k] = c.cf.f;
+        if (rot) rec_t[k] = c.cf.torque;
+        if (rolling) rec_roll[k] = c.roll;
+        if (friction && slots < uint32_t(kPairSlots))
+          new_slots[slots++] = FrictionSlot{j, float(spring.x), float(spring.y), float(spring.z)};
+      }
+      if (friction && slots < uint32_t(kPairSlots)) new_slots[slots].key = kNoKey;
+    });
+  }
+
+  // Second pass: each particle sums its pairs' records with gravity, in
+  // ascending partner index as pair_forces does (the lower partners' records
+  // negated), so both ways give the same bits.
+  void pair_gather() {
+    const ParticleArrays P = arrays();
+    const bool rot = rotation_;
+    const bool rolling = rot && pair_law_.mu_roll > 0;
+    const Vec3d grav = cfg_.gravity;
+    const uint32_t* nl_start = nl_start_.data();
+    const uint32_t* lo_start = lo_start_.data();
+    const uint32_t* lo_rec = lo_rec_.data();
+    const Vec3d* rec_f = rec_f_.data();
+    const Vec3d* rec_t = rec_torque_.data();
+    const Vec3d* rec_roll = rec_roll_.data();
+    const uint8_t* touched = rec_touched_.data();
+    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+      if (P.state[i] != kActive) return;
+      const double r = P.r[i], m = P.mass[i];
+      Vec3d f = grav * m, torque{0, 0, 0};
+      bool any = false;
+      for (uint32_t k = lo_start[i], e = lo_start[i + 1]; k < e; ++k) {
+        const uint32_t q = lo_rec[k];
+        if (!touched[q]) continue;
+        f = f - rec_f[q];
+        if (rot) torque = torque + rec_t[q] * r;
+        if (rolling) torque = torque - rec_roll[q];
+        any = true;
+      }
+      for (uint32_t q = nl_start[i], e = nl_start[i + 1]; q < e; ++q) {
+        if (!touched[q]) continue;
+        f = f + rec_f[q];
+        if (rot) torque = torque + rec_t[q] * r;
+        if (rolling) torque = torque + rec_roll[q];
+        any = true;
+      }
+      P.flags[i] = any ? uint8_t(kActive | kFlagParticleContact) : uint8_t(kActive);
+      P.acc[i] = f * (1.0 / m);
+      if (rot) P.alpha[i] = torque * (1.0 / (0.4 * m * r * r));
+    });
   }
 
   void pair_forces(double dt, bool measure) {
@@ -626,9 +879,12 @@ class DynamicsPipeline final : public Simulation {
     const bool list = nlist_;
     const uint32_t* nl_start = nl_start_.data();
     const uint32_t* nl = nl_list_.data();
+    const uint32_t* lo_start = lo_start_.data();
+    const uint32_t* lo_j = lo_j_.data();
     double* stats = scratch_.data();
     const size_t n = n_;
     const bool friction = law.mu > 0;
+    const bool rolling = rot && law.mu_roll > 0;
     backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
       if (P.state[i] != kActive) {
         if (measure)
@@ -638,7 +894,7 @@ class DynamicsPipeline final : public Simulation {
       }
       const Vec3d xi = P.x[i], vi = P.v[i];
       const Vec3d wi = rot ? P.w[i] : Vec3d{0, 0, 0};
-      const double r = P.r[i], m = 1.0 / P.inv_mass[i];
+      const double r = P.r[i], m = P.mass[i];
       const Vec3f xf = cast3<float>(xi);
       const float rf = float(r);
       Vec3d f = grav * m, torque{0, 0, 0};
@@ -649,35 +905,26 @@ class DynamicsPipeline final : public Simulation {
       FrictionSlot* new_slots = friction ? hout + size_t(i) * kPairSlots : nullptr;
       // One candidate j: the exact test in double, then the contact's force.
       auto touch = [&](uint32_t j) {
-        const Vec3d xj = P.x[j];
-        const Vec3d d = xi - xj;
+        const Vec3d d = xi - P.x[j];
         const double rs = r + P.r[j];
         const double dist2 = dot(d, d);
         if (!(dist2 < rs * rs)) return;
-        const double dist = sqrt(dist2);
-        // Coincident centres: separate along z, opposite ways for the two.
-        const Vec3d nrm =
-            dist > 1e-12 * rs ? d * (1.0 / dist) : Vec3d{0, 0, i < j ? 1.0 : -1.0};
-        const double mj = 1.0 / P.inv_mass[j];
-        Vec3d vrel = vi - P.v[j];
-        if (friction) vrel = vrel + cross(wi, nrm * (-r)) - cross(P.w[j], nrm * P.r[j]);
-        Vec3d spring = friction ? find_spring(old_slots, kPairSlots, j) : Vec3d{0, 0, 0};
-        const double rj = P.r[j], r_eff = r * rj / rs;
-        const ContactForce cf =
-            contact_force(law, nrm, rs - dist, vrel, m * mj / (m + mj), r_eff, r, &spring, dt);
-        f = f + cf.f;
-        torque = torque + cf.torque;
-        if (rot && law.mu_roll > 0) {
-          const double ii = 0.4 * m * r * r, ij = 0.4 * mj * rj * rj;
-          torque = torque +
-                   rolling_torque(law, nrm, cf.fn, wi - P.w[j], r_eff, ii * ij / (ii + ij), dt);
-        }
-        elastic += 0.5 * cf.elastic;  // each side holds half the pair's springs
-        overlap_max = hd_max(overlap_max, (rs - dist) / r);
+        // The pair's spring is kept by its lower index, as that particle sees it.
+        const bool owner = i < j;
+        Vec3d spring{0, 0, 0};
+        if (friction)
+          spring = owner ? find_spring(old_slots, kPairSlots, j)
+                         : find_spring(hin + size_t(j) * kPairSlots, kPairSlots, i) * -1.0;
+        const PairContact c = pair_contact(law, rot, P, i, j, vi, wi, r, m, d, dist2, rs, &spring, dt);
+        f = f + c.cf.f;
+        if (rot) torque = torque + c.cf.torque * r;
+        if (rolling) torque = torque + c.roll;
+        elastic += 0.5 * c.cf.elastic;  // each side holds half the pair's springs
+        overlap_max = hd_max(overlap_max, (rs - sqrt(dist2)) / r);
         ++npair;
         // Slots are counted on the measuring pass too (it writes none), so that the
-        // neighbours beyond kPairSlots reach the frame's statistics.
-        if (friction) {
+        // partners beyond kPairSlots reach the frame's statistics.
+        if (friction && owner) {
           if (slots < uint32_t(kPairSlots)) {
             if (!measure)
               new_slots[slots] =
@@ -689,9 +936,14 @@ class DynamicsPipeline final : public Simulation {
         }
       };
       if (list) {
-        // Ascending partner index (each list is sorted when built): the same
-        // contacts in the same order whenever the list was built, so a run
-        // resumed from a checkpoint repeats the original bit for bit.
+        // Ascending partner index (each list is sorted when built, the lower
+        // partners' before the upper's): the same contacts in the same order
+        // whenever the list was built, so a run resumed from a checkpoint
+        // repeats the original bit for bit, and pair_gather sums alike.
+        for (uint32_t k = lo_start[i], e = lo_start[i + 1]; k < e; ++k) {
+          const uint32_t j = lo_j[k];
+          if (P.state[j] == kActive) touch(j);
+        }
         for (uint32_t k = nl_start[i], e = nl_start[i + 1]; k < e; ++k) {
           const uint32_t j = nl[k];
           if (P.state[j] == kActive) touch(j);
@@ -724,6 +976,11 @@ class DynamicsPipeline final : public Simulation {
     const ParticleArrays P = arrays();
     const WallView wall = wall_.view();
     const PlanarTriangleD* tris_d = wall_.tris_d.data();
+    // The wall's candidates from the neighbour list when it has them.
+    const bool listed = wall_list_;
+    const uint32_t* wl_start = wl_start_.data();
+    const uint32_t* wl_count = wl_count_.data();
+    const uint32_t* wl = wl_list_.data();
     const ContactLaw law = wall_law_;
     const bool rot = rotation_;
     const Vec3d grav = cfg_.gravity;
@@ -750,7 +1007,7 @@ class DynamicsPipeline final : public Simulation {
       // Candidates from the prepared wall; most particles have none and stop here.
       WallContactSet<kMaxWallContacts> set;
       const double r2 = r * r, tol = 1e-9 * r;
-      wall.for_each_candidate(cast3<float>(xi), [&](uint32_t k, uint32_t orig) {
+      auto consider = [&](uint32_t k, uint32_t orig) {
         const PlanarTriangleD& t = tris_d[k];
         Vec3d q;
         double h = 0;
@@ -767,11 +1024,27 @@ class DynamicsPipeline final : public Simulation {
           nrm = (xi - q) * (1.0 / d);
         }
         set.offer(WallContact{q, nrm, d, orig}, tol);
-      });
-      const double m = 1.0 / P.inv_mass[i];
+      };
+      if (listed) {
+        for (uint32_t q = wl_start[i], e = q + wl_count[i]; q < e; ++q)
+          consider(wl[q], wall.original_of(wl[q]));
+      } else {
+        wall.for_each_candidate(cast3<float>(xi), consider);
+      }
       // No springs are kept without friction (the buffers are empty): no pointer into them.
       const FrictionSlot* old_slots = friction ? hin + size_t(i) * kWallSlots : nullptr;
       FrictionSlot* new_slots = friction ? hout + size_t(i) * kWallSlots : nullptr;
+      if (set.n == 0 && !measure) {
+        // Away from the wall (most particles): nothing to add, no springs kept.
+        if (!add) {
+          P.acc[i] = grav;
+          if (rot) P.alpha[i] = Vec3d{0, 0, 0};
+          P.flags[i] = uint8_t(kActive);
+        }
+        if (friction) new_slots[0].key = kNoKey;
+        return;
+      }
+      const double m = P.mass[i];
       Vec3d f{0, 0, 0}, torque{0, 0, 0};
       double elastic = 0, overlap_max = 0;
       const Vec3d vi = P.v[i];
@@ -825,7 +1098,7 @@ class DynamicsPipeline final : public Simulation {
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
       const uint8_t st = P.state[i];
       const bool active = st == kActive;
-      const double m = 1.0 / P.inv_mass[i];
+      const double m = P.mass[i];
       double ke = 0, pe = 0, sp = 0;
       if (active) {
         ke = 0.5 * m * dot(P.v[i], P.v[i]);
@@ -864,7 +1137,7 @@ class DynamicsPipeline final : public Simulation {
   std::vector<double> radius_host_, release_host_;
 
   Buf<Vec3d> pos_, vel_, acc_, omega_, alpha_;
-  Buf<double> radius_, inv_mass_, release_, speed_, scratch_;
+  Buf<double> radius_, mass_, release_, speed_, scratch_;
   Buf<double> peak_overlap_;  // deepest wall overlap per particle since the last measure
   Buf<uint8_t> state_, flags_;
   // Friction springs as terminated lists: last step's (hist_in_) and this step's.
@@ -877,8 +1150,20 @@ class DynamicsPipeline final : public Simulation {
   bool nlist_ = false, nl_valid_ = false;
   double skin_ = 0;
   uint64_t nl_released_ = 0;
+  double released_at_ = 0;  // s: when the release kernel last ran
   std::vector<double> release_sorted_;  // host: release times in order, to count releases
-  Buf<uint32_t> nl_start_, nl_list_;
+  // Each list holds the partners of larger index (upper, sorted); lo_start_,
+  // lo_j_ and lo_rec_ give each particle its partners of smaller index (sorted)
+  // and where each such pair sits in its partner's upper list.
+  Buf<uint32_t> nl_start_, nl_list_, lo_start_, lo_j_, lo_rec_;
+  // once_: pair forces evaluated once per pair, into records per upper-list entry.
+  bool once_ = false;
+  Buf<Vec3d> rec_f_, rec_torque_, rec_roll_;
+  Buf<uint8_t> rec_touched_;
+  // The wall's candidates per particle (wall_list_, with the neighbour list on a
+  // still wall): wl_count_[i] triangles or pieces from wl_list_[wl_start_[i]].
+  bool wall_list_ = false;
+  Buf<uint32_t> wl_start_, wl_count_, wl_list_;
   Buf<Vec3d> x_ref_;
   Buf<double> disp_;
   float filter_slack_ = 0;

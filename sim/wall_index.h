@@ -99,6 +99,48 @@ struct WallView {
       }
     });
   }
+
+  // The original mesh index of prepared triangle or piece k.
+  COLLIDO_HD COLLIDO_FORCEINLINE uint32_t original_of(uint32_t k) const {
+    return bin ? k : original[k];
+  }
+
+  // Calls f(k) for every k that for_each_candidate gives at some point within
+  // e of p (0 <= e < one cell); f may see a k more than once. A grid's
+  // candidates depend only on the point's cell, and the cells of the points in
+  // the cube [p - e, p + e] are those between its corners' (float rounding is
+  // monotonic); the tree is walked with its reach grown by e.
+  template <class F>
+  COLLIDO_HD void for_each_candidate_near(Vec3f p, float e, F&& f) const {
+    if (bvh) {
+      bvh_for_each_near(bvh, p, bvh_reach + e, f);
+      return;
+    }
+    int lo[3], hi[3];
+    const float pc[3] = {p.x, p.y, p.z}, oc[3] = {g.origin.x, g.origin.y, g.origin.z};
+    const int n[3] = {g.nx, g.ny, g.nz};
+    for (int a = 0; a < 3; ++a) {
+      const float f0 = (pc[a] - e - oc[a]) * g.inv_cell, f1 = (pc[a] + e - oc[a]) * g.inv_cell;
+      if (!(f1 >= 0.f) || !(f0 < float(n[a]))) return;  // the cube misses the grid
+      lo[a] = f0 < 0.f ? 0 : (int(f0) < n[a] ? int(f0) : n[a] - 1);
+      hi[a] = int(f1) < n[a] ? int(f1) : n[a] - 1;
+    }
+    const int r = bin ? 0 : reach;  // pieces: the cells within reach of each of those
+    for (int z = lo[2] - r; z <= hi[2] + r; ++z)
+      for (int y = lo[1] - r; y <= hi[1] + r; ++y)
+        for (int x = lo[0] - r; x <= hi[0] + r; ++x) {
+          if (!g.inside(x, y, z)) continue;
+          const uint64_t l = g.linear(x, y, z);
+          const uint32_t b = g.bucket(l);
+          if (bin) {
+            for (uint32_t k = bin_start[b], end = bin_start[b + 1]; k < end; ++k)
+              if (!g.hashed || bin_cell[k] == l) f(bin_tri[k]);
+          } else {
+            for (uint32_t k = tri_start[b], end = tri_end[b]; k < end; ++k)
+              if (!g.hashed || tri_cell[k] == l) f(k);
+          }
+        }
+  }
 };
 
 template <class B>
