@@ -47,7 +47,8 @@ class CudaBackend {
   // of device memory a particle (sim/detect_pipeline.h, bvh).
   static constexpr bool kWalksReadReorderedCopy = false;
   // Pair forces from a neighbour list are evaluated by both particles: records
-  // between two passes cost the GPU more memory traffic than the arithmetic saved.
+  // between two passes cost the GPU more memory traffic than the arithmetic
+  // saves (H200, 10^6 particles with friction: 0.74 against 0.54 ms a step).
   static constexpr bool kPairForcesOncePerPair = false;
   // Device memory that grows but never shrinks, so frames reuse it.
   template <class T>

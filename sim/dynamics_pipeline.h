@@ -80,6 +80,7 @@ class DynamicsPipeline final : public Simulation {
     if (!(dt > 0) || !std::isfinite(dt))
       return invalid_argument("time step must be positive, got " + std::to_string(dt));
     for (uint64_t k = 0; k < steps; ++k) one_step(dt);
+    close_pending_step();
     backend_.sync();
     return backend_.status();
   }
@@ -96,6 +97,7 @@ class DynamicsPipeline final : public Simulation {
       if (since_check >= kSpeedCheckInterval) {
         // The fastest speed, read every few steps: it sizes the automatic step
         // and, with a fixed one, tells how far a step carries a particle.
+        close_pending_step();
         const double vmax = fastest_speed();
         dt = ts_.explicit_step > 0 ? ts_.explicit_step : automatic_step(vmax);
         if (ts_.r_min > 0) travel = std::max(travel, vmax * dt / ts_.r_min);
@@ -121,6 +123,7 @@ class DynamicsPipeline final : public Simulation {
   }
 
   Status measure(FrameStats* st) override {
+    close_pending_step();
     *st = FrameStats{};
     st->time = time_;
     if (n_ == 0) return backend_.status();
@@ -157,6 +160,7 @@ class DynamicsPipeline final : public Simulation {
   }
 
   Status save_state(SimState* out) override {
+    close_pending_step();
     out->particles = n_;
     out->time = time_;
     out->steps = steps_;
@@ -189,12 +193,15 @@ class DynamicsPipeline final : public Simulation {
     time_ = in.time;
     steps_ = in.steps;
     all_released_ = in.all_released;
+    close_pending_ = false;  // the restored state is a whole step's
+    disp_fresh_ = false;
     nl_valid_ = false;  // built afresh for the restored positions
     backend_.sync();
     return backend_.status();
   }
 
   Status download(ParticleSet* out, std::vector<uint8_t>* flags) override {
+    close_pending_step();
     std::vector<Vec3d> p(n_), v(n_);
     if (n_) {
       backend_.to_host(p.data(), pos_.data(), n_ * sizeof(Vec3d));
@@ -359,14 +366,20 @@ class DynamicsPipeline final : public Simulation {
   }
 
   // --- one step -------------------------------------------------------------------------------
+  // Velocity Verlet's closing half kick and checks are left pending at the end
+  // of a step and done in the next step's first pass (one pass over the
+  // particles instead of two), or by close_pending_step() before anything
+  // reads the state.
   void one_step(double dt) {
     if (timing_) lap_ = std::chrono::steady_clock::now();
-    if (!all_released_) {
-      release(time_);
-      all_released_ = time_ >= last_release_;
-    }
+    const bool releasing = !all_released_;
     const bool verlet = cfg_.integrator == Integrator::kVelocityVerlet;
-    if (verlet) kick_drift(dt);
+    if (verlet) {
+      open_step(dt, releasing);
+    } else if (releasing) {
+      release(time_);
+    }
+    if (releasing) all_released_ = time_ >= last_release_;
     lap(times_.drift_ms);
     if (cfg_.particle_contacts) {
       update_pair_candidates();
@@ -375,7 +388,11 @@ class DynamicsPipeline final : public Simulation {
     // Forces where the positions now are: after Verlet's drift, at the step's end.
     forces(dt, false, verlet ? time_ + dt : time_);
     if (rotation_) swap_history();
-    finish_step(dt, verlet, wall_pose(time_ + dt));
+    if (verlet) {
+      close_pending_ = true, pending_dt_ = dt;
+    } else {
+      finish_step(dt, false, wall_pose(time_ + dt));
+    }
     lap(times_.kick_ms);
     times_.steps += timing_;
     time_ += dt;
@@ -408,58 +425,117 @@ class DynamicsPipeline final : public Simulation {
     });
   }
 
-  void kick_drift(double dt) {
-    const ParticleArrays P = arrays();
-    const bool rot = rotation_;
-    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
-      if (P.state[i] != kActive) return;
-      P.v[i] = P.v[i] + P.acc[i] * (0.5 * dt);
-      P.x[i] = P.x[i] + P.v[i] * dt;
-      if (rot) P.w[i] = P.w[i] + P.alpha[i] * (0.5 * dt);
-    });
-  }
-
   // The wall's pose at time t, in the engine's local frame.
   WallPose wall_pose(double t) const { return cfg_.wall_motion.pose(t, wall_.origin); }
 
-  // pose: the wall at the step's end; a translating or oscillating wall carries the domain along.
+  // The domain the checks keep particles in, with the wall's pose (a
+  // translating or oscillating wall carries it along).
+  struct Domain {
+    Vec3d lo, hi;
+  };
+  Domain domain_at(const WallPose& pose) const { return {lo_ + pose.d, hi_ + pose.d}; }
+
+  // The end of a step for active particle i: the closing kick (Verlet's second
+  // half, or symplectic Euler's whole kick and drift), then the checks.
+  // Returns its state afterwards. speed: |v| written for the speed check.
+  COLLIDO_HD static COLLIDO_FORCEINLINE uint8_t close_particle(const ParticleArrays& P, uint32_t i,
+                                                               double dt, bool verlet, bool rot,
+                                                               double* speed, Domain dom) {
+    Vec3d vi = P.v[i], xi = P.x[i];
+    if (verlet) {
+      vi = vi + P.acc[i] * (0.5 * dt);
+      if (rot) P.w[i] = P.w[i] + P.alpha[i] * (0.5 * dt);
+    } else {
+      vi = vi + P.acc[i] * dt;
+      xi = xi + vi * dt;
+      if (rot) P.w[i] = P.w[i] + P.alpha[i] * dt;
+    }
+    const double s2 = dot(vi, vi);
+    const bool finite = hd_finite(s2) && hd_finite(xi.x) && hd_finite(xi.y) && hd_finite(xi.z);
+    if (!finite) {
+      // Frozen where it last was finite, counted, never written as NaN.
+      P.state[i] = kInvalid;
+      P.flags[i] = kInvalid;
+      P.v[i] = Vec3d{0, 0, 0};
+      speed[i] = 0;
+      return kInvalid;
+    }
+    P.v[i] = vi;
+    if (!verlet) P.x[i] = xi;  // Verlet moved it in the drift
+    speed[i] = sqrt(s2);
+    const Vec3d lo = dom.lo, hi = dom.hi;
+    if (xi.x < lo.x || xi.y < lo.y || xi.z < lo.z || xi.x > hi.x || xi.y > hi.y || xi.z > hi.z) {
+      P.state[i] = kEscaped;
+      P.flags[i] = kEscaped;
+      speed[i] = 0;
+      return kEscaped;
+    }
+    return kActive;
+  }
+
+  // Velocity Verlet's first pass of a step, particle by particle in the order
+  // separate passes would take: the last step's pending close, the releases
+  // due now, this step's half kick and drift; with a neighbour list, each
+  // particle's squared move since the list was built.
+  void open_step(double dt, bool releasing) {
+    const ParticleArrays P = arrays();
+    const bool rot = rotation_;
+    const bool close = close_pending_;
+    const double h = pending_dt_;
+    double* speed = speed_.data();
+    const Domain dom = domain_at(wall_pose(time_));  // the pending step ended now
+    const double* rel = release_.data();
+    const double t = time_;
+    if (releasing) released_at_ = t;
+    const bool disp = nlist_ && nl_valid_;
+    const Vec3d* ref = x_ref_.data();
+    double* d2 = disp_.data();
+    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+      uint8_t st = P.state[i];
+      if (close) {
+        if (st == kActive)
+          st = close_particle(P, i, h, true, rot, speed, dom);
+        else
+          speed[i] = 0;
+      }
+      if (releasing && st == kWaiting && rel[i] <= t) P.state[i] = st = kActive;
+      if (st != kActive) {
+        if (disp) d2[i] = 0;
+        return;
+      }
+      const Vec3d v = P.v[i] + P.acc[i] * (0.5 * dt);
+      const Vec3d x = P.x[i] + v * dt;
+      P.v[i] = v;
+      P.x[i] = x;
+      if (rot) P.w[i] = P.w[i] + P.alpha[i] * (0.5 * dt);
+      if (disp) {
+        const Vec3d d = x - ref[i];
+        d2[i] = dot(d, d);
+      }
+    });
+    close_pending_ = false;
+    disp_fresh_ = disp;
+  }
+
+  // Closes a step left pending (see one_step) on its own pass.
+  void close_pending_step() {
+    if (!close_pending_) return;
+    finish_step(pending_dt_, true, wall_pose(time_));
+    close_pending_ = false;
+  }
+
+  // pose: the wall at the step's end.
   void finish_step(double dt, bool verlet, const WallPose& pose) {
     const ParticleArrays P = arrays();
     double* speed = speed_.data();
     const bool rot = rotation_;
-    const Vec3d lo = lo_ + pose.d, hi = hi_ + pose.d;
+    const Domain dom = domain_at(pose);
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
       if (P.state[i] != kActive) {
         speed[i] = 0;
         return;
       }
-      Vec3d vi = P.v[i], xi = P.x[i];
-      if (verlet) {
-        vi = vi + P.acc[i] * (0.5 * dt);
-        if (rot) P.w[i] = P.w[i] + P.alpha[i] * (0.5 * dt);
-      } else {
-        vi = vi + P.acc[i] * dt;
-        xi = xi + vi * dt;
-        if (rot) P.w[i] = P.w[i] + P.alpha[i] * dt;
-      }
-      const double s2 = dot(vi, vi);
-      const bool finite = hd_finite(s2) && hd_finite(xi.x) && hd_finite(xi.y) && hd_finite(xi.z);
-      if (!finite) {
-        // Frozen where it last was finite, counted, never written as NaN.
-        P.state[i] = kInvalid;
-        P.flags[i] = kInvalid;
-        P.v[i] = Vec3d{0, 0, 0};
-        speed[i] = 0;
-        return;
-      }
-      P.v[i] = vi;
-      if (!verlet) P.x[i] = xi;  // Verlet moved it in the drift
-      speed[i] = sqrt(s2);
-      if (xi.x < lo.x || xi.y < lo.y || xi.z < lo.z || xi.x > hi.x || xi.y > hi.y || xi.z > hi.z) {
-        P.state[i] = kEscaped;
-        P.flags[i] = kEscaped;
-        speed[i] = 0;
-      }
+      close_particle(P, i, dt, verlet, rot, speed, dom);
     });
   }
 
@@ -509,15 +585,18 @@ class DynamicsPipeline final : public Simulation {
     const uint64_t released = released_by(released_at_);
     bool rebuild = !nl_valid_ || released != nl_released_;
     if (!rebuild) {
-      const ParticleArrays P = arrays();
-      const Vec3d* ref = x_ref_.data();
       double* d2 = disp_.data();
-      backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
-        const Vec3d d = P.x[i] - ref[i];
-        d2[i] = P.state[i] == kActive ? dot(d, d) : 0.0;
-      });
+      if (!disp_fresh_) {  // open_step has not measured the moves since the positions changed
+        const ParticleArrays P = arrays();
+        const Vec3d* ref = x_ref_.data();
+        backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+          const Vec3d d = P.x[i] - ref[i];
+          d2[i] = P.state[i] == kActive ? dot(d, d) : 0.0;
+        });
+      }
       rebuild = 4 * backend_.reduce_max(d2, n_) > skin_ * skin_;
     }
+    disp_fresh_ = false;
     if (rebuild) build_neighbour_list();
     nl_released_ = released;
   }
@@ -761,11 +840,13 @@ class DynamicsPipeline final : public Simulation {
     // i's surface point against j's: (v_i - v_j) - (w_i x n r_i + w_j x n r_j).
     Vec3d vrel = vi - P.v[j];
     if (law.mu > 0) vrel = vrel - (cross(wi, nrm * r) + cross(P.w[j], nrm * rj));
-    const double r_eff = r * rj / rs;
+    // The contact's radius, for the laws that read it (a division the linear law saves).
+    const bool roll = rot && law.mu_roll > 0;
+    const double r_eff = law.model == ContactModel::kHertzMindlin || roll ? r * rj / rs : 0.0;
     PairContact out;
     out.cf = contact_force(law, nrm, rs - dist, vrel, m * mj / (m + mj), r_eff, 1.0, spring, dt);
     out.roll = Vec3d{0, 0, 0};
-    if (rot && law.mu_roll > 0) {
+    if (roll) {
       const double ii = 0.4 * m * r * r, ij = 0.4 * mj * rj * rj;
       out.roll = rolling_torque(law, nrm, out.cf.fn, wi - P.w[j], r_eff, ii * ij / (ii + ij), dt);
     }
@@ -1151,6 +1232,10 @@ class DynamicsPipeline final : public Simulation {
   double skin_ = 0;
   uint64_t nl_released_ = 0;
   double released_at_ = 0;  // s: when the release kernel last ran
+  // Velocity Verlet's close of the last step (its dt) waits for the next pass.
+  bool close_pending_ = false;
+  double pending_dt_ = 0;
+  bool disp_fresh_ = false;  // disp_ holds the moves of the current positions
   std::vector<double> release_sorted_;  // host: release times in order, to count releases
   // Each list holds the partners of larger index (upper, sorted); lo_start_,
   // lo_j_ and lo_rec_ give each particle its partners of smaller index (sorted)
