@@ -195,6 +195,9 @@ class DynamicsPipeline final : public Simulation {
     all_released_ = in.all_released;
     close_pending_ = false;  // the restored state is a whole step's
     disp_fresh_ = false;
+    // Unknown here which releases the saved state has seen: the next step's
+    // release then differs from the build's count and rebuilds the lists.
+    released_at_ = -1.0;
     nl_valid_ = false;  // built afresh for the restored positions
     backend_.sync();
     return backend_.status();
