@@ -28,6 +28,58 @@ bool finite3(Vec3d v) {
   return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
 }
 
+// Whether fill sites lie inside a closed wall, with one winding number per
+// connected group of sites instead of one per site (each costs a pass over
+// every triangle: 38,000 sites over an 83,750-triangle mesh took 70 s). Two
+// neighbouring sites whose clear balls (no wall within them) together reach
+// across the gap between them are joined by a segment the wall does not cross,
+// so they lie on the same side of it. Groups are merged across layers with a
+// union-find over group ids, each holding its side once known.
+class SideOfWall {
+ public:
+  explicit SideOfWall(const TriangleMesh& wall) : wall_(wall) {}
+  int new_group() {
+    parent_.push_back(uint32_t(parent_.size()));
+    side_.push_back(kUnknown);
+    return int(parent_.size() - 1);
+  }
+  int find(int g) {
+    while (parent_[g] != uint32_t(g)) g = int(parent_[g] = parent_[parent_[g]]);
+    return g;
+  }
+  void join(int a, int b) {
+    a = find(a), b = find(b);
+    if (a == b) return;
+    if (side_[b] == kUnknown) side_[b] = side_[a];
+    parent_[a] = uint32_t(b);
+  }
+  // |w|: a vessel wound inward (as other DEM codes export them) has w = -1 inside.
+  bool inside(int g, Vec3d p) {
+    g = find(g);
+    if (side_[g] == kUnknown) side_[g] = std::fabs(winding_number(wall_, p)) >= 0.5 ? kIn : kOut;
+    return side_[g] == kIn;
+  }
+
+ private:
+  enum : uint8_t { kUnknown, kIn, kOut };
+  const TriangleMesh& wall_;
+  std::vector<uint32_t> parent_;
+  std::vector<uint8_t> side_;
+};
+
+// A small union-find over one layer's sites.
+struct LayerSets {
+  std::vector<uint32_t> parent;
+  explicit LayerSets(size_t n) : parent(n) {
+    for (size_t i = 0; i < n; ++i) parent[i] = uint32_t(i);
+  }
+  uint32_t find(uint32_t a) {
+    while (parent[a] != a) a = parent[a] = parent[parent[a]];
+    return a;
+  }
+  void join(uint32_t a, uint32_t b) { parent[find(a)] = find(b); }
+};
+
 // Lattice sites in the region, a layer (fixed z) at a time from the bottom, that
 // lie inside a closed wall and clear of its surface, until `count` are found.
 Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl,
@@ -47,12 +99,30 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
     return invalid_argument("placement.region: a layer of " + std::to_string(nx * ny) +
                             " sites is too large");
   const bool closed = is_closed_manifold(wall);
-  // The wall's own detector finds sites that would start touching it.
+  // The wall's own detector finds sites that would start touching it; on a
+  // closed wall a second look at a larger radius finds the sites clear enough
+  // to join their neighbours (SideOfWall).
+  const double clear = r * 1.05, wide = r * 1.1;
   DetectConfig dc;
-  dc.r_max = r * 1.05;
+  dc.r_max = closed ? wide : clear;
   dc.time_stages = false;
   auto detector = Detector::create(wall, dc, std::max<uint64_t>(nx * ny, 1));
   if (!detector) return detector.status();
+  // Runs the detector on the layer at radius `radius`: per site, touching or not.
+  auto touches = [&](Particles& layer, double radius, std::vector<uint32_t>* counts) -> Status {
+    std::fill(layer.r.begin(), layer.r.end(), radius);
+    if (Status s = (*detector)->set_particles(layer); !s) return s;
+    DetectResult found;
+    (*detector)->set_frame_options(false, false);
+    if (Status s = (*detector)->detect(&found); !s) return s;
+    *counts = std::move(found.counts);
+    return Status::ok();
+  };
+  SideOfWall side(wall);
+  const size_t per_layer = size_t(nx * ny);
+  std::vector<int> group(per_layer, -1), last_group(per_layer, -1);  // -1: not clear
+  std::vector<double> reach(per_layer, 0), last_reach(per_layer, 0);
+  Particles last;
   out->resize(0);
   for (uint64_t k = 0; k < nz && out->size() < ps.count; ++k) {
     Particles layer;
@@ -61,21 +131,50 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
         layer.x.push_back(lo.x + r + i * spacing + rng.uniform(-jitter, jitter));
         layer.y.push_back(lo.y + r + j * spacing + rng.uniform(-jitter, jitter));
         layer.z.push_back(lo.z + r + k * spacing + rng.uniform(-jitter, jitter));
-        layer.r.push_back(r * 1.05);
+        layer.r.push_back(clear);
       }
-    if (Status s = (*detector)->set_particles(layer); !s) return s;
-    DetectResult touching;
-    (*detector)->set_frame_options(false, false);
-    if (Status s = (*detector)->detect(&touching); !s) return s;
+    std::vector<uint32_t> touching, touching_wide;
+    if (Status s = touches(layer, clear, &touching); !s) return s;
+    if (closed) {
+      if (Status s = touches(layer, wide, &touching_wide); !s) return s;
+      // How far from each clear site the wall surely is not; then the groups.
+      for (size_t s = 0; s < per_layer; ++s)
+        reach[s] = touching[s] ? 0 : touching_wide[s] ? clear : wide;
+      auto site = [&](const Particles& p, size_t s) { return Vec3d{p.x[s], p.y[s], p.z[s]}; };
+      auto joined = [&](Vec3d a, double ra, Vec3d b, double rb) {
+        return ra > 0 && rb > 0 && length(a - b) < ra + rb;
+      };
+      LayerSets sets(per_layer);
+      for (size_t s = 0; s < per_layer; ++s) {
+        const size_t i = s % nx;
+        if (i > 0 && joined(site(layer, s), reach[s], site(layer, s - 1), reach[s - 1]))
+          sets.join(uint32_t(s), uint32_t(s - 1));
+        if (s >= nx && joined(site(layer, s), reach[s], site(layer, s - nx), reach[s - nx]))
+          sets.join(uint32_t(s), uint32_t(s - nx));
+      }
+      std::fill(group.begin(), group.end(), -1);
+      std::vector<int> of_root(per_layer, -1);
+      for (size_t s = 0; s < per_layer; ++s) {
+        if (!(reach[s] > 0)) continue;
+        int& g = of_root[sets.find(uint32_t(s))];
+        if (g < 0) g = side.new_group();
+        group[s] = g;
+        if (k > 0 && last_group[s] >= 0 && joined(site(layer, s), reach[s], site(last, s), last_reach[s]))
+          side.join(last_group[s], g);
+      }
+    }
     for (size_t s = 0; s < layer.size() && out->size() < ps.count; ++s) {
-      if (touching.counts[s]) continue;
-      // |w|: a vessel wound inward (as other DEM codes export them) has w = -1 inside.
-      if (closed && std::fabs(winding_number(wall, {layer.x[s], layer.y[s], layer.z[s]})) < 0.5)
-        continue;
+      if (touching[s]) continue;
+      if (closed && !side.inside(group[s], {layer.x[s], layer.y[s], layer.z[s]})) continue;
       const size_t n = out->size();
       out->resize(n + 1);
       out->x[n] = layer.x[s], out->y[n] = layer.y[s], out->z[n] = layer.z[s];
       out->vx[n] = pl.velocity.x, out->vy[n] = pl.velocity.y, out->vz[n] = pl.velocity.z;
+    }
+    if (closed) {
+      std::swap(group, last_group);
+      std::swap(reach, last_reach);
+      last = std::move(layer);
     }
   }
   if (out->size() < ps.count)

@@ -55,6 +55,61 @@ TEST(Placement, FillIsInsideClearAndWithoutOverlaps) {
   EXPECT_EQ(p->r, q->r);
 }
 
+// Inside is decided once per connected group of sites (sim/placement.cpp,
+// SideOfWall): two closed boxes apart, and a solid block inside one of them,
+// take particles in both cavities and none between them, in the block or
+// clear of its faces; every particle placed lies inside, as a winding number
+// of its own says, and the lattice fills each cavity as a box alone fills.
+TEST(Placement, FillFindsEveryCavityOfAClosedWall) {
+  auto moved = [](TriangleMesh m, Vec3d d) {
+    for (Vec3d& v : m.vertices) v = v + d;
+    return m;
+  };
+  auto add = [](TriangleMesh* to, const TriangleMesh& m) {
+    const uint32_t base = uint32_t(to->vertices.size());
+    to->vertices.insert(to->vertices.end(), m.vertices.begin(), m.vertices.end());
+    for (auto t : m.triangles) to->triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+  };
+  const TriangleMesh left = make_box(10, 10, 10), right = moved(make_box(10, 10, 10), {14, 0, 0});
+  TriangleMesh block = moved(make_box(4, 4, 4), {14, 0, 3});
+  for (auto& t : block.triangles) std::swap(t[1], t[2]);  // a solid inside the right box
+  TriangleMesh wall;
+  add(&wall, left);
+  add(&wall, right);
+  add(&wall, block);
+  for (size_t i = 0; i < wall.triangles.size(); ++i) wall.source_ids.push_back(uint32_t(i));
+  ASSERT_TRUE(is_closed_manifold(wall));
+  ParticleSpec ps;
+  ps.count = 100000;  // more than fit: the error says how many do
+  ps.r_min = ps.r_max = 0.45;
+  PlacementSpec pl;
+  pl.has_region = true;
+  pl.region_lo = {-5, -5, 0}, pl.region_hi = {19, 5, 10};
+  auto refused = place_particles(wall, ps, pl, {0, 0, -9.81}, 5);
+  ASSERT_FALSE(refused);
+  const std::string msg = refused.status().message();
+  const size_t at = msg.find("holds only ");
+  ASSERT_NE(at, std::string::npos) << msg;
+  const size_t fit = std::stoul(msg.substr(at + 11));
+  ps.count = fit;
+  auto p = place_particles(wall, ps, pl, {0, 0, -9.81}, 5);
+  ASSERT_TRUE(p) << p.status().message();
+  size_t in_left = 0, in_right = 0;
+  for (size_t i = 0; i < p->size(); ++i) {
+    const Vec3d c{p->x[i], p->y[i], p->z[i]};
+    EXPECT_GT(std::fabs(winding_number(wall, c)), 0.5) << "particle " << i;
+    EXPECT_FALSE(c.x > 4.5 && c.x < 9.5) << "between the boxes: " << c.x;
+    // The block spans [12, 16] x [-2, 2] x [3, 7].
+    EXPECT_FALSE(std::fabs(c.x - 14) < 2 + 0.45 && std::fabs(c.y) < 2 + 0.45 && c.z > 3 - 0.45 &&
+                 c.z < 7 + 0.45)
+        << "in or on the block";
+    (c.x < 7 ? in_left : in_right) += 1;
+  }
+  EXPECT_GT(in_left, 100u);
+  EXPECT_GT(in_right, 100u);
+  EXPECT_GT(in_left, in_right);  // the block takes room on the right
+}
+
 // A closed vessel whose triangles wind inward fills exactly as the same vessel wound outward.
 TEST(Placement, InwardWoundVesselFillsLikeOutward) {
   const TriangleMesh out = make_cylinder(10, 20, 40);
