@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <mutex>
 #include <numeric>
 #include <vector>
 
@@ -42,6 +43,21 @@ class CpuBackend {
   template <class F>
   void parallel_for_heavy(size_t n, F f) {
     cpu_parallel_for(*pool_, n, f);
+  }
+  // Runs f(i) for every i < n and returns the largest value it returned (0
+  // when n == 0); f returns doubles >= 0.
+  template <class F>
+  double parallel_max(size_t n, F f) {
+    if (n == 0) return 0;
+    std::mutex m;
+    double best = 0;
+    pool_->run_chunks(n, 4096, [&](size_t begin, size_t end) {
+      double local = 0;
+      for (size_t i = begin; i < end; ++i) local = std::max(local, f(static_cast<uint32_t>(i)));
+      std::lock_guard<std::mutex> lock(m);
+      best = std::max(best, local);
+    });
+    return best;
   }
   template <class T>
   void fill(T* p, size_t n, T v) {

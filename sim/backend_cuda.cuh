@@ -10,6 +10,7 @@
 #include <cub/device/device_reduce.cuh>
 #include <cub/device/device_scan.cuh>
 #include <cub/device/device_segmented_sort.cuh>
+#include <cstring>
 #include <string>
 
 #include "sim/parallel.h"
@@ -27,6 +28,24 @@ template <class F>
 __global__ void for_each_kernel(uint32_t n, F f) {
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i < n) f(i);
+}
+
+// f(i) for every i, and the largest value any returned (values >= 0, whose
+// bits order as the numbers do) into *out: a warp's and then the block's
+// largest, one atomic per block.
+template <class F>
+__global__ void for_each_max_kernel(uint32_t n, F f, unsigned long long* out) {
+  const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
+  double v = i < n ? f(i) : 0.0;
+  for (int o = 16; o > 0; o >>= 1) v = fmax(v, __shfl_down_sync(0xffffffffu, v, o));
+  __shared__ double warp_max[32];
+  if ((threadIdx.x & 31) == 0) warp_max[threadIdx.x >> 5] = v;
+  __syncthreads();
+  if (threadIdx.x == 0) {
+    double m = 0;
+    for (uint32_t w = 0; w < (blockDim.x + 31) / 32; ++w) m = fmax(m, warp_max[w]);
+    atomicMax(out, static_cast<unsigned long long>(__double_as_longlong(m)));
+  }
 }
 
 // The same with at least two 256-thread blocks per SM: caps a heavy loop body
@@ -145,6 +164,24 @@ class CudaBackend {
     to_host(&v, scalar_.data(), sizeof v);
     return v;
   }
+  // Runs f(i) for every i < n and returns the largest value it returned (0
+  // when n == 0); f returns doubles >= 0. One pass, no reduction of its own.
+  template <class F>
+  double parallel_max(size_t n, F f) {
+    if (n == 0 || !ok_) return 0;
+    resize(max_bits_, 1);
+    check(cudaMemsetAsync(max_bits_.data(), 0, sizeof(unsigned long long)), "memset");
+    constexpr uint32_t kBlock = 256;
+    const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
+    cuda_detail::for_each_max_kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f,
+                                                          max_bits_.data());
+    check(cudaGetLastError(), "kernel launch");
+    unsigned long long bits = 0;
+    to_host(&bits, max_bits_.data(), sizeof bits);
+    double v = 0;
+    std::memcpy(&v, &bits, sizeof v);
+    return v;
+  }
   double reduce_max(const double* d, size_t n) {
     if (n == 0) return 0;
     resize(scalar_, 1);
@@ -233,6 +270,7 @@ class CudaBackend {
   Buffer<uint32_t> scan_out_, runs_, seg_tri_;
   Buffer<uint64_t> seg_cell_;
   Buffer<double> scalar_;
+  Buffer<unsigned long long> max_bits_;  // parallel_max's result, as the bits of a double
 };
 
 }  // namespace collido::sim

@@ -300,7 +300,6 @@ class DynamicsPipeline final : public Simulation {
     lists_ = nlist_ || wall_list_;
     if (lists_) {
       backend_.resize(x_ref_, std::max<size_t>(n_, 1));
-      backend_.resize(disp_, std::max<size_t>(n_, 1));
       release_sorted_ = ps.release;
       std::sort(release_sorted_.begin(), release_sorted_.end());
     }
@@ -483,24 +482,17 @@ class DynamicsPipeline final : public Simulation {
     return kActive;
   }
 
-  // Velocity Verlet's first pass of a step, particle by particle in the order
-  // separate passes would take: the last step's pending close, the releases
-  // due now, this step's half kick and drift; with a neighbour list, each
-  // particle's squared move since the list was built.
-  void open_step(double dt, bool releasing) {
-    const ParticleArrays P = arrays();
-    const bool rot = rotation_;
-    const bool close = close_pending_;
-    const double h = pending_dt_;
-    double* speed = speed_.data();
-    const Domain dom = domain_at(wall_pose(time_));  // the pending step ended now
-    const double* rel = release_.data();
-    const double t = time_;
-    if (releasing) released_at_ = t;
-    const bool disp = lists_ && nl_valid_;
-    const Vec3d* ref = x_ref_.data();
-    double* d2 = disp_.data();
-    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+  // What open_step does to one particle; returns its squared move since the
+  // lists were built (0 when it is not active or there are no lists).
+  struct OpenStep {
+    ParticleArrays P;
+    bool rot, close, releasing, disp;
+    double h, dt, t;  // the pending step's length, this step's, the time now
+    double* speed;
+    Domain dom;  // where the pending step ended
+    const double* rel;
+    const Vec3d* ref;
+    COLLIDO_HD COLLIDO_FORCEINLINE double operator()(uint32_t i) const {
       uint8_t st = P.state[i];
       if (close) {
         if (st == kActive)
@@ -509,20 +501,34 @@ class DynamicsPipeline final : public Simulation {
           speed[i] = 0;
       }
       if (releasing && st == kWaiting && rel[i] <= t) P.state[i] = st = kActive;
-      if (st != kActive) {
-        if (disp) d2[i] = 0;
-        return;
-      }
+      if (st != kActive) return 0.0;
       const Vec3d v = P.v[i] + P.acc[i] * (0.5 * dt);
       const Vec3d x = P.x[i] + v * dt;
       P.v[i] = v;
       P.x[i] = x;
       if (rot) P.w[i] = P.w[i] + P.alpha[i] * (0.5 * dt);
-      if (disp) {
-        const Vec3d d = x - ref[i];
-        d2[i] = dot(d, d);
-      }
-    });
+      if (!disp) return 0.0;
+      const Vec3d d = x - ref[i];
+      return dot(d, d);
+    }
+  };
+
+  // Velocity Verlet's first pass of a step, particle by particle in the order
+  // separate passes would take: the last step's pending close, the releases
+  // due now, this step's half kick and drift; with lists, the largest squared
+  // move since they were built, for the check that follows.
+  void open_step(double dt, bool releasing) {
+    const bool disp = lists_ && nl_valid_;
+    const OpenStep op{arrays(),     rotation_, close_pending_,  releasing,
+                      disp,         pending_dt_, dt,            time_,
+                      speed_.data(), domain_at(wall_pose(time_)), release_.data(),
+                      x_ref_.data()};
+    if (releasing) released_at_ = time_;
+    if (disp) {
+      disp_max_ = backend_.parallel_max(n_, [=] COLLIDO_HD(uint32_t i) { return op(i); });
+    } else {
+      backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) { op(i); });
+    }
     close_pending_ = false;
     disp_fresh_ = disp;
   }
@@ -594,16 +600,15 @@ class DynamicsPipeline final : public Simulation {
     const uint64_t released = released_by(released_at_);
     bool rebuild = !nl_valid_ || released != nl_released_;
     if (!rebuild) {
-      double* d2 = disp_.data();
       if (!disp_fresh_) {  // open_step has not measured the moves since the positions changed
         const ParticleArrays P = arrays();
         const Vec3d* ref = x_ref_.data();
-        backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+        disp_max_ = backend_.parallel_max(n_, [=] COLLIDO_HD(uint32_t i) {
           const Vec3d d = P.x[i] - ref[i];
-          d2[i] = P.state[i] == kActive ? dot(d, d) : 0.0;
+          return P.state[i] == kActive ? dot(d, d) : 0.0;
         });
       }
-      rebuild = 4 * backend_.reduce_max(d2, n_) > skin_ * skin_;
+      rebuild = 4 * disp_max_ > skin_ * skin_;
     }
     disp_fresh_ = false;
     if (rebuild) build_lists();
@@ -1240,9 +1245,9 @@ class DynamicsPipeline final : public Simulation {
   int hist_in_ = 0;
   Buf<uint32_t> p_key_, p_idx_, p_key_sorted_, p_idx_sorted_, cell_start_, cell_end_;
   Buf<PackedParticle> sorted_;  // float copies in cell order, for the pair loop's first test
-  bool lists_ = false;  // some candidates are listed (nlist_ or wall_list_), with x_ref_ and disp_
+  bool lists_ = false;  // some candidates are listed (nlist_ or wall_list_), built at x_ref_
   // The neighbour list (nlist_): per particle [nl_start_[i], nl_start_[i + 1]) of
-  // nl_list_, built at the positions x_ref_; disp_ holds each step's squared moves.
+  // nl_list_, built at the positions x_ref_.
   bool nlist_ = false, nl_valid_ = false;
   double skin_ = 0;
   uint64_t nl_released_ = 0;
@@ -1250,7 +1255,8 @@ class DynamicsPipeline final : public Simulation {
   // Velocity Verlet's close of the last step (its dt) waits for the next pass.
   bool close_pending_ = false;
   double pending_dt_ = 0;
-  bool disp_fresh_ = false;  // disp_ holds the moves of the current positions
+  bool disp_fresh_ = false;  // disp_max_ is the largest move of the current positions
+  double disp_max_ = 0;      // squared, since the lists were built
   std::vector<double> release_sorted_;  // host: release times in order, to count releases
   // Each list holds the partners of larger index (upper, sorted); lo_start_,
   // lo_j_ and lo_rec_ give each particle its partners of smaller index (sorted)
@@ -1265,7 +1271,6 @@ class DynamicsPipeline final : public Simulation {
   bool wall_list_ = false;
   Buf<uint32_t> wl_start_, wl_count_, wl_list_;
   Buf<Vec3d> x_ref_;
-  Buf<double> disp_;
   float filter_slack_ = 0;
 };
 
