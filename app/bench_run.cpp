@@ -12,6 +12,7 @@
 #include "sim/detect_cuda.h"
 #include "sim/dynamics.h"
 #include "sim/parallel.h"
+#include "sim/particles.h"
 #include "sim/shapes.h"
 
 namespace collido::app {
@@ -34,6 +35,8 @@ const std::vector<FlagSpec> kFlags = {
     {"warmup", true, "untimed steps first (default 5)"},
     {"threads", true, "CPU threads (default: all cores)"},
     {"stages", false, "also time each stage (a sync after each) and print the breakdown"},
+    {"shuffle", false, "number the particles in a random order (as a pour's end up), not along the lattice"},
+    {"renumber", true, "auto | never | N: renumber the particles by cell when scattered, never, or every N-th list build (default auto)"},
     {"help", false, "this help"},
 };
 
@@ -53,6 +56,16 @@ void block_scene(uint64_t n, sim::TriangleMesh* wall, sim::ParticleSet* p) {
         p->z[k] = r * 0.999 + z * s;
         p->r[k] = r;
       }
+}
+
+// The same particles numbered in a random order (Fisher-Yates, a fixed seed).
+void shuffle_particles(sim::ParticleSet* p, uint64_t seed) {
+  sim::SplitMix64 rng(seed);
+  for (size_t i = p->size(); i > 1; --i) {
+    const size_t j = size_t(rng.next() % i);
+    for (std::vector<double>* a : {&p->x, &p->y, &p->z, &p->vx, &p->vy, &p->vz, &p->r, &p->release})
+      std::swap((*a)[i - 1], (*a)[j]);
+  }
 }
 
 }  // namespace
@@ -95,6 +108,16 @@ int bench_run(const Args& args) {
   if (once != "auto" && once != "on" && once != "off")
     return usage_error("bench run", "--pairs-once must be auto, on or off");
   const int pairs_once = once == "auto" ? -1 : once == "on" ? 1 : 0;
+  const std::string renumber = p->get("renumber", "auto");
+  int renumber_every = -1;
+  if (renumber == "never") {
+    renumber_every = 0;
+  } else if (renumber != "auto") {
+    const int64_t every = p->get_int("renumber", -1, &err);
+    if (!err.empty() || every < 1 || every > 1000000)
+      return usage_error("bench run", "--renumber must be auto, never or a count of builds");
+    renumber_every = int(every);
+  }
   sim::ThreadPool pool{int(threads)};
   const std::string pairs = p->get("pairs", "both");
   std::vector<bool> pair_modes;
@@ -136,6 +159,7 @@ int bench_run(const Args& args) {
     sim::TriangleMesh wall;
     sim::ParticleSet ps;
     block_scene(n, &wall, &ps);
+    if (p->has("shuffle")) shuffle_particles(&ps, 7);
     for (bool with_pairs : pair_modes) {
       sim::DynamicsConfig cfg;
       cfg.backend = backend;
@@ -145,6 +169,7 @@ int bench_run(const Args& args) {
       cfg.material.rolling_friction = rolling;
       cfg.neighbour_skin = skin;
       cfg.pairs_once = pairs_once;
+      cfg.renumber_every = renumber_every;
       cfg.contact_model = model;
       // The linear spring of the earlier benchmarks; Hertz sizes its modulus itself.
       if (model == sim::ContactModel::kLinear) cfg.material.stiffness = 1e9;

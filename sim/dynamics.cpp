@@ -254,6 +254,8 @@ Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const Particl
   if (!finite_nonneg(c.impact_speed)) return invalid_argument("impact_speed must be >= 0 m/s");
   if (!std::isfinite(c.neighbour_skin))
     return invalid_argument("neighbour_skin must be a length in m (or < 0 for automatic)");
+  if (c.renumber_every < -1)
+    return invalid_argument("renumber_every must be -1 (when scattered), 0 (never) or a count of builds");
   if (c.pairs_once < -1 || c.pairs_once > 1)
     return invalid_argument("pairs_once must be -1 (the backend's choice), 0 or 1");
   if (p.size() == 0) return invalid_argument("particles: a run needs at least one particle");

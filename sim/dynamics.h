@@ -124,6 +124,11 @@ struct DynamicsConfig {
   // of the two particles for itself. -1: the backend's faster way; 0: each
   // particle; 1: once per pair. The trajectories are the same bit for bit.
   int pairs_once = -1;
+  // When the particles are renumbered in the order of their cells (for
+  // locality; results keep the caller's numbering): -1 at a list build where
+  // the numbering has scattered (kScatteredCells); 0 never; N at the first
+  // list build and every N-th after.
+  int renumber_every = -1;
   double domain_margin = -1;  // escape distance outside the wall's box, m; < 0 = automatic
   uint64_t max_dense_cells = 1ull << 24;
   // Threads of the CPU backend, owned by the caller; nullptr = default_pool().
@@ -294,6 +299,11 @@ double hertz_restitution(double eta);
 
 // Steps between re-evaluations of the motion bound (the fastest speed).
 inline constexpr int kSpeedCheckInterval = 8;
+// With a neighbour list the engine renumbers the particles in the order of
+// their cells (results come back in the caller's numbering) when, at a list
+// build, consecutively numbered particles lie on average more than this many
+// cells apart (each distance counted up to 64 cells).
+inline constexpr double kScatteredCells = 4;
 
 // The contact laws and the critical step they allow, from the material, the
 // particle radii (m; r_mean sizes a stiffness from youngs_modulus), the fastest

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <type_traits>
 #include <vector>
 
 #include "sim/cell_ranges.h"
@@ -48,6 +49,12 @@ enum StatColumn : size_t {
   kStatInvalid,
   kStatColumns
 };
+
+// reorder_by_cell moves the widest per-particle record through the statistics scratch.
+static_assert(kPairSlots * sizeof(FrictionSlot) <= kStatColumns * sizeof(double) &&
+                  kWallSlots * sizeof(FrictionSlot) <= kStatColumns * sizeof(double) &&
+                  sizeof(Vec3d) <= kStatColumns * sizeof(double),
+              "a particle's record must fit its statistics scratch");
 
 template <class B>
 class DynamicsPipeline final : public Simulation {
@@ -190,6 +197,11 @@ class DynamicsPipeline final : public Simulation {
     if (!fits || k != in.arrays.size())
       return invalid_argument("checkpoint does not match this run's settings (friction, particle "
                               "contacts or integrator differ)");
+    // The constant arrays in the restored numbering.
+    const std::vector<uint32_t> order = host_order();
+    for (uint32_t i : order)
+      if (i >= n_) return invalid_argument("checkpoint holds a particle order that is not one");
+    upload_in_order(order);
     time_ = in.time;
     steps_ = in.steps;
     all_released_ = in.all_released;
@@ -206,21 +218,26 @@ class DynamicsPipeline final : public Simulation {
   Status download(ParticleSet* out, std::vector<uint8_t>* flags) override {
     close_pending_step();
     std::vector<Vec3d> p(n_), v(n_);
+    const std::vector<uint32_t> order = host_order();
     if (n_) {
       backend_.to_host(p.data(), pos_.data(), n_ * sizeof(Vec3d));
       backend_.to_host(v.data(), vel_.data(), n_ * sizeof(Vec3d));
     }
+    // In the caller's numbering (the engine's follows the cells, see reorder_by_cell).
     out->resize(n_);
-    for (size_t i = 0; i < n_; ++i) {
-      out->x[i] = p[i].x + wall_.origin.x, out->y[i] = p[i].y + wall_.origin.y,
-      out->z[i] = p[i].z + wall_.origin.z;
-      out->vx[i] = v[i].x, out->vy[i] = v[i].y, out->vz[i] = v[i].z;
+    for (size_t k = 0; k < n_; ++k) {
+      const size_t i = order[k];
+      out->x[i] = p[k].x + wall_.origin.x, out->y[i] = p[k].y + wall_.origin.y,
+      out->z[i] = p[k].z + wall_.origin.z;
+      out->vx[i] = v[k].x, out->vy[i] = v[k].y, out->vz[i] = v[k].z;
       out->r[i] = radius_host_[i];
       out->release[i] = release_host_[i];
     }
     if (flags) {
+      std::vector<uint8_t> f(n_);
+      if (n_) backend_.to_host(f.data(), flags_.data(), n_);
       flags->resize(n_);
-      if (n_) backend_.to_host(flags->data(), flags_.data(), n_);
+      for (size_t k = 0; k < n_; ++k) (*flags)[order[k]] = f[k];
     }
     return backend_.status();
   }
@@ -251,20 +268,19 @@ class DynamicsPipeline final : public Simulation {
     release_host_ = ps.release;
     last_release_ = n_ ? *std::max_element(ps.release.begin(), ps.release.end()) : 0.0;
     std::vector<Vec3d> p(n_), v(n_);
-    std::vector<double> mass(n_);
     std::vector<uint8_t> state(n_);
+    std::vector<uint32_t> order(n_);
     for (size_t i = 0; i < n_; ++i) {
       p[i] = Vec3d{ps.x[i], ps.y[i], ps.z[i]} - wall_.origin;
       v[i] = {ps.vx[i], ps.vy[i], ps.vz[i]};
-      mass[i] = cfg_.material.density * 4.0 / 3.0 * M_PI * ps.r[i] * ps.r[i] * ps.r[i];
       state[i] = ps.release[i] > 0 ? kWaiting : kActive;
+      order[i] = uint32_t(i);
     }
     upload(pos_, p);
     upload(vel_, v);
-    upload(radius_, ps.r);
-    upload(mass_, mass);
-    upload(release_, ps.release);
     upload(state_, state);
+    upload(order_, order);
+    upload_in_order(order);
     backend_.resize(flags_, std::max<size_t>(n_, 1));
     backend_.fill(flags_.data(), n_, uint8_t(0));
     backend_.resize(acc_, std::max<size_t>(n_, 1));
@@ -349,7 +365,7 @@ class DynamicsPipeline final : public Simulation {
   template <class F>
   bool state_arrays(F&& f) {
     bool ok = f(pos_, n_) && f(vel_, n_) && f(acc_, n_) && f(state_, n_) && f(flags_, n_) &&
-              f(speed_, n_);
+              f(speed_, n_) && f(order_, n_);
     if (ok && rotation_) {
       ok = f(omega_, n_) && f(alpha_, n_) && f(wall_hist_[hist_in_], n_ * kWallSlots);
       if (ok && cfg_.particle_contacts) ok = f(pair_hist_[hist_in_], n_ * kPairSlots);
@@ -372,6 +388,83 @@ class DynamicsPipeline final : public Simulation {
   void upload(Buf<T>& dst, const std::vector<T>& src) {
     backend_.resize(dst, std::max<size_t>(src.size(), 1));
     if (!src.empty()) backend_.to_device(dst.data(), src.data(), src.size() * sizeof(T));
+  }
+
+  // The engine's numbering: order_[k] is the caller's index of the particle held at k.
+  std::vector<uint32_t> host_order() {
+    std::vector<uint32_t> order(n_);
+    if (n_) backend_.to_host(order.data(), order_.data(), n_ * sizeof(uint32_t));
+    return order;
+  }
+  // The particles' constant arrays (radius, mass, release time) in that numbering.
+  void upload_in_order(const std::vector<uint32_t>& order) {
+    std::vector<double> r(n_), mass(n_), release(n_);
+    for (size_t k = 0; k < n_; ++k) {
+      const double ri = radius_host_[order[k]];
+      r[k] = ri;
+      mass[k] = cfg_.material.density * 4.0 / 3.0 * M_PI * ri * ri * ri;
+      release[k] = release_host_[order[k]];
+    }
+    upload(radius_, r);
+    upload(mass_, mass);
+    upload(release_, release);
+  }
+
+  // Renumbers the particles in the order of their cells (the grid just built:
+  // p_idx_sorted_, waiting and gone particles last in their old order), so that
+  // neighbours sit near each other in memory. Every per-particle array moves;
+  // friction springs move with their particle and take their partners' new
+  // numbers; hand_over_springs then gives each to its pair's new owner.
+  // No memory of its own: the moves go through the statistics scratch (free
+  // between frames' measures, 128 bytes a particle) and the inverse through
+  // the particle grid's unsorted indices (free once sorted).
+  void reorder_by_cell() {
+    const uint32_t* perm = p_idx_sorted_.data();  // new k holds old perm[k]
+    uint32_t* iv = p_idx_.data();
+    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t k) { iv[perm[k]] = k; });
+    move_by(pos_, 1, perm), move_by(vel_, 1, perm), move_by(acc_, 1, perm);
+    move_by(state_, 1, perm), move_by(flags_, 1, perm), move_by(speed_, 1, perm);
+    move_by(peak_overlap_, 1, perm), move_by(order_, 1, perm);
+    move_by(radius_, 1, perm), move_by(mass_, 1, perm), move_by(release_, 1, perm);
+    if (rotation_) {
+      move_by(omega_, 1, perm), move_by(alpha_, 1, perm);
+      move_by(wall_hist_[hist_in_], kWallSlots, perm);
+      if (cfg_.particle_contacts) {
+        move_by(pair_hist_[hist_in_], kPairSlots, perm);
+        FrictionSlot* slots = pair_hist_[hist_in_].data();
+        backend_.parallel_for(n_ * kPairSlots, [=] COLLIDO_HD(uint32_t q) {
+          if (slots[q].key != kNoKey) slots[q].key = iv[slots[q].key];
+        });
+      }
+    }
+  }
+
+  // Whether consecutively numbered particles lie, on average, more than
+  // kScatteredCells cells apart (each distance counted up to 64 cells): a
+  // numbering that follows space (a lattice, a fresh renumbering) stays, one
+  // that a pour has stirred is renumbered. Through the statistics scratch.
+  bool numbering_scattered() {
+    if (n_ < 2) return false;
+    const Vec3d* x = pos_.data();
+    const double inv_cell = 1.0 / double(pgrid_.cell);
+    double* d = scratch_.data();
+    backend_.parallel_for(n_ - 1, [=] COLLIDO_HD(uint32_t k) {
+      d[k] = hd_min(length(x[k + 1] - x[k]) * inv_cell, 64.0);
+    });
+    return backend_.reduce_sum(d, n_ - 1) > kScatteredCells * double(n_ - 1);
+  }
+
+  // buf[k * width + s] = old buf[perm[k] * width + s], through the statistics scratch.
+  template <class T>
+  void move_by(Buf<T>& buf, size_t width, const uint32_t* perm) {
+    static_assert(alignof(T) <= alignof(double), "the scratch is an array of doubles");
+    const size_t bytes = n_ * width * sizeof(T);
+    T* dst = reinterpret_cast<T*>(scratch_.data());
+    const T* src = buf.data();
+    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t k) {
+      for (size_t s = 0; s < width; ++s) dst[k * width + s] = src[size_t(perm[k]) * width + s];
+    });
+    backend_.copy(buf.data(), dst, bytes);
   }
 
   // --- one step -------------------------------------------------------------------------------
@@ -630,15 +723,25 @@ class DynamicsPipeline final : public Simulation {
     ++times_.neighbour_builds;
   }
 
-  // Every active pair within r_i + r_j + skin: per particle its partners of
-  // larger index (the upper list) and of smaller index (the lower list, with
-  // where each pair sits in the partner's upper list), both in ascending index.
+  // Every active pair within r_i + r_j + skin: per particle the partners whose
+  // pair it owns (larger index: the upper list) and those that own their pair
+  // with it (the lower list, with where each pair sits in the owner's upper
+  // list), both in ascending index.
   // A count pass, two scans, a fill pass per list (each sorted in place, a few
   // dozen entries). The candidate test is symmetric in i and j (the same float
   // copies, one sum of radii, cells found alike), so every lower entry is found
   // in its partner's upper list.
   void build_pair_lists() {
     build_particle_grid();
+    const int every = cfg_.renumber_every;
+    const bool renumber = every < 0   ? numbering_scattered()
+                          : every > 0 ? pair_builds_ % uint64_t(every) == 0
+                                      : false;
+    ++pair_builds_;
+    if (renumber) {
+      reorder_by_cell();
+      build_particle_grid();
+    }
     const ParticleArrays P = arrays();
     const GridSpec pg = pgrid_;
     const uint32_t* start = cell_start_.data();
@@ -724,6 +827,35 @@ class DynamicsPipeline final : public Simulation {
         if (once) lo_rec[b] = q;
       }
     });
+    if (renumber && rotation_) hand_over_springs();
+  }
+
+  // After a renumbering a pair may have a new owner (its particle of lower
+  // index): each particle's springs become those of its upper list's pairs,
+  // found in its own slots or, negated, in the partner's (the old owner's).
+  void hand_over_springs() {
+    const uint32_t* nl_start = nl_start_.data();
+    const uint32_t* nl = nl_list_.data();
+    const FrictionSlot* hin = pair_hist_[hist_in_].data();
+    FrictionSlot* hout = pair_hist_[hist_in_ ^ 1].data();
+    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+      const FrictionSlot* mine = hin + size_t(i) * kPairSlots;
+      FrictionSlot* out = hout + size_t(i) * kPairSlots;
+      int c = 0;
+      for (uint32_t k = nl_start[i], e = nl_start[i + 1]; k < e && c < kPairSlots; ++k) {
+        const uint32_t j = nl[k];
+        const FrictionSlot* theirs = hin + size_t(j) * kPairSlots;
+        bool found = false;
+        for (int s = 0; s < kPairSlots && mine[s].key != kNoKey && !found; ++s)
+          if (mine[s].key == j) out[c++] = mine[s], found = true;
+        for (int s = 0; s < kPairSlots && theirs[s].key != kNoKey && !found; ++s)
+          if (theirs[s].key == i)
+            out[c++] = FrictionSlot{j, -theirs[s].sx, -theirs[s].sy, -theirs[s].sz}, found = true;
+      }
+      if (c < kPairSlots) out[c].key = kNoKey;
+    });
+    // Back into the current generation (the wall's springs share its index).
+    backend_.copy(pair_hist_[hist_in_].data(), hout, n_ * kPairSlots * sizeof(FrictionSlot));
   }
 
   // Calls f(k) for each wall triangle or piece k within `reach` of x (repeats
@@ -873,9 +1005,9 @@ class DynamicsPipeline final : public Simulation {
   }
 
   // Pair forces once per pair, first pass: each particle evaluates the pairs
-  // of its upper list (partners of larger index) and records, per listed pair,
+  // of its upper list (the pairs it owns) and records, per listed pair,
   // whether it touches and the contact's force, torque per metre and rolling
-  // torque as the lower particle sees them; it keeps the pair's spring.
+  // torque as the owner sees them; it keeps the pair's spring.
   void pair_records(double dt) {
     const ParticleArrays P = arrays();
     const ContactLaw law = pair_law_;
@@ -922,9 +1054,9 @@ class DynamicsPipeline final : public Simulation {
     });
   }
 
-  // Second pass: each particle sums its pairs' records with gravity, in
-  // ascending partner index as pair_forces does (the lower partners' records
-  // negated), so both ways give the same bits.
+  // Second pass: each particle sums its pairs' records with gravity, the lower
+  // list's (negated) and then the upper list's, each in ascending index, as
+  // pair_forces does, so both ways give the same bits.
   void pair_gather() {
     const ParticleArrays P = arrays();
     const bool rot = rotation_;
@@ -1004,13 +1136,13 @@ class DynamicsPipeline final : public Simulation {
       const FrictionSlot* old_slots = friction ? hin + size_t(i) * kPairSlots : nullptr;
       FrictionSlot* new_slots = friction ? hout + size_t(i) * kPairSlots : nullptr;
       // One candidate j: the exact test in double, then the contact's force.
-      auto touch = [&](uint32_t j) {
+      // owner: i is the pair's particle of lower index (it keeps the spring).
+      auto touch = [&](uint32_t j, bool owner) {
         const Vec3d d = xi - P.x[j];
         const double rs = r + P.r[j];
         const double dist2 = dot(d, d);
         if (!(dist2 < rs * rs)) return;
-        // The pair's spring is kept by its lower index, as that particle sees it.
-        const bool owner = i < j;
+        // The pair's spring is kept by its owner, as that particle sees it.
         Vec3d spring{0, 0, 0};
         if (friction)
           spring = owner ? find_spring(old_slots, kPairSlots, j)
@@ -1036,20 +1168,21 @@ class DynamicsPipeline final : public Simulation {
         }
       };
       if (list) {
-        // Ascending partner index (each list is sorted when built, the lower
-        // partners' before the upper's): the same contacts in the same order
-        // whenever the list was built, so a run resumed from a checkpoint
-        // repeats the original bit for bit, and pair_gather sums alike.
+        // The lower list and then the upper, each in ascending index (sorted
+        // when built): the same contacts in the same order whenever the list
+        // was built, so a run resumed from a checkpoint repeats the original
+        // bit for bit, and pair_gather sums alike.
         for (uint32_t k = lo_start[i], e = lo_start[i + 1]; k < e; ++k) {
           const uint32_t j = lo_j[k];
-          if (P.state[j] == kActive) touch(j);
+          if (P.state[j] == kActive) touch(j, false);
         }
         for (uint32_t k = nl_start[i], e = nl_start[i + 1]; k < e; ++k) {
           const uint32_t j = nl[k];
-          if (P.state[j] == kActive) touch(j);
+          if (P.state[j] == kActive) touch(j, true);
         }
       } else {
-        for_each_grid_candidate(pg, start, end, sidx, sp, slack, i, xf, rf, touch);
+        for_each_grid_candidate(pg, start, end, sidx, sp, slack, i, xf, rf,
+                                [&](uint32_t j) { touch(j, i < j); });
       }
       P.flags[i] = npair ? uint8_t(kActive | kFlagParticleContact) : uint8_t(kActive);
       if (measure) {
@@ -1237,6 +1370,8 @@ class DynamicsPipeline final : public Simulation {
   std::vector<double> radius_host_, release_host_;
 
   Buf<Vec3d> pos_, vel_, acc_, omega_, alpha_;
+  Buf<uint32_t> order_;  // order_[k]: the caller's index of the particle held at k
+  uint64_t pair_builds_ = 0;  // pair-list builds so far (renumber_every counts them)
   Buf<double> radius_, mass_, release_, speed_, scratch_;
   Buf<double> peak_overlap_;  // deepest wall overlap per particle since the last measure
   Buf<uint8_t> state_, flags_;
@@ -1258,9 +1393,9 @@ class DynamicsPipeline final : public Simulation {
   bool disp_fresh_ = false;  // disp_max_ is the largest move of the current positions
   double disp_max_ = 0;      // squared, since the lists were built
   std::vector<double> release_sorted_;  // host: release times in order, to count releases
-  // Each list holds the partners of larger index (upper, sorted); lo_start_,
-  // lo_j_ and lo_rec_ give each particle its partners of smaller index (sorted)
-  // and where each such pair sits in its partner's upper list.
+  // Each list holds the partners whose pair the particle owns (upper, sorted);
+  // lo_start_, lo_j_ and lo_rec_ give each particle the partners owning their
+  // pair with it (sorted) and where each such pair sits in its owner's upper list.
   Buf<uint32_t> nl_start_, nl_list_, lo_start_, lo_j_, lo_rec_;
   // once_: pair forces evaluated once per pair, into records per upper-list entry.
   bool once_ = false;

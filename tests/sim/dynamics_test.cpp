@@ -334,6 +334,9 @@ void pour_into(const TriangleMesh& wall, int per_layer_side, int layers, uint64_
 // A particle of radius 3 touched by 14 of radius 1 (6 along the axes, 8 on the
 // diagonals, 3.9 from its centre and clear of each other) has more frictional contacts
 // than its 8 history slots (kPairSlots); the frame's statistics count the 6 without one.
+// A pair's spring is kept by its particle of lower index, here the large one:
+// the grid is searched every step, so the particles keep the numbers given
+// (a neighbour list renumbers them in the order of their cells).
 void friction_history_overflow_is_counted() {
   const Vec3d c{0, 0, 50};
   std::vector<Vec3d> pos{c};
@@ -349,6 +352,7 @@ void friction_history_overflow_is_counted() {
   cfg.gravity = {0, 0, 0};
   cfg.particle_contacts = true;
   cfg.material.friction = 0.3;
+  cfg.neighbour_skin = 0;
   auto s = make_sim(make_cylinder(50, 100, 40), cfg, p);
   ASSERT_TRUE(s);
   ASSERT_TRUE(s->step(1, s->time_step_info().spring_step));
@@ -478,12 +482,19 @@ TEST(Dynamics, NeighbourListFindsEveryContactTheGridDoes) { neighbour_list_finds
 // sum a particle's pairs in the same order (on the CPU; the GPU's fused
 // multiply-adds may differ between kernels). Dense colliding scenes with
 // friction, rolling resistance, both contact laws, mixed radii, particles
-// released while the list stands, and two threads.
+// released while the list stands, particles numbered at random (renumbered by
+// cell, results in the caller's numbering), and two threads.
 void pairs_once_or_from_both_sides_agree() {
   const TriangleMesh wall = make_cylinder(50, 100, 40);
-  for (int scene = 0; scene < 3; ++scene) {
+  for (int scene = 0; scene < 4; ++scene) {
     ParticleSet p = lattice(10, 9.9, -0.05, 1, 5.0, 11);  // 1.98 apart: pressed together
     SplitMix64 rng(5);
+    if (scene == 3)  // the lattice numbered at random
+      for (size_t i = p.size(); i > 1; --i) {
+        const size_t j = size_t(rng.next() % i);
+        for (std::vector<double>* a : {&p.x, &p.y, &p.z, &p.vx, &p.vy, &p.vz})
+          std::swap((*a)[i - 1], (*a)[j]);
+      }
     if (scene != 0)
       for (double& r : p.r) r = rng.uniform(0.9, 1.05);
     DynamicsConfig cfg;
@@ -539,6 +550,55 @@ void pairs_once_or_from_both_sides_agree() {
   }
 }
 TEST(Dynamics, PairsOnceOrFromBothSidesAgreeBitForBit) { pairs_once_or_from_both_sides_agree(); }
+
+// A neighbour list renumbers the particles in the order of their cells (here
+// at its first build and every 4th after, renumber_every), handing each
+// friction spring to its pair's new owner; the grid searched every step keeps
+// the caller's numbers. The two runs differ only in the order their sums are
+// taken, so a spring lost or turned the wrong way in a renumbering would part
+// them at once: a frictional pile poured in 50 groups (the list built about 50
+// times) keeps the two within rounding, and the caller sees its own numbering.
+void renumbering_keeps_the_springs() {
+  const TriangleMesh wall = make_cylinder(50, 100, 40);
+  ParticleSet p = lattice(10, 9.9, -0.05, 1, 5.0, 7);  // 1.98 apart: pressed together
+  DynamicsConfig cfg;
+  cfg.particle_contacts = true;
+  cfg.material.friction = 0.4;
+  cfg.material.restitution = 0.5;
+  auto probe = make_sim(wall, cfg, p);
+  ASSERT_TRUE(probe);
+  const double dt = probe->time_step_info().spring_step;
+  for (size_t i = 0; i < p.size(); ++i) p.release[i] = 3 * dt * double(i % 50);
+  DynamicsConfig grid = cfg;
+  grid.neighbour_skin = 0;
+  cfg.renumber_every = 4;
+  auto listed = make_sim(wall, cfg, p), searched = make_sim(wall, grid, p);
+  ASSERT_TRUE(listed && searched);
+  listed->set_stage_timing(true);
+  double worst = 0, elastic = 0;
+  for (int k = 0; k < 400; ++k) {
+    ASSERT_TRUE(listed->step(1, dt));
+    ASSERT_TRUE(searched->step(1, dt));
+    const FrameStats a = measure(*listed), b = measure(*searched);
+    ASSERT_EQ(a.particle_contacts, b.particle_contacts) << "step " << k;
+    ASSERT_NEAR(a.elastic, b.elastic, 1e-6 * b.elastic + 1e-12) << "step " << k;
+    elastic = std::max(elastic, b.elastic);
+  }
+  ParticleSet pa, pb;
+  ASSERT_TRUE(listed->download(&pa, nullptr));
+  ASSERT_TRUE(searched->download(&pb, nullptr));
+  for (size_t i = 0; i < p.size(); ++i) {
+    EXPECT_EQ(pa.r[i], p.r[i]);
+    worst = std::max({worst, std::fabs(pa.x[i] - pb.x[i]), std::fabs(pa.z[i] - pb.z[i]),
+                      std::fabs(pa.vx[i] - pb.vx[i]) * dt});
+  }
+  std::printf("listed against searched over 400 steps, %llu builds: largest difference %.3g r\n",
+              (unsigned long long)listed->stage_times().neighbour_builds, worst);
+  EXPECT_GT(listed->stage_times().neighbour_builds, 40u);
+  EXPECT_GT(elastic, 0);
+  EXPECT_LT(worst, 1e-9);
+}
+TEST(Dynamics, RenumberingKeepsTheSprings) { renumbering_keeps_the_springs(); }
 
 // Velocity Verlet closes a step in the next step's first pass; taken one call
 // at a time, each step is closed on its own pass. Both give the same bits (the
@@ -682,6 +742,7 @@ TEST_F(DynamicsCuda, PairsOnceOrFromBothSidesAgreeBitForBit) {
 TEST_F(DynamicsCuda, StepsOneAtATimeOrTogetherAgreeBitForBit) {
   steps_one_at_a_time_or_together_agree();
 }
+TEST_F(DynamicsCuda, RenumberingKeepsTheSprings) { renumbering_keeps_the_springs(); }
 TEST_F(DynamicsCuda, FrictionTurnsSlidingIntoRolling) {
   friction_makes_it_roll();
 }
