@@ -9,7 +9,9 @@
 namespace collido::job {
 namespace {
 
-constexpr char kMagic[8] = {'C', 'L', 'C', 'K', 'P', 'T', '0', '1'};
+// The last two characters are the format: 02 holds the engine's particle
+// numbering among the arrays (01, before particles were renumbered by cell, did not).
+constexpr char kMagic[8] = {'C', 'L', 'C', 'K', 'P', 'T', '0', '2'};
 // More than any run holds; a larger count or size means a damaged file.
 constexpr uint32_t kMaxArrays = 64;
 
@@ -72,6 +74,11 @@ Expected<Checkpoint> read_checkpoint(const std::string& path) {
   ss << in.rdbuf();
   const std::string b = ss.str();
   auto damaged = [&](const char* why) { return parse_error(path + ": damaged checkpoint (" + why + ")"); };
+  if (b.size() >= sizeof kMagic && std::memcmp(b.data(), kMagic, 6) == 0 &&
+      std::memcmp(b.data(), kMagic, sizeof kMagic) != 0)
+    return parse_error(path + ": a checkpoint of another format (" + b.substr(6, 2) +
+                       ", this version reads " + std::string(kMagic + 6, 2) +
+                       "): run the scene again from its start");
   if (b.size() < sizeof kMagic + 8 || std::memcmp(b.data(), kMagic, sizeof kMagic) != 0)
     return damaged("not a checkpoint");
   uint64_t stored = 0;

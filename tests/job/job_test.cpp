@@ -190,6 +190,14 @@ TEST(Job, CheckpointsRoundTripAndDamageIsDetected) {
   ASSERT_TRUE(write_file_atomic(dir + "/damaged.bin", bytes));
   EXPECT_EQ(read_checkpoint(dir + "/damaged.bin").status().code(), ErrorCode::kParse);
   EXPECT_EQ(read_checkpoint(dir + "/none.bin").status().code(), ErrorCode::kNotFound);
+  // One of the format before the engine kept its particle numbering: refused, saying so.
+  bytes = read_file(dir + "/checkpoint.bin");
+  bytes[7] = '1';
+  ASSERT_TRUE(write_file_atomic(dir + "/older.bin", bytes));
+  const auto older = read_checkpoint(dir + "/older.bin");
+  ASSERT_FALSE(older);
+  EXPECT_NE(older.status().message().find("another format (01"), std::string::npos)
+      << older.status().message();
 }
 
 // Runs the spec in a job-exec child and kills it with SIGKILL once it has
