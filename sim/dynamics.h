@@ -127,7 +127,7 @@ struct DynamicsConfig {
   // When the particles are renumbered in the order of their cells (for
   // locality; results keep the caller's numbering): -1 at a list build where
   // the numbering has scattered (kScatteredCells); 0 never; N at the first
-  // list build and every N-th after.
+  // list build and every N-th after (counted from the start, or from a resume).
   int renumber_every = -1;
   double domain_margin = -1;  // escape distance outside the wall's box, m; < 0 = automatic
   uint64_t max_dense_cells = 1ull << 24;

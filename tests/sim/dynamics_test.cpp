@@ -407,6 +407,14 @@ void saved_state_continues_exactly() {
 }
 TEST(Dynamics, SavedStateContinuesExactly) { saved_state_continues_exactly(); }
 
+// Releases the particles in 50 groups, one every 3 spring steps of the scene.
+void release_in_50_groups(const TriangleMesh& wall, const DynamicsConfig& cfg, ParticleSet* p) {
+  auto probe = make_sim(wall, cfg, *p);
+  ASSERT_TRUE(probe);
+  const double step = probe->time_step_info().spring_step;
+  for (size_t i = 0; i < p->size(); ++i) p->release[i] = 3 * step * double(i % 50);
+}
+
 // The neighbour list finds exactly the contacts a search of the grid finds:
 // every step, the list run's state is copied into a run that searches the grid
 // every step (neighbour_skin 0), and both measure it: the same pair and wall
@@ -428,13 +436,7 @@ void neighbour_list_finds_every_contact() {
     cfg.material.restitution = 0.5;
     if (scene == 3) cfg.method = Method::kCircumcircle;
     if (scene == 4) cfg.method = Method::kBvh;
-    if (scene == 2) {
-      // Released in 50 groups over the first 150 steps.
-      auto probe = make_sim(wall, cfg, p);
-      ASSERT_TRUE(probe);
-      const double step = probe->time_step_info().spring_step;
-      for (size_t i = 0; i < p.size(); ++i) p.release[i] = 3 * step * double(i % 50);
-    }
+    if (scene == 2) release_in_50_groups(wall, cfg, &p);
     DynamicsConfig grid = cfg;
     grid.neighbour_skin = 0;
     auto listed = make_sim(wall, cfg, p);
@@ -505,12 +507,7 @@ void pairs_once_or_from_both_sides_agree() {
     if (scene == 1) cfg.contact_model = ContactModel::kHertzMindlin;
     ThreadPool pool(2);
     cfg.pool = &pool;
-    if (scene == 2) {
-      auto probe = make_sim(wall, cfg, p);
-      ASSERT_TRUE(probe);
-      const double step = probe->time_step_info().spring_step;
-      for (size_t i = 0; i < p.size(); ++i) p.release[i] = 3 * step * double(i % 50);
-    }
+    if (scene == 2) release_in_50_groups(wall, cfg, &p);
     ParticleSet end[2];
     std::vector<uint8_t> flags[2];
     uint64_t contacts[2] = {0, 0}, overflow[2] = {0, 0};
@@ -565,16 +562,14 @@ void renumbering_keeps_the_springs() {
   cfg.particle_contacts = true;
   cfg.material.friction = 0.4;
   cfg.material.restitution = 0.5;
-  auto probe = make_sim(wall, cfg, p);
-  ASSERT_TRUE(probe);
-  const double dt = probe->time_step_info().spring_step;
-  for (size_t i = 0; i < p.size(); ++i) p.release[i] = 3 * dt * double(i % 50);
+  release_in_50_groups(wall, cfg, &p);
   DynamicsConfig grid = cfg;
   grid.neighbour_skin = 0;
   cfg.renumber_every = 4;
   auto listed = make_sim(wall, cfg, p), searched = make_sim(wall, grid, p);
   ASSERT_TRUE(listed && searched);
   listed->set_stage_timing(true);
+  const double dt = listed->time_step_info().spring_step;
   double worst = 0, elastic = 0;
   for (int k = 0; k < 400; ++k) {
     ASSERT_TRUE(listed->step(1, dt));
