@@ -188,9 +188,11 @@ COLLIDO_HD COLLIDO_FORCEINLINE ContactForce contact_force(const ContactLaw& law,
     }
     s = s + vt * dt;
     Vec3d ft = s * (-kt) - vt * gamma_t;
-    const double ftn = length(ft), limit = law.mu * (fn > 0 ? fn : 0);
-    if (ftn > limit) {
-      // Sliding: cap at the Coulomb limit, and reset the spring to what that force implies.
+    const double ft2 = dot(ft, ft), limit = law.mu * (fn > 0 ? fn : 0);
+    if (ft2 > limit * limit) {
+      // Sliding: cap at the Coulomb limit, and reset the spring to what that
+      // force implies (the square root only here: most contacts stick).
+      const double ftn = hd_sqrt(ft2);
       ft = ftn > 0 ? ft * (limit / ftn) : Vec3d{0, 0, 0};
       s = kt > 0 ? (ft + vt * gamma_t) * (-1.0 / kt) : Vec3d{0, 0, 0};
     }
