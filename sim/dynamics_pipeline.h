@@ -313,8 +313,7 @@ class DynamicsPipeline final : public Simulation {
     skin_ = ts_.neighbour_skin;
     nlist_ = cfg_.particle_contacts && skin_ > 0;
     wall_list_ = nlist_ && !cfg_.wall_motion.moving();
-    lists_ = nlist_ || wall_list_;
-    if (lists_) {
+    if (nlist_) {
       backend_.resize(x_ref_, std::max<size_t>(n_, 1));
       release_sorted_ = ps.release;
       std::sort(release_sorted_.begin(), release_sorted_.end());
@@ -483,7 +482,7 @@ class DynamicsPipeline final : public Simulation {
     }
     if (releasing) all_released_ = time_ >= last_release_;
     lap(times_.drift_ms);
-    if (cfg_.particle_contacts || lists_) {
+    if (cfg_.particle_contacts) {
       update_candidates();
       lap(times_.grid_ms);
     }
@@ -611,7 +610,7 @@ class DynamicsPipeline final : public Simulation {
   // due now, this step's half kick and drift; with lists, the largest squared
   // move since they were built, for the check that follows.
   void open_step(double dt, bool releasing) {
-    const bool disp = lists_ && nl_valid_;
+    const bool disp = nlist_ && nl_valid_;
     const OpenStep op{arrays(),     rotation_, close_pending_,  releasing,
                       disp,         pending_dt_, dt,            time_,
                       speed_.data(), domain_at(wall_pose(time_)), release_.data(),
@@ -686,8 +685,11 @@ class DynamicsPipeline final : public Simulation {
   // pair now touching was within r_i + r_j + skin at the build, and every wall
   // triangle touching a particle within r + skin/2 of it, so they are listed).
   void update_candidates() {
-    if (cfg_.particle_contacts && !nlist_) build_particle_grid();
-    if (!lists_) return;
+    if (!cfg_.particle_contacts) return;
+    if (!nlist_) {
+      build_particle_grid();
+      return;
+    }
     // Those the release kernel has let go: the measuring pass comes after a
     // step's time has advanced and before the next step releases at it.
     const uint64_t released = released_by(released_at_);
@@ -714,9 +716,19 @@ class DynamicsPipeline final : public Simulation {
                     release_sorted_.begin());
   }
 
+  // Sorts a short list in place (insertion sort: a few dozen entries).
+  COLLIDO_HD static COLLIDO_FORCEINLINE void sort_short(uint32_t* a, uint32_t n) {
+    for (uint32_t k = 1; k < n; ++k) {
+      const uint32_t v = a[k];
+      uint32_t b = k;
+      for (; b > 0 && a[b - 1] > v; --b) a[b] = a[b - 1];
+      a[b] = v;
+    }
+  }
+
   // The lists at the current positions, which their check then measures moves from.
   void build_lists() {
-    if (nlist_) build_pair_lists();
+    build_pair_lists();
     if (wall_list_) build_wall_lists();
     backend_.copy(x_ref_.data(), pos_.data(), n_ * sizeof(Vec3d));
     nl_valid_ = true;
@@ -782,18 +794,12 @@ class DynamicsPipeline final : public Simulation {
     uint32_t* up_list = nl_list_.data();
     backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
       if (P.state[i] != kActive) return;
-      const uint32_t s0 = up_first[i];
-      uint32_t c = s0;
+      uint32_t c = up_first[i];
       for_each_grid_candidate(pg, start, end, sidx, sp, extra, i, cast3<float>(P.x[i]),
                               float(P.r[i]), [&](uint32_t j) {
                                 if (j > i) up_list[c++] = j;
                               });
-      for (uint32_t a = s0 + 1; a < c; ++a) {  // insertion sort: short lists
-        const uint32_t v = up_list[a];
-        uint32_t b = a;
-        for (; b > s0 && up_list[b - 1] > v; --b) up_list[b] = up_list[b - 1];
-        up_list[b] = v;
-      }
+      sort_short(up_list + up_first[i], c - up_first[i]);
     });
     uint32_t* lo_j = lo_j_.data();
     uint32_t* lo_rec = lo_rec_.data();
@@ -804,27 +810,18 @@ class DynamicsPipeline final : public Simulation {
       uint32_t c = s0;
       for_each_grid_candidate(pg, start, end, sidx, sp, extra, i, cast3<float>(P.x[i]),
                               float(P.r[i]), [&](uint32_t j) {
-                                if (j > i) return;
-                                lo_j[c] = j;
-                                if (once) {  // i's place in j's sorted upper list
-                                  uint32_t lo = up_first[j], hi = up_first[j + 1];
-                                  while (lo < hi) {
-                                    const uint32_t mid = lo + (hi - lo) / 2;
-                                    if (up_list[mid] < i) lo = mid + 1; else hi = mid;
-                                  }
-                                  lo_rec[c] = lo;
-                                }
-                                ++c;
+                                if (j < i) lo_j[c++] = j;
                               });
-      for (uint32_t a = s0 + 1; a < c; ++a) {  // insertion sort by partner
-        const uint32_t v = lo_j[a], q = once ? lo_rec[a] : 0;
-        uint32_t b = a;
-        for (; b > s0 && lo_j[b - 1] > v; --b) {
-          lo_j[b] = lo_j[b - 1];
-          if (once) lo_rec[b] = lo_rec[b - 1];
+      sort_short(lo_j + s0, c - s0);
+      if (!once) return;
+      for (uint32_t a = s0; a < c; ++a) {  // i's place in the sorted upper list of j
+        const uint32_t j = lo_j[a];
+        uint32_t lo = up_first[j], hi = up_first[j + 1];
+        while (lo < hi) {
+          const uint32_t mid = lo + (hi - lo) / 2;
+          if (up_list[mid] < i) lo = mid + 1; else hi = mid;
         }
-        lo_j[b] = v;
-        if (once) lo_rec[b] = q;
+        lo_rec[a] = lo;
       }
     });
     if (renumber && rotation_) hand_over_springs();
@@ -1380,9 +1377,8 @@ class DynamicsPipeline final : public Simulation {
   int hist_in_ = 0;
   Buf<uint32_t> p_key_, p_idx_, p_key_sorted_, p_idx_sorted_, cell_start_, cell_end_;
   Buf<PackedParticle> sorted_;  // float copies in cell order, for the pair loop's first test
-  bool lists_ = false;  // some candidates are listed (nlist_ or wall_list_), built at x_ref_
-  // The neighbour list (nlist_): per particle [nl_start_[i], nl_start_[i + 1]) of
-  // nl_list_, built at the positions x_ref_.
+  // The neighbour lists (nlist_; with them the wall's, wall_list_): per particle
+  // [nl_start_[i], nl_start_[i + 1]) of nl_list_, built at the positions x_ref_.
   bool nlist_ = false, nl_valid_ = false;
   double skin_ = 0;
   uint64_t nl_released_ = 0;

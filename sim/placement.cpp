@@ -35,49 +35,53 @@ bool finite3(Vec3d v) {
 // across the gap between them are joined by a segment the wall does not cross,
 // so they lie on the same side of it. Groups are merged across layers with a
 // union-find over group ids, each holding its side once known.
-class SideOfWall {
- public:
-  explicit SideOfWall(const TriangleMesh& wall) : wall_(wall) {}
-  int new_group() {
-    parent_.push_back(uint32_t(parent_.size()));
-    side_.push_back(kUnknown);
-    return int(parent_.size() - 1);
-  }
-  int find(int g) {
-    while (parent_[g] != uint32_t(g)) g = int(parent_[g] = parent_[parent_[g]]);
-    return g;
-  }
-  void join(int a, int b) {
-    a = find(a), b = find(b);
-    if (a == b) return;
-    if (side_[b] == kUnknown) side_[b] = side_[a];
-    parent_[a] = uint32_t(b);
-  }
-  // |w|: a vessel wound inward (as other DEM codes export them) has w = -1 inside.
-  bool inside(int g, Vec3d p) {
-    g = find(g);
-    if (side_[g] == kUnknown) side_[g] = std::fabs(winding_number(wall_, p)) >= 0.5 ? kIn : kOut;
-    return side_[g] == kIn;
-  }
-
- private:
-  enum : uint8_t { kUnknown, kIn, kOut };
-  const TriangleMesh& wall_;
-  std::vector<uint32_t> parent_;
-  std::vector<uint8_t> side_;
-};
-
-// A small union-find over one layer's sites.
-struct LayerSets {
+// Disjoint sets (union-find with path halving): a layer's sites, and the groups.
+struct DisjointSets {
   std::vector<uint32_t> parent;
-  explicit LayerSets(size_t n) : parent(n) {
+  explicit DisjointSets(size_t n = 0) : parent(n) {
     for (size_t i = 0; i < n; ++i) parent[i] = uint32_t(i);
+  }
+  uint32_t add() {
+    parent.push_back(uint32_t(parent.size()));
+    return parent.back();
   }
   uint32_t find(uint32_t a) {
     while (parent[a] != a) a = parent[a] = parent[parent[a]];
     return a;
   }
-  void join(uint32_t a, uint32_t b) { parent[find(a)] = find(b); }
+  // Joins a's set into b's; returns b's root.
+  uint32_t join(uint32_t a, uint32_t b) {
+    a = find(a), b = find(b);
+    parent[a] = b;
+    return b;
+  }
+};
+
+class SideOfWall {
+ public:
+  explicit SideOfWall(const TriangleMesh& wall) : wall_(wall) {}
+  int new_group() {
+    side_.push_back(kUnknown);
+    return int(groups_.add());
+  }
+  void join(int a, int b) {
+    const uint8_t side = side_[groups_.find(uint32_t(a))];
+    const uint32_t root = groups_.join(uint32_t(a), uint32_t(b));
+    if (side_[root] == kUnknown) side_[root] = side;
+  }
+  // |w|: a vessel wound inward (as other DEM codes export them) has w = -1 inside.
+  bool inside(int g, Vec3d p) {
+    const uint32_t root = groups_.find(uint32_t(g));
+    if (side_[root] == kUnknown)
+      side_[root] = std::fabs(winding_number(wall_, p)) >= 0.5 ? kIn : kOut;
+    return side_[root] == kIn;
+  }
+
+ private:
+  enum : uint8_t { kUnknown, kIn, kOut };
+  const TriangleMesh& wall_;
+  DisjointSets groups_;
+  std::vector<uint8_t> side_;
 };
 
 // Lattice sites in the region, a layer (fixed z) at a time from the bottom, that
@@ -144,7 +148,7 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
       auto joined = [&](Vec3d a, double ra, Vec3d b, double rb) {
         return ra > 0 && rb > 0 && length(a - b) < ra + rb;
       };
-      LayerSets sets(per_layer);
+      DisjointSets sets(per_layer);
       for (size_t s = 0; s < per_layer; ++s) {
         const size_t i = s % nx;
         if (i > 0 && joined(site(layer, s), reach[s], site(layer, s - 1), reach[s - 1]))
