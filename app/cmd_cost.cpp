@@ -229,7 +229,10 @@ int gvm_train_jobs(const ParsedArgs& p, const std::string& log_path) {
   std::printf("interval (out-of-fold residual quantiles, model space):");
   for (size_t k = 0; k < K; ++k)
     std::printf(" %s [%+.3f, %+.3f]", kShort[k], model->residual_lo(k), model->residual_hi(k));
-  std::printf("\n");
+  std::printf("\nshare of the GVM's correction kept over the prior: total %.2f, per-frame %.2f\n",
+              model->gvm_weight(0), model->gvm_weight(1));
+  std::printf("memory's point raised by (log10) host %.4f, device %.4f\n", model->point_offset(2),
+              model->point_offset(3));
   const auto& rs = *rows;
   const double us_point = us_per_call([&](size_t i) {
     double out[job::kJobOutputs];

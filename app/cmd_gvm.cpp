@@ -82,8 +82,8 @@ const std::vector<FlagSpec>& train_flags() {
   static const std::vector<FlagSpec> specs = {
       {"logs", true, "run log or job log CSV to train on (required; see docs/gvm.md)"},
       {"out", true, "where to write the model JSON (required)"},
-      {"hidden", true, "hidden neurons (default 16)"},
-      {"epochs", true, "epochs; one epoch = one proposal per parameter (default 2000)"},
+      {"hidden", true, "hidden neurons (default 16; a job log 12)"},
+      {"epochs", true, "epochs; one epoch = one proposal per parameter (default 2000; a job log 800)"},
       {"seed", true, "seed of the machine's signs, start and proposals (default 1)"},
       {"delta", true, "largest Monte Carlo step, fraction of a parameter's range (default 0.1)"},
       {"fixed-delta", false, "keep the step at --delta instead of adapting it per epoch"},

@@ -68,13 +68,22 @@ WorkEstimate estimate_work(const sim::TriangleMesh& wall, const sim::DynamicsCon
     }
     e.pieces = double(wall.triangles.size());
   } else {
-    // Four-way splitting's count is exact and cheap to compute; bisection
-    // (gravity, circumcircle) stops each piece as soon as it fits and makes 6 to
-    // 14 times fewer on the calibration walls (app/cmd_calibrate.cpp), so a
-    // sixth of it is a generous estimate there. The grid over piece centres
-    // costs work in proportion to the pieces, not to the cells.
+    // Four-way splitting's count is a product per triangle. Bisection (gravity,
+    // circumcircle) stops each piece as soon as it fits, 6 to 14 times fewer on
+    // the calibration walls: counted exactly (walking the bisections, about
+    // 10 ns a piece) up to kCountedPieces, beyond which a sixth of four-way's
+    // count stands in (such a wall is refused by the usual budget anyway). The
+    // grid over piece centres costs work in proportion to the pieces, not cells.
+    constexpr double kCountedPieces = 2e6;
     const double m4 = sim::midpoint4_piece_count(wall, r_max);
-    e.pieces = config.method == sim::Method::kMidpoint4 ? m4 : m4 / 6;
+    const sim::DivisionMethod how = config.method == sim::Method::kGravity
+                                        ? sim::DivisionMethod::kGravity
+                                        : config.method == sim::Method::kCircumcircle
+                                              ? sim::DivisionMethod::kCircumcircle
+                                              : sim::DivisionMethod::kMidpoint4;
+    e.pieces = how == sim::DivisionMethod::kMidpoint4 ? m4
+               : m4 / 6 <= kCountedPieces         ? sim::division_piece_count(wall, how, r_max)
+                                                  : m4 / 6;
   }
   e.host_bytes = double(particles) * bytes_per_particle(config) + e.pieces * 160 +
                  std::min(e.wall_cells, 1e12) * 12 + 64.0 * (1 << 20);

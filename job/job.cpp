@@ -140,7 +140,10 @@ json manifest(const JobResult& r, const scene::Scene* scene) {
                {"ms_per_step", c.steps ? 1e3 * c.simulate_s / double(c.steps) : 0.0},
                {"peak_host_bytes", c.peak_host_bytes},
                {"peak_device_bytes", c.peak_device_bytes},
-               {"gpu_busy_fraction", c.gpu_busy_fraction}};
+               {"gpu_busy_fraction", c.gpu_busy_fraction},
+               {"active_steps", c.active_steps},
+               {"wall_contact_steps", c.wall_contact_steps},
+               {"pair_contact_steps", c.pair_contact_steps}};
   j["notes"] = r.notes;
   json arts = json::array();
   for (const Artifact& a : r.artifacts)
@@ -209,6 +212,9 @@ class JobRunner {
       result_.cost.steps = c.value("steps", uint64_t(0));
       result_.cost.peak_host_bytes = c.value("peak_host_bytes", uint64_t(0));
       result_.cost.peak_device_bytes = c.value("peak_device_bytes", uint64_t(0));
+      result_.cost.active_steps = c.value("active_steps", 0.0);
+      result_.cost.wall_contact_steps = c.value("wall_contact_steps", 0.0);
+      result_.cost.pair_contact_steps = c.value("pair_contact_steps", 0.0);
     } catch (const json::exception&) {
       return false;  // a field of the wrong type: not a manifest we wrote
     }
@@ -404,6 +410,10 @@ class JobRunner {
         pvd.push_back({last_.time, "vtp/" + vtp_name(f)});
       }
       if (Status w = stats_.append(last_, engine_ms); !w) return w;
+      const double substeps = double(last_.substeps);
+      result_.cost.active_steps += double(last_.active) * substeps;
+      result_.cost.wall_contact_steps += double(last_.wall_contacts) * substeps;
+      result_.cost.pair_contact_steps += double(last_.particle_contacts) * substeps;
       if (last_.escaped + last_.invalid > lost_) {
         note("frame " + std::to_string(f) + ": " + std::to_string(last_.escaped) +
              " particles escaped, " + std::to_string(last_.invalid) +

@@ -106,6 +106,9 @@ struct Cost {
   uint64_t peak_host_bytes = 0;    // this process's peak resident set
   uint64_t peak_device_bytes = 0;  // held by the engine's backend (0 on the CPU)
   double gpu_busy_fraction = 0;    // share of the simulation's wall time on the GPU (0 on the CPU)
+  // What the steps did (each frame's end counts weighted by its steps; the frames this
+  // process ran): what a job's time turns on besides its sizes, kept for the cost model.
+  double active_steps = 0, wall_contact_steps = 0, pair_contact_steps = 0;
 };
 
 struct JobResult {

@@ -85,7 +85,14 @@ const std::vector<std::string>& job_log_columns() {
       "render_height", "formats",        "backend",         "device",
       "threads",       "total_s",        "prepare_s",       "simulate_s",
       "render_s",      "per_frame_s",    "peak_host_bytes", "peak_device_bytes",
-      "gpu_load",      "output_bytes",   "steps_taken",     "load_avg"};
+      "gpu_load",      "output_bytes",   "steps_taken",     "load_avg",
+      "active_steps",  "wall_contact_steps", "pair_contact_steps"};
+  return cols;
+}
+
+const std::vector<std::string>& job_log_optional_columns() {
+  static const std::vector<std::string> cols = {"active_steps", "wall_contact_steps",
+                                                "pair_contact_steps"};
   return cols;
 }
 
@@ -138,6 +145,11 @@ Status validate(const JobMeasure& m) {
       {"output_bytes", m.output_bytes}, {"load_avg", m.load_avg}};
   for (const auto& [name, v] : fields)
     if (!std::isfinite(v) || v < 0) return invalid_argument(std::string(name) + " must be >= 0");
+  const std::pair<const char*, double> notes[] = {{"active_steps", m.active_steps},
+                                                  {"wall_contact_steps", m.wall_contact_steps},
+                                                  {"pair_contact_steps", m.pair_contact_steps}};
+  for (const auto& [name, v] : notes)  // NaN: not recorded
+    if (std::isinf(v) || v < 0) return invalid_argument(std::string(name) + " must be >= 0 or empty");
   if (m.gpu_load > 1) return invalid_argument("gpu_load must be <= 1");
   return Status::ok();
 }
@@ -190,6 +202,10 @@ std::string cell(const JobRecord& r, const std::string& c) {
   if (c == "output_bytes") return n(m.output_bytes);
   if (c == "steps_taken") return u(m.steps_taken);
   if (c == "load_avg") return n(m.load_avg);
+  auto note = [&](double v) { return std::isnan(v) ? std::string() : n(v); };
+  if (c == "active_steps") return note(m.active_steps);
+  if (c == "wall_contact_steps") return note(m.wall_contact_steps);
+  if (c == "pair_contact_steps") return note(m.pair_contact_steps);
   return "";
 }
 
@@ -260,6 +276,13 @@ bool read_cell(JobRecord* r, const std::string& c, const std::string& v, std::st
   if (c == "output_bytes") return num(&m.output_bytes);
   if (c == "steps_taken") return cnt(&m.steps_taken);
   if (c == "load_avg") return num(&m.load_avg);
+  auto note = [&](double* out) {  // empty: not recorded
+    if (v.empty()) return *out = JobMeasure::kNotRecorded, true;
+    return num(out);
+  };
+  if (c == "active_steps") return note(&m.active_steps);
+  if (c == "wall_contact_steps") return note(&m.wall_contact_steps);
+  if (c == "pair_contact_steps") return note(&m.pair_contact_steps);
   *what = "a known column";
   return false;
 }
@@ -302,6 +325,9 @@ Expected<JobMeasure> job_measure_from_manifest(const std::string& result_json,
                                                    m.simulate_s / m.total_s)
                                : 0.0;
     m.steps_taken = c.at("steps").get<uint64_t>();
+    m.active_steps = c.value("active_steps", JobMeasure::kNotRecorded);
+    m.wall_contact_steps = c.value("wall_contact_steps", JobMeasure::kNotRecorded);
+    m.pair_contact_steps = c.value("pair_contact_steps", JobMeasure::kNotRecorded);
     double bytes = 0;
     for (const json& a : r.at("artifacts")) bytes += a.at("bytes").get<double>();
     m.output_bytes = bytes;
@@ -326,12 +352,18 @@ Expected<std::vector<JobRecord>> parse_job_log(const std::string& text) {
     where[name] = c;
   }
   const auto& cols = job_log_columns();
+  constexpr size_t kAbsent = size_t(-1);
   std::vector<size_t> at;
   for (const std::string& name : cols) {
     auto it = where.find(name);
+    const auto& optional = job_log_optional_columns();
+    if (it == where.end() && std::find(optional.begin(), optional.end(), name) != optional.end()) {
+      at.push_back(kAbsent);
+      continue;
+    }
     if (it == where.end())
       return parse_error("line " + std::to_string(header.line) + ": missing column '" + name +
-                         "' (a job log; see docs/gvm.md \"Job log\")");
+                         "' (a job log; see docs/gvm.md \"Job log format\")");
     at.push_back(it->second);
   }
   std::vector<JobRecord> rows;
@@ -343,6 +375,7 @@ Expected<std::vector<JobRecord>> parse_job_log(const std::string& text) {
                          " fields, the header has " + std::to_string(header.fields.size()));
     JobRecord row;
     for (size_t k = 0; k < cols.size(); ++k) {
+      if (at[k] == kAbsent) continue;  // an optional column this log lacks: not recorded
       const std::string v = g::trim(rec.fields[at[k]]);
       std::string what;
       if (!read_cell(&row, cols[k], v, &what))

@@ -60,6 +60,12 @@ struct JobMeasure {
   double output_bytes = 0;       // every file of the run directory
   uint64_t steps_taken = 0;      // measured: the plan's check, not a model output
   double load_avg = 0;           // the machine's 1-minute load when the job started (a note)
+  // What the steps did, measured (result.json's cost; notes, not model outputs): the
+  // sums over frames of the active particles, wall contacts and particle pairs in
+  // contact at each frame's end times its steps. NaN where a log predates them.
+  double active_steps = kNotRecorded, wall_contact_steps = kNotRecorded,
+         pair_contact_steps = kNotRecorded;
+  static constexpr double kNotRecorded = __builtin_nan("");
 };
 
 struct JobRecord {
@@ -78,8 +84,11 @@ JobInputs job_inputs(const JobAssessment& a, const std::string& backend,
 Expected<JobMeasure> job_measure_from_manifest(const std::string& result_json,
                                                std::string* backend = nullptr);
 
-// The CSV columns in the order they are written.
+// The CSV columns in the order they are written: every one is required on reading
+// but the optional ones (the measured notes added since the first logs), which are
+// read when present and written empty when not recorded.
 const std::vector<std::string>& job_log_columns();
+const std::vector<std::string>& job_log_optional_columns();
 
 // Checks the values (counts, finite sizes, known names); names the bad field.
 Status validate(const JobInputs& in);

@@ -119,6 +119,48 @@ double midpoint4_piece_count(const TriangleMesh& mesh, double r_max) {
   return count;
 }
 
+namespace {
+
+// Pieces bisect(root, max_edge) makes, counted without making them; *obtuse gets how
+// many of them have an obtuse corner (circumcircle splits each of those in two).
+double bisect_count(const Tri& root, double max_edge, double* obtuse) {
+  const double limit2 = max_edge * max_edge;
+  double n = 0;
+  std::vector<Tri> stack{root};
+  while (!stack.empty()) {
+    const Tri t = stack.back();
+    stack.pop_back();
+    const int k = longest_edge(t);
+    if (edge2(t, k) <= limit2) {
+      n += 1;
+      if (obtuse && obtuse_corner(t) >= 0) *obtuse += 1;
+      continue;
+    }
+    const Vec3d a = t[k], b = t[(k + 1) % 3], c = t[(k + 2) % 3];
+    const Vec3d m = (a + b) * 0.5;
+    stack.push_back({m, b, c});
+    stack.push_back({a, m, c});
+  }
+  return n;
+}
+
+}  // namespace
+
+double division_piece_count(const TriangleMesh& mesh, DivisionMethod method, double r_max) {
+  if (method == DivisionMethod::kMidpoint4) return midpoint4_piece_count(mesh, r_max);
+  double count = 0;
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+    const Tri root{mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2)};
+    if (method == DivisionMethod::kGravity) {
+      count += bisect_count(root, r_max, nullptr);
+    } else {
+      double obtuse = 0;
+      count += bisect_count(root, std::sqrt(3.0) * r_max, &obtuse) + obtuse;
+    }
+  }
+  return count;
+}
+
 DividedMesh divide(const TriangleMesh& mesh, DivisionMethod method, double r_max) {
   DividedMesh out;
   std::vector<Tri> pieces, right;

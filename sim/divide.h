@@ -37,6 +37,11 @@ DividedMesh divide(const TriangleMesh& mesh, DivisionMethod method, double r_max
 // astronomical (a large wall for small particles) where dividing would never finish.
 double midpoint4_piece_count(const TriangleMesh& mesh, double r_max);
 
+// The number of pieces divide(mesh, method, r_max) makes, exactly, without making
+// them: the bisections are walked and their leaves counted (time in proportion to
+// the pieces, no memory for them); midpoint4's is midpoint4_piece_count.
+double division_piece_count(const TriangleMesh& mesh, DivisionMethod method, double r_max);
+
 // Relative difference between the total area of the pieces and of the mesh,
 // both summed in double (paper Eq. 6).
 double division_area_error(const TriangleMesh& mesh, const DividedMesh& divided);

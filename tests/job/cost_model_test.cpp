@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -16,6 +17,7 @@
 #include "job/cost_model.h"
 #include "job/job.h"
 #include "job/job_log.h"
+#include "gvm/csv.h"
 #include "gvm/run_log.h"
 
 namespace collido::job {
@@ -61,6 +63,7 @@ JobRecord sample_record(uint64_t particles) {
   m.output_bytes = 3.5e6;
   m.steps_taken = 6000;
   m.load_avg = 0.5;
+  m.active_steps = 4.5e5, m.wall_contact_steps = 1.25e5, m.pair_contact_steps = 3e5;
   return r;
 }
 
@@ -68,6 +71,7 @@ TEST(JobLog, RoundTripsEveryColumnExactly) {
   std::vector<JobRecord> rows = {sample_record(100), sample_record(2000)};
   rows[1].inputs.formats = "none";
   rows[1].inputs.render_width = rows[1].inputs.render_height = 0;
+  rows[1].measure.pair_contact_steps = JobMeasure::kNotRecorded;  // written empty
   const std::string text = format_job_log(rows);
   EXPECT_EQ(log_kind(text), LogKind::kJob);
   auto back = parse_job_log(text);
@@ -79,12 +83,41 @@ TEST(JobLog, RoundTripsEveryColumnExactly) {
   EXPECT_EQ((*back)[1].inputs.formats, "none");
   EXPECT_TRUE((*back)[0].inputs.has_format("gif"));
   EXPECT_FALSE((*back)[0].inputs.has_format("webm"));
+  EXPECT_EQ((*back)[0].measure.wall_contact_steps, 1.25e5);
+  EXPECT_TRUE(std::isnan((*back)[1].measure.pair_contact_steps));
 
   const std::string path = tmp("log.csv");
   ASSERT_TRUE(write_job_log(path, rows));
   auto read = read_job_log(path);
   ASSERT_TRUE(read) << read.status().message();
   EXPECT_EQ(read->size(), 2u);
+}
+
+// Logs written before the measured dynamics columns still read: those are not recorded.
+TEST(JobLog, OptionalColumnsMayBeAbsent) {
+  const std::string text = format_job_log({sample_record(100)});
+  auto rows = gvm::split_csv(text);
+  ASSERT_TRUE(rows);
+  const auto& optional = job_log_optional_columns();
+  std::string old;
+  for (const gvm::CsvRecord& rec : *rows) {
+    std::string line;
+    for (size_t c = 0; c < rec.fields.size(); ++c) {
+      const std::string& name = rows->front().fields[c];
+      if (std::find(optional.begin(), optional.end(), name) != optional.end()) continue;
+      line += (line.empty() ? "" : ",") + gvm::quote_csv(rec.fields[c]);
+    }
+    old += line + "\n";
+  }
+  auto back = parse_job_log(old);
+  ASSERT_TRUE(back) << back.status().message();
+  ASSERT_EQ(back->size(), 1u);
+  EXPECT_TRUE(std::isnan((*back)[0].measure.active_steps));
+  EXPECT_TRUE(std::isnan((*back)[0].measure.wall_contact_steps));
+  EXPECT_EQ((*back)[0].measure.total_s, 1.5);
+  JobRecord neg = sample_record(100);
+  neg.measure.wall_contact_steps = -1;
+  EXPECT_FALSE(validate(neg.measure));
 }
 
 TEST(JobLog, ErrorsNameTheLineAndTheColumn) {
@@ -325,6 +358,45 @@ TEST(JobCostModelPrior, MemoryExtrapolatesAsTheJobHoldsMore) {
   EXPECT_GE(p->peak_host_bytes.p90, 0.97 * host_bytes(200'000));
 }
 
+// The time's prior is a sum over the stages, so a job ten times longer and larger than
+// any trained costs about what the law says (a GVM alone stays near its largest trained
+// job); the time per frame is that sum without the set-up, per frame.
+TEST(JobCostModelPrior, TimeExtrapolatesWithTheWork) {
+  constexpr double kSetup = 0.05, kPerParticleStep = 2e-8;
+  auto total = [&](uint64_t particles, uint64_t steps) {
+    return kSetup + kPerParticleStep * double(particles) * double(steps);
+  };
+  std::vector<JobRecord> rows;
+  for (int i = 0; i < 40; ++i) {
+    const uint64_t particles = uint64_t(100 * std::pow(200.0, i / 39.0));  // 100 .. 20,000
+    JobRecord r = sample_record(particles);
+    r.inputs.steps = 1000 + 997 * uint64_t(i % 7);
+    // A few per cent of deterministic scatter in the steps' time, as measured times have.
+    const double scatter = 1 + 0.03 * std::sin(5.0 * i);
+    const double steps_s = (total(particles, r.inputs.steps) - kSetup) * scatter;
+    r.measure.total_s = kSetup + steps_s;
+    r.measure.per_frame_s = steps_s / double(r.inputs.frames + 1);
+    rows.push_back(r);
+  }
+  JobCostOptions o;
+  o.gvm.hidden = 6;
+  o.gvm.epochs = 60;
+  o.folds = 3;
+  auto m = JobCostModel::train(rows, o, nullptr);
+  ASSERT_TRUE(m) << m.status().message();
+  JobInputs far = sample_record(200'000).inputs;  // 10x the particles, 10x the steps
+  far.steps = 70'000;
+  auto p = m->predict(far);
+  ASSERT_TRUE(p) << p.status().message();
+  EXPECT_TRUE(p->outside_training);
+  const double want = total(200'000, 70'000);
+  EXPECT_NEAR(p->total_s.p50, want, 0.15 * want);
+  EXPECT_NEAR(p->per_frame_s.p50, (want - kSetup) / 31, 0.15 * (want - kSetup) / 31)
+      << "GVM share " << m->gvm_weight(1);
+  EXPECT_LE(p->total_s.p10, p->total_s.p50);
+  EXPECT_GE(p->total_s.p90, p->total_s.p50);
+}
+
 TEST_F(TrainedModel, PricesAnAssessedScene) {
   JobSpec spec;
   spec.scene_json = R"({"wall": "wall1", "particles": {"count": 2000, "radius": 1},
@@ -377,6 +449,7 @@ TEST(JobSweep, QuickSweepWritesJobRows) {
   ASSERT_TRUE(rows) << rows.status().message();
   ASSERT_EQ(rows->size(), summary->measured);
   ASSERT_GT(rows->size(), 0u);
+  double active_steps = 0;
   for (const JobRecord& r : *rows) {
     EXPECT_TRUE(validate(r.inputs)) << validate(r.inputs).message();
     EXPECT_EQ(r.inputs.backend, "cpu");
@@ -387,7 +460,15 @@ TEST(JobSweep, QuickSweepWritesJobRows) {
     EXPECT_GT(r.measure.total_s, 0.0);
     EXPECT_GT(r.measure.peak_host_bytes, 1e6);
     EXPECT_GT(r.measure.output_bytes, 0.0);
+    // What the steps did: each frame's end counts times its steps, so at most every
+    // particle active on every step (a pour may not have released one yet).
+    EXPECT_GE(r.measure.active_steps, 0.0);
+    active_steps += r.measure.active_steps;
+    EXPECT_LE(r.measure.active_steps, double(r.inputs.particles) * double(r.measure.steps_taken));
+    EXPECT_GE(r.measure.wall_contact_steps, 0.0);
+    EXPECT_GE(r.measure.pair_contact_steps, 0.0);
   }
+  EXPECT_GT(active_steps, 0.0);
   JobSweepSpec bad = s;
   bad.configs = 0;
   EXPECT_FALSE(validate(bad));

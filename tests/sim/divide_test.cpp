@@ -79,5 +79,19 @@ TEST(Divide, Midpoint4CountWithoutDividingMatchesDivide) {
   EXPECT_EQ(midpoint4_piece_count(wall, 1e9), static_cast<double>(wall.triangles.size()));
 }
 
+// The job cost model and the budget read the pieces of every method before dividing:
+// the counts are those divide() makes, obtuse pieces (circumcircle's second split)
+// and slivers included.
+TEST(Divide, PieceCountsWithoutDividingMatchDivide) {
+  const TriangleMesh wall = make_cylinder(50, 100, 40, Caps::kBoth);
+  for (DivisionMethod m :
+       {DivisionMethod::kGravity, DivisionMethod::kCircumcircle, DivisionMethod::kMidpoint4})
+    for (double r : {200.0, 20.0, 7.0, 3.0}) {
+      const size_t made = divide(wall, m, r).pieces.size();
+      EXPECT_EQ(division_piece_count(wall, m, r), static_cast<double>(made))
+          << to_string(m) << " r_max " << r;
+    }
+}
+
 }  // namespace
 }  // namespace collido::sim
