@@ -49,6 +49,7 @@ const std::vector<FlagSpec>& calibrate_flags() {
       {"jobs", false,
        "sweep real jobs (job-exec children) into a job log instead of detection frames"},
       {"job-threads", true, "with --jobs: CPU threads of every job (default 1)"},
+      {"settled", true, "with --jobs: share of jobs with gravity drawn long enough for their particles to land, fewer particles keeping them within ten times the usual work (default 0)"},
       {"meshes", true,
        "with --jobs: folder of the sweep's STL walls (default tests/data/meshes, if there)"},
       {"work", true, "with --jobs: folder for the jobs' run directories (default OUT.work)"},
@@ -149,6 +150,8 @@ int calibrate_jobs(const ParsedArgs& parsed) {
   spec.budget_s = static_cast<double>(parsed.get_int("budget", cuda && !spec.quick ? 480 : 0, &error));
   if (!error.empty()) return usage_error(cmd, error);
   spec.render = !parsed.has("no-render");
+  spec.settled_share = parsed.get_double("settled", 0.0, &error);
+  if (!error.empty()) return usage_error(cmd, error);
   spec.out_path = parsed.get("out");
   spec.work_dir = parsed.get("work", spec.out_path + ".work");
   spec.mesh_dir = parsed.get("meshes", is_dir("tests/data/meshes") ? "tests/data/meshes" : "");
@@ -188,7 +191,8 @@ int cmd_calibrate(const Args& args) {
         "                              [--budget SECONDS] [--radius P|LO:HI]\n"
         "       collidoscope calibrate --jobs --out JOBS.csv [--backend cpu|cuda] [--configs N]\n"
         "                              [--seed S] [--job-threads T] [--repeats R] [--budget S]\n"
-        "                              [--meshes DIR] [--work DIR] [--no-render] [--quick]\n\n"
+        "                              [--meshes DIR] [--work DIR] [--no-render] [--quick]\n"
+        "                              [--settled SHARE]\n\n"
         "Runs a seeded sweep of real configurations (walls, particle counts, methods,\n"
         "traversals, frames) on this machine, each in a process of its own, and writes one\n"
         "run-log row per configuration: time per frame (the steady cost: median of the\n"

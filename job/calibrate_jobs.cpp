@@ -73,6 +73,7 @@ struct Draw {
   int width = 0, height = 0;
   std::string formats = "none";
   std::vector<double> velocity{0, 0, 0};  // m/s, a share of the wall's size per second
+  double settle_falls = 0;  // > 0: the duration is this many falls across the wall's height
 };
 
 // Sweep ranges per backend. Particle-steps bound a job's work: on the CPU about 0.3
@@ -182,8 +183,13 @@ JobSpec spec_of(const json& scene, const Draw& d, const JobSweepSpec& sw) {
   return spec;
 }
 
+// A settling draw's work bound, in the usual bound: piles of hundreds of particles
+// over 10^5 steps (5 to 20 s on the CPU), as a sweep of minutes can afford a few dozen.
+constexpr double kSettledWork = 10;
+
 // Sizes a draw: the step from the plan sets the duration for its target steps, the
-// particle-step bound trims the steps, a fill keeps to what its box can hold. An
+// particle-step bound trims the steps (a settling draw keeps its steps and trims the
+// particles, within kSettledWork times the bound), a fill keeps to what its box can hold. An
 // error when the job would be refused (budget, placement) or the wall cannot load.
 Expected<Planned> size_job(const Draw& d, const Ranges& rg, const JobSweepSpec& sw,
                            const std::string& device, uint64_t seed) {
@@ -219,18 +225,35 @@ Expected<Planned> size_job(const Draw& d, const Ranges& rg, const JobSweepSpec& 
   auto first = build(1.0, double(d.frames));
   if (!first) return first.status();
   const double step = first->inputs.step_s;
+  // Particles active on average over a run of `steps`, from the release plan.
+  auto active_share = [&](double steps) {
+    const double duration = steps * step, release = first->inputs.release_s;
+    return release > 0 && duration > 0
+               ? std::min(1.0, duration < release ? duration / (2 * release)
+                                                  : 1 - release / (2 * duration))
+               : 1.0;
+  };
   double steps = d.target_steps;
-  // Particles active on average over the run, from the release plan, bound the work.
-  for (int k = 0; k < 3; ++k) {
-    const double duration = steps * step;
-    const double active = first->inputs.release_s > 0 && duration > 0
-                              ? std::min(1.0, duration < first->inputs.release_s
-                                                  ? duration / (2 * first->inputs.release_s)
-                                                  : 1 - first->inputs.release_s / (2 * duration))
-                              : 1.0;
-    const double work = double(particles) * std::max(active, 0.02) * steps;
-    if (work <= rg.particle_steps) break;
-    steps = std::max(rg.steps_lo * 0.5, steps * rg.particle_steps / work);
+  if (d.settle_falls > 0) {
+    // Long enough to land: the steps are set, the particles shrink to the work bound.
+    const double fall = std::sqrt(2 * b.extent().z / first->inputs.gravity);
+    steps = d.settle_falls * fall / step;
+    if (steps > 4e5) return resource_exhausted("settling takes more steps than the sweep's");
+    const double most =
+        kSettledWork * rg.particle_steps / (std::max(active_share(steps), 0.02) * steps);
+    if (most < 20) return resource_exhausted("too few particles would settle in the sweep's work");
+    if (double(particles) > most) {
+      particles = int64_t(most);
+      first = build(1.0, double(d.frames));  // the release plan follows the count
+      if (!first) return first.status();
+    }
+  } else {
+    // The particle-step bound trims the steps.
+    for (int k = 0; k < 3; ++k) {
+      const double work = double(particles) * std::max(active_share(steps), 0.02) * steps;
+      if (work <= rg.particle_steps) break;
+      steps = std::max(rg.steps_lo * 0.5, steps * rg.particle_steps / work);
+    }
   }
   const double duration = steps * step;
   const int64_t frames = std::max<int64_t>(1, std::min<int64_t>(d.frames, int64_t(steps)));
@@ -316,12 +339,15 @@ Expected<CalibrateSummary> run_sweep(const JobSweepSpec& sw, const CalibrateHook
   }
   const Ranges rg = ranges_for(sw.backend, sw.quick);
   gvm::Rng rng(sw.seed);
+  gvm::Rng settle_rng(sw.seed ^ 0x5E771EDull);  // its own stream: share 0 draws as before
   std::vector<Planned> plans;
   size_t refused = 0;
   const auto t_start = SteadyClock::now();
   for (int64_t tries = 0; int64_t(plans.size()) < sw.configs && tries < 20 * sw.configs; ++tries) {
     if (cancel_requested()) return cancelled("calibration cancelled");
-    const Draw d = draw_job(rng, rg, walls, shapes, sw.render, sw.quick);
+    Draw d = draw_job(rng, rg, walls, shapes, sw.render, sw.quick);
+    if (!d.zero_gravity && settle_rng.uniform01() < sw.settled_share)
+      d.settle_falls = settle_rng.uniform(1.5, 3.0);
     auto p = size_job(d, rg, sw, device, sw.seed * 1000003u + plans.size());
     if (!p) {
       ++refused;
@@ -416,6 +442,8 @@ Status validate(const JobSweepSpec& s) {
   if (s.out_path.empty()) return invalid_argument("no output path for the job log");
   if (s.work_dir.empty()) return invalid_argument("no work folder for the jobs' run directories");
   if (s.executable.empty()) return invalid_argument("no collidoscope executable to run jobs in");
+  if (!(s.settled_share >= 0 && s.settled_share <= 1))
+    return invalid_argument("settled share must be in [0, 1]");
   return Status::ok();
 }
 

@@ -28,6 +28,11 @@ struct JobSweepSpec {
   int repeats = 3;              // passes over the sweep, 1..100
   double budget_s = 0;          // seconds; no job starts after this (0 = no limit)
   bool render = true;           // draw rendered jobs too (the executable needs a renderer)
+  // Share of the jobs with gravity drawn long enough for their particles to land
+  // (1.5 to 3 falls across the wall's height), fewer particles keeping them within
+  // ten times the usual work: the settled piles a user's job of seconds spends most
+  // of its steps in. Drawn from a stream of its own, so 0 reproduces the sweeps before it.
+  double settled_share = 0;
   // Folder of STL walls the sweep may draw (teapot, 3ds Max export, sphere with a
   // hole from tests/data/meshes); "" or missing = parametric walls only.
   std::string mesh_dir;

@@ -332,6 +332,18 @@ const std::vector<std::string>& job_feature_names() {
   return names;
 }
 
+double landed_share(const JobInputs& in) {
+  if (!(in.gravity > 0) || !(in.duration > 0)) return 0;
+  const double height = in.placement == "fill" ? in.box[2] / 2 : in.box[2];
+  const double after = in.duration - std::sqrt(2 * height / in.gravity);  // time left to rest
+  if (after <= 0) return 0;
+  // Released evenly over [0, release_s], each landing a fall later: the share landed
+  // grows as a ramp; its mean over the run in closed form.
+  const double r = in.release_s;
+  const double area = r <= 0 ? after : after <= r ? after * after / (2 * r) : after - r / 2;
+  return std::min(1.0, area / in.duration);
+}
+
 CostDrivers cost_drivers(const JobInputs& in) {
   CostDrivers d;
   const double r = in.r_max, r_mean = 0.5 * (in.r_min + in.r_max);
@@ -343,10 +355,16 @@ CostDrivers cost_drivers(const JobInputs& in) {
   const double active = double(in.particles) * d.mean_active;
   d.particle_steps = active * double(in.steps);
   d.packing = double(in.particles) * 4.0 / 3.0 * M_PI * r_mean * r_mean * r_mean / volume;
-  // A pile under gravity settles at about six neighbours a particle (three pairs); a
-  // gas without gravity meets in proportion to its packing (0.55: a loose random pack).
-  if (in.particle_contacts)
-    d.pair_contacts = active * 3 * (in.gravity > 0 ? 1.0 : std::min(1.0, d.packing / 0.55));
+  // A pile under gravity settles at about six neighbours a particle (three pairs),
+  // counted from when a particle lands: a fall after its release, from half the wall's
+  // height (a fill) or from an inlet over its top; a gas without gravity meets in
+  // proportion to its packing (0.55: a loose random pack).
+  if (in.particle_contacts) {
+    if (in.gravity > 0)
+      d.landed = landed_share(in);
+    d.pair_contacts = in.gravity > 0 ? double(in.particles) * 3 * d.landed
+                                     : active * 3 * std::min(1.0, d.packing / 0.55);
+  }
   d.near_wall = std::max(1.0, active * std::min(1.0, 2 * r * in.wall_area / volume));
   if (in.renders())
     d.pixel_frames = double(in.render_width) * double(in.render_height) * double(in.frames + 1);
@@ -639,14 +657,18 @@ Expected<JobCostModel> JobCostModel::train(const std::vector<JobRecord>& rows,
                                           terms[k][r].size(), cuda),
                      g});
     }
-    double best = std::numeric_limits<double>::infinity();
+    double err[21];
     for (int step = 0; step <= 20; ++step) {
-      const double a = step / 20.0;
-      double err = 0;
-      for (const auto& [measured, prior, g] : oof)
-        err += std::fabs(std::pow(10.0, prior + a * g - measured) - 1);  // times: log10
-      if (err < best - 1e-12) best = err, model.gvm_weight_[k] = a;
+      err[step] = 0;
+      for (const auto& [measured, prior, g] : oof)  // times: log10
+        err[step] += std::fabs(std::pow(10.0, prior + step / 20.0 * g - measured) - 1);
     }
+    // The smallest share within 1 % of the best: a correction that does not earn its
+    // keep is left out (out of the trained range it is only the GVM's saturation).
+    const double best = *std::min_element(err, err + 21);
+    int step = 0;
+    while (err[step] > 1.01 * best) ++step;
+    model.gvm_weight_[k] = step / 20.0;
   }
 
   // Memory's point is raised (in steps of 0.05 % of log10, at most 3 %) until at most

@@ -49,7 +49,7 @@ struct JobCostPrediction {
   // What drives the cost, from the time-step plan and the scene.
   uint64_t steps = 0, steps_per_frame = 0;
   double particle_steps = 0;  // released particles x steps
-  double pair_contacts = 0;   // expected from the packing (0 without particle contacts)
+  double pair_contacts = 0;   // touching pairs expected, averaged over the run (0 without particle contacts)
   double pixel_frames = 0;    // rendered pixels x frames (0 without rendering)
 };
 
@@ -70,13 +70,18 @@ void job_features(const JobInputs& in, const std::vector<std::string>& devices, 
 struct CostDrivers {
   double mean_active = 1;     // share of the particles released, averaged over the run
   double particle_steps = 0;  // particles x mean_active x steps
-  double pair_contacts = 0;   // expected pair contacts at a time (particle contacts on)
+  double landed = 0;          // share of the particles resting, averaged over the run (gravity)
+  double pair_contacts = 0;   // expected touching pairs, averaged over the run (particle contacts on)
   double near_wall = 0;       // particles within a radius of the wall, if spread evenly
   double packing = 0;         // particles' volume over the wall's box volume
   double pixel_frames = 0;    // rendered pixels x frames written
   double snapshot_bytes = 0;  // the frames' snapshots, about 29 bytes a released particle
 };
 CostDrivers cost_drivers(const JobInputs& in);
+// The share of a job's particles that have landed, averaged over its run: each lands a
+// free fall after its release (from half the wall's height in a fill, from an inlet
+// over its top otherwise); 0 without gravity or before the first lands.
+double landed_share(const JobInputs& in);
 
 // ---- Outputs -------------------------------------------------------------------
 

@@ -25,8 +25,10 @@ int longest_edge(const Tri& t) {
   return e0 >= e1 && e0 >= e2 ? 0 : (e1 >= e2 ? 1 : 2);
 }
 
-// Bisects the longest edge until every edge is <= max_edge (paper 3.3.2's binary tree, depth first).
-void bisect(const Tri& root, double max_edge, std::vector<Tri>& out) {
+// Bisects the longest edge until every edge is <= max_edge (paper 3.3.2's binary
+// tree, depth first), handing each final piece to leaf in a stable left-to-right order.
+template <class Leaf>
+void bisect_walk(const Tri& root, double max_edge, Leaf&& leaf) {
   const double limit2 = max_edge * max_edge;
   std::vector<Tri> stack{root};
   while (!stack.empty()) {
@@ -34,7 +36,7 @@ void bisect(const Tri& root, double max_edge, std::vector<Tri>& out) {
     stack.pop_back();
     int k = longest_edge(t);
     if (edge2(t, k) <= limit2) {
-      out.push_back(t);
+      leaf(t);
       continue;
     }
     const Vec3d a = t[k], b = t[(k + 1) % 3], c = t[(k + 2) % 3];
@@ -43,6 +45,10 @@ void bisect(const Tri& root, double max_edge, std::vector<Tri>& out) {
     stack.push_back({m, b, c});
     stack.push_back({a, m, c});
   }
+}
+
+void bisect(const Tri& root, double max_edge, std::vector<Tri>& out) {
+  bisect_walk(root, max_edge, [&](const Tri& t) { out.push_back(t); });
 }
 
 void midpoint4(const Tri& root, double max_edge, std::vector<Tri>& out) {
@@ -124,23 +130,11 @@ namespace {
 // Pieces bisect(root, max_edge) makes, counted without making them; *obtuse gets how
 // many of them have an obtuse corner (circumcircle splits each of those in two).
 double bisect_count(const Tri& root, double max_edge, double* obtuse) {
-  const double limit2 = max_edge * max_edge;
   double n = 0;
-  std::vector<Tri> stack{root};
-  while (!stack.empty()) {
-    const Tri t = stack.back();
-    stack.pop_back();
-    const int k = longest_edge(t);
-    if (edge2(t, k) <= limit2) {
-      n += 1;
-      if (obtuse && obtuse_corner(t) >= 0) *obtuse += 1;
-      continue;
-    }
-    const Vec3d a = t[k], b = t[(k + 1) % 3], c = t[(k + 2) % 3];
-    const Vec3d m = (a + b) * 0.5;
-    stack.push_back({m, b, c});
-    stack.push_back({a, m, c});
-  }
+  bisect_walk(root, max_edge, [&](const Tri& t) {
+    n += 1;
+    if (obtuse && obtuse_corner(t) >= 0) *obtuse += 1;
+  });
   return n;
 }
 

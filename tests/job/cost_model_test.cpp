@@ -358,6 +358,35 @@ TEST(JobCostModelPrior, MemoryExtrapolatesAsTheJobHoldsMore) {
   EXPECT_GE(p->peak_host_bytes.p90, 0.97 * host_bytes(200'000));
 }
 
+// The pair contacts expected count the particles that have landed: a free fall after
+// each release (half the wall's height in a fill, all of it from an inlet), averaged
+// over the run, in closed form.
+TEST(CostDrivers, ParticlesLandAFallAfterTheirRelease) {
+  JobInputs in = sample_record(1000).inputs;
+  in.gravity = 9.81;
+  in.placement = "fill";
+  in.release_s = 0;
+  in.box[2] = 2 * 4.905;  // half of it: a 1 s fall
+  in.duration = 2;
+  EXPECT_NEAR(landed_share(in), 0.5, 1e-12);
+  in.duration = 0.9;  // over before the first lands
+  EXPECT_EQ(landed_share(in), 0.0);
+  in.placement = "pour";  // from the top: a 1 s fall, released evenly over 2 s
+  in.box[2] = 4.905;
+  in.release_s = 2;
+  in.duration = 4;  // landed ramps up over [1, 3] s, then all: (1 + 1) / 4
+  EXPECT_NEAR(landed_share(in), 0.5, 1e-12);
+  in.duration = 2;  // still ramping at the end: half of 1 s x 0.5, over 2 s
+  EXPECT_NEAR(landed_share(in), 0.125, 1e-12);
+  in.gravity = 0;
+  EXPECT_EQ(landed_share(in), 0.0);
+  // Without gravity nothing lands; a gas meets in proportion to its packing.
+  in.particle_contacts = true;
+  EXPECT_GT(cost_drivers(in).pair_contacts, 0.0);
+  in.gravity = 9.81;
+  EXPECT_NEAR(cost_drivers(in).pair_contacts, 3 * 1000 * 0.125, 1e-9);
+}
+
 // The time's prior is a sum over the stages, so a job ten times longer and larger than
 // any trained costs about what the law says (a GVM alone stays near its largest trained
 // job); the time per frame is that sum without the set-up, per frame.
@@ -371,6 +400,7 @@ TEST(JobCostModelPrior, TimeExtrapolatesWithTheWork) {
     const uint64_t particles = uint64_t(100 * std::pow(200.0, i / 39.0));  // 100 .. 20,000
     JobRecord r = sample_record(particles);
     r.inputs.steps = 1000 + 997 * uint64_t(i % 7);
+    r.inputs.frames = 10 + 7 * uint64_t(i % 5);  // apart from the particles (snapshots)
     // A few per cent of deterministic scatter in the steps' time, as measured times have.
     const double scatter = 1 + 0.03 * std::sin(5.0 * i);
     const double steps_s = (total(particles, r.inputs.steps) - kSetup) * scatter;
@@ -439,6 +469,7 @@ TEST(JobSweep, QuickSweepWritesJobRows) {
   s.threads = 1;
   s.render = false;
   s.seed = 2;
+  s.settled_share = 0.5;  // some jobs sized to land (a share of 0 draws the rest as before)
   s.out_path = tmp("jobs.csv");
   s.work_dir = tmp("sweep-work");
   s.executable = COLLIDO_BINARY;
@@ -471,6 +502,9 @@ TEST(JobSweep, QuickSweepWritesJobRows) {
   EXPECT_GT(active_steps, 0.0);
   JobSweepSpec bad = s;
   bad.configs = 0;
+  EXPECT_FALSE(validate(bad));
+  bad = s;
+  bad.settled_share = 1.5;
   EXPECT_FALSE(validate(bad));
   bad = s;
   bad.backend = "tpu";
