@@ -67,6 +67,15 @@ JobRecord sample_record(uint64_t particles) {
   return r;
 }
 
+// Small machines, few epochs: tests train in milliseconds.
+JobCostOptions small_options() {
+  JobCostOptions o;
+  o.gvm.hidden = 6;
+  o.gvm.epochs = 60;
+  o.folds = 3;
+  return o;
+}
+
 TEST(JobLog, RoundTripsEveryColumnExactly) {
   std::vector<JobRecord> rows = {sample_record(100), sample_record(2000)};
   rows[1].inputs.formats = "none";
@@ -240,12 +249,8 @@ class TrainedModel : public ::testing::Test {
     auto rows = read_job_log(std::string(COLLIDO_SOURCE_DIR) + "/bench/data/jobs_cpu.csv");
     ASSERT_TRUE(rows) << rows.status().message();
     rows_ = new std::vector<JobRecord>(std::move(*rows));
-    JobCostOptions o;
-    o.gvm.hidden = 6;
-    o.gvm.epochs = 60;
-    o.folds = 3;
     JobTrainReport report;
-    auto m = JobCostModel::train(*rows_, o, &report);
+    auto m = JobCostModel::train(*rows_, small_options(), &report);
     ASSERT_TRUE(m) << m.status().message();
     model_ = new JobCostModel(std::move(*m));
     EXPECT_EQ(report.curve.size(), 60u);
@@ -344,11 +349,7 @@ TEST(JobCostModelPrior, MemoryExtrapolatesAsTheJobHoldsMore) {
     r.measure.per_frame_s = r.measure.total_s / 31;
     rows.push_back(r);
   }
-  JobCostOptions o;
-  o.gvm.hidden = 6;
-  o.gvm.epochs = 60;
-  o.folds = 3;
-  auto m = JobCostModel::train(rows, o, nullptr);
+  auto m = JobCostModel::train(rows, small_options(), nullptr);
   ASSERT_TRUE(m) << m.status().message();
   JobInputs far = sample_record(200'000).inputs;  // 10x the largest trained
   auto p = m->predict(far);
@@ -408,11 +409,7 @@ TEST(JobCostModelPrior, TimeExtrapolatesWithTheWork) {
     r.measure.per_frame_s = steps_s / double(r.inputs.frames + 1);
     rows.push_back(r);
   }
-  JobCostOptions o;
-  o.gvm.hidden = 6;
-  o.gvm.epochs = 60;
-  o.folds = 3;
-  auto m = JobCostModel::train(rows, o, nullptr);
+  auto m = JobCostModel::train(rows, small_options(), nullptr);
   ASSERT_TRUE(m) << m.status().message();
   JobInputs far = sample_record(200'000).inputs;  // 10x the particles, 10x the steps
   far.steps = 70'000;
