@@ -128,7 +128,8 @@ double wall_box_volume(const double (&e)[3], double r) {
 // growing absurdly large. midpoint4's count needs no division
 // (sim::midpoint4_piece_count); bisection (gravity, circumcircle) stops each piece as
 // soon as it fits and makes far fewer (wall1 at 1 %: 0.36 and 0.16 million against
-// 2.2), so it is counted by dividing, once, at radius_ref.
+// 2.2), so its leaves are counted (sim::division_piece_count, no pieces made), once,
+// at radius_ref.
 Expected<Survey> survey_walls(bool quick, const RadiusRange& rr) {
   Survey s;
   for (size_t w = 0; w < kWallCount; ++w) {
@@ -155,12 +156,11 @@ Expected<Survey> survey_walls(bool quick, const RadiusRange& rr) {
     for (int d = 0; d < 2; ++d)
       ws.bisect_ref[d] =
           m4_ref > 5e7 ? static_cast<int64_t>(std::min(m4_ref, 9e18))
-                       : static_cast<int64_t>(
-                             sim::divide(*mesh,
-                                         d == 0 ? sim::DivisionMethod::kGravity
-                                                : sim::DivisionMethod::kCircumcircle,
-                                         radius_ref(rr) * ws.longest)
-                                 .pieces.size());
+                       : static_cast<int64_t>(sim::division_piece_count(
+                             *mesh,
+                             d == 0 ? sim::DivisionMethod::kGravity
+                                    : sim::DivisionMethod::kCircumcircle,
+                             radius_ref(rr) * ws.longest));
   }
   return s;
 }

@@ -163,8 +163,7 @@ constexpr size_t kMaxPriorTerms = 2 * kTimeTerms;
 
 // The time terms of a job (see above); the set-up's are zero when per_frame, and the
 // others divided by the frames written. Written into t[0, kTimeTerms).
-void time_terms(const JobInputs& in, bool per_frame, double* t) {
-  const CostDrivers d = cost_drivers(in);
+void time_terms(const JobInputs& in, const CostDrivers& d, bool per_frame, double* t) {
   const double n = double(in.particles), steps = double(in.steps);
   const double contacts = in.particle_contacts ? 1 : 0;
   const double active = d.particle_steps;  // released particles x steps
@@ -225,7 +224,7 @@ size_t prior_terms(size_t k, const JobInputs& in, double* t) {
     case kPerFrame: {
       // One block per backend, the other's zero: each backend's weights are its own.
       std::fill(t, t + 2 * kTimeTerms, 0.0);
-      time_terms(in, k == kPerFrame, t + (is_cuda(in) ? kTimeTerms : 0));
+      time_terms(in, d, k == kPerFrame, t + (is_cuda(in) ? kTimeTerms : 0));
       return 2 * kTimeTerms;
     }
     default:
@@ -332,6 +331,11 @@ const std::vector<std::string>& job_feature_names() {
   return names;
 }
 
+double mean_released_share(double release_s, double duration) {
+  if (!(release_s > 0 && duration > 0)) return 1;
+  return release_s <= duration ? 1 - release_s / (2 * duration) : duration / (2 * release_s);
+}
+
 double landed_share(const JobInputs& in) {
   if (!(in.gravity > 0) || !(in.duration > 0)) return 0;
   const double height = in.placement == "fill" ? in.box[2] / 2 : in.box[2];
@@ -348,10 +352,7 @@ CostDrivers cost_drivers(const JobInputs& in) {
   CostDrivers d;
   const double r = in.r_max, r_mean = 0.5 * (in.r_min + in.r_max);
   const double volume = (in.box[0] + 2 * r) * (in.box[1] + 2 * r) * (in.box[2] + 2 * r);
-  // An inlet releases at a steady rate until release_s: the mean share out over the run.
-  if (in.release_s > 0 && in.duration > 0)
-    d.mean_active = in.release_s <= in.duration ? 1 - in.release_s / (2 * in.duration)
-                                                : in.duration / (2 * in.release_s);
+  d.mean_active = mean_released_share(in.release_s, in.duration);
   const double active = double(in.particles) * d.mean_active;
   d.particle_steps = active * double(in.steps);
   d.packing = double(in.particles) * 4.0 / 3.0 * M_PI * r_mean * r_mean * r_mean / volume;

@@ -78,6 +78,9 @@ struct CostDrivers {
   double snapshot_bytes = 0;  // the frames' snapshots, about 29 bytes a released particle
 };
 CostDrivers cost_drivers(const JobInputs& in);
+// The share of the particles an inlet has released, averaged over a run of `duration`
+// s when it releases at a steady rate until release_s (1 for a fill: release_s 0).
+double mean_released_share(double release_s, double duration);
 // The share of a job's particles that have landed, averaged over its run: each lands a
 // free fall after its release (from half the wall's height in a fill, from an inlet
 // over its top otherwise); 0 without gravity or before the first lands.

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "sim/divide.h"
 #include "sim/mesh.h"
 #include "sim/status.h"
 
@@ -27,6 +28,12 @@ enum class Method {
 // offers both traversals: all but the tree, which walks from each particle,
 // and the reference, which tests every triangle.
 inline bool uses_grid(Method m) { return m != Method::kBvh && m != Method::kReference; }
+// How a dividing method divides (gravity, circumcircle, midpoint4; any other: midpoint4).
+inline DivisionMethod division_of(Method m) {
+  return m == Method::kGravity        ? DivisionMethod::kGravity
+         : m == Method::kCircumcircle ? DivisionMethod::kCircumcircle
+                                      : DivisionMethod::kMidpoint4;
+}
 enum class Traversal { kParticle, kWall };
 enum class Backend { kCpu, kCuda };
 // How a float method decides a pair: `exact` re-decides in double every pair

@@ -192,9 +192,7 @@ class WallIndex {
   // nvcc's extended lambdas may not live in private member functions, so the
   // preparation steps are public; callers use prepare() and view().
   Status prepare_pieces(B& backend, const TriangleMesh& mesh, double cell, PrepareInfo* info) {
-    const DivisionMethod dm = method_ == Method::kGravity        ? DivisionMethod::kGravity
-                              : method_ == Method::kCircumcircle ? DivisionMethod::kCircumcircle
-                                                                 : DivisionMethod::kMidpoint4;
+    const DivisionMethod dm = division_of(method_);
     // Division is bounded by area / r_max^2; refuse absurd requests before allocating.
     const double estimate = 8 * mesh_area(mesh) / (r_max_ * r_max_) + mesh.triangles.size();
     if (estimate > 4e8)
