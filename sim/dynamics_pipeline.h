@@ -28,6 +28,8 @@ inline constexpr int kMaxWallContacts = 4;
 // kPairSlots neighbours (a settled pile has about six; more are counted as overflow).
 inline constexpr int kWallSlots = kMaxWallContacts;
 inline constexpr int kPairSlots = 8;
+// Waiting particles the neighbour lists hold at least, past the live ones (see list_cover).
+inline constexpr size_t kCoverAhead = 64;
 
 // Per-particle statistics columns filled by a measuring pass, reduced per frame.
 enum StatColumn : size_t {
@@ -141,9 +143,10 @@ class DynamicsPipeline final : public Simulation {
     double col[kStatColumns];
     for (size_t c = 0; c < kStatColumns; ++c) {
       const bool max = c == kStatOverlapWall || c == kStatOverlapPair || c == kStatSpeed;
-      col[c] = max ? backend_.reduce_max(scratch_.data() + c * n_, n_)
-                   : backend_.reduce_sum(scratch_.data() + c * n_, n_);
+      col[c] = max ? backend_.reduce_max(scratch_.data() + c * n_, live_)
+                   : backend_.reduce_sum(scratch_.data() + c * n_, live_);
     }
+    col[kStatWaiting] += double(n_ - live_);  // beyond the live prefix every particle waits
     st->elastic = col[kStatElasticWall] + col[kStatElasticPair];
     st->max_overlap = std::max(col[kStatOverlapWall], col[kStatOverlapPair]);
     st->wall_contacts = static_cast<uint64_t>(col[kStatWallContacts] + 0.5);
@@ -161,8 +164,8 @@ class DynamicsPipeline final : public Simulation {
         static_cast<uint64_t>(col[kStatOverflowWall] + col[kStatOverflowPair] + 0.5);
     // The deepest wall overlap of any step since the last measure, then a fresh start.
     st->peak_wall_overlap =
-        std::max(col[kStatOverlapWall], backend_.reduce_max(peak_overlap_.data(), n_));
-    backend_.fill(peak_overlap_.data(), n_, 0.0);
+        std::max(col[kStatOverlapWall], backend_.reduce_max(peak_overlap_.data(), live_));
+    backend_.fill(peak_overlap_.data(), live_, 0.0);
     return backend_.status();
   }
 
@@ -202,14 +205,15 @@ class DynamicsPipeline final : public Simulation {
     for (uint32_t i : order)
       if (i >= n_) return invalid_argument("checkpoint holds a particle order that is not one");
     upload_in_order(order);
+    // Every particle the saved run released was due by its time; a checkpoint
+    // numbered otherwise than by release (an older one) just keeps a longer prefix.
+    live_ = 0;
+    grow_live(in.time);
     time_ = in.time;
     steps_ = in.steps;
     all_released_ = in.all_released;
     close_pending_ = false;  // the restored state is a whole step's
     disp_fresh_ = false;
-    // Unknown here which releases the saved state has seen: the next step's
-    // release then differs from the build's count and rebuilds the lists.
-    released_at_ = -1.0;
     nl_valid_ = false;  // built afresh for the restored positions
     backend_.sync();
     return backend_.status();
@@ -267,14 +271,20 @@ class DynamicsPipeline final : public Simulation {
     radius_host_ = ps.r;
     release_host_ = ps.release;
     last_release_ = n_ ? *std::max_element(ps.release.begin(), ps.release.end()) : 0.0;
+    // Numbered in the order of release, so the released particles are a
+    // prefix: the passes of a step skip those still waiting at an inlet (a
+    // pour spent a quarter of its time on them) and releasing extends the prefix.
+    std::vector<uint32_t> order(n_);
+    for (size_t i = 0; i < n_; ++i) order[i] = uint32_t(i);
+    std::stable_sort(order.begin(), order.end(),
+                     [&](uint32_t a, uint32_t b) { return ps.release[a] < ps.release[b]; });
     std::vector<Vec3d> p(n_), v(n_);
     std::vector<uint8_t> state(n_);
-    std::vector<uint32_t> order(n_);
-    for (size_t i = 0; i < n_; ++i) {
-      p[i] = Vec3d{ps.x[i], ps.y[i], ps.z[i]} - wall_.origin;
-      v[i] = {ps.vx[i], ps.vy[i], ps.vz[i]};
-      state[i] = ps.release[i] > 0 ? kWaiting : kActive;
-      order[i] = uint32_t(i);
+    for (size_t k = 0; k < n_; ++k) {
+      const size_t i = order[k];
+      p[k] = Vec3d{ps.x[i], ps.y[i], ps.z[i]} - wall_.origin;
+      v[k] = {ps.vx[i], ps.vy[i], ps.vz[i]};
+      state[k] = ps.release[i] > 0 ? kWaiting : kActive;
     }
     upload(pos_, p);
     upload(vel_, v);
@@ -286,6 +296,7 @@ class DynamicsPipeline final : public Simulation {
     backend_.resize(acc_, std::max<size_t>(n_, 1));
     backend_.fill(acc_.data(), n_, Vec3d{0, 0, 0});
     backend_.resize(speed_, std::max<size_t>(n_, 1));
+    backend_.fill(speed_.data(), n_, 0.0);  // saved with the state, waiting ones too
     backend_.resize(peak_overlap_, std::max<size_t>(n_, 1));
     backend_.fill(peak_overlap_.data(), std::max<size_t>(n_, 1), 0.0);
     backend_.resize(scratch_, std::max<size_t>(n_ * kStatColumns, 1));
@@ -313,11 +324,7 @@ class DynamicsPipeline final : public Simulation {
     skin_ = ts_.neighbour_skin;
     nlist_ = cfg_.particle_contacts && skin_ > 0;
     wall_list_ = nlist_ && !cfg_.wall_motion.moving();
-    if (nlist_) {
-      backend_.resize(x_ref_, std::max<size_t>(n_, 1));
-      release_sorted_ = ps.release;
-      std::sort(release_sorted_.begin(), release_sorted_.end());
-    }
+    if (nlist_) backend_.resize(x_ref_, std::max<size_t>(n_, 1));
     if (wall_list_) {
       backend_.resize(wl_start_, n_ + 1);
       backend_.resize(wl_count_, std::max<size_t>(n_, 1));
@@ -407,11 +414,25 @@ class DynamicsPipeline final : public Simulation {
     upload(radius_, r);
     upload(mass_, mass);
     upload(release_, release);
+    // The earliest release at or after each place of the numbering.
+    due_from_.assign(n_, 0.0);
+    for (size_t k = n_; k-- > 0;)
+      due_from_[k] = k + 1 < n_ ? std::min(release[k], due_from_[k + 1]) : release[k];
   }
 
-  // Renumbers the particles in the order of their cells (the grid just built:
-  // p_idx_sorted_, waiting and gone particles last in their old order), so that
-  // neighbours sit near each other in memory. Every per-particle array moves;
+  // Grows the live prefix to hold every particle due by t: past it, each
+  // place's earliest release lies after t. It only grows, and renumbering
+  // moves particles within it only, so the places past it keep their values.
+  void grow_live(double t) {
+    const size_t due = size_t(std::upper_bound(due_from_.begin(), due_from_.end(), t) -
+                              due_from_.begin());
+    live_ = std::max(live_, due);
+  }
+
+  // Renumbers the live particles in the order of their cells (the grid just
+  // built over them: p_idx_sorted_, waiting and gone particles last in their
+  // old order), so that neighbours sit near each other in memory; those past
+  // the live prefix stay where they are. Every per-particle array moves;
   // friction springs move with their particle and take their partners' new
   // numbers; hand_over_springs then gives each to its pair's new owner.
   // No memory of its own: the moves go through the statistics scratch (free
@@ -420,7 +441,7 @@ class DynamicsPipeline final : public Simulation {
   void reorder_by_cell() {
     const uint32_t* perm = p_idx_sorted_.data();  // new k holds old perm[k]
     uint32_t* iv = p_idx_.data();
-    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t k) { iv[perm[k]] = k; });
+    backend_.parallel_for(live_, [=] COLLIDO_HD(uint32_t k) { iv[perm[k]] = k; });
     move_by(pos_, 1, perm), move_by(vel_, 1, perm), move_by(acc_, 1, perm);
     move_by(state_, 1, perm), move_by(flags_, 1, perm), move_by(speed_, 1, perm);
     move_by(peak_overlap_, 1, perm), move_by(order_, 1, perm);
@@ -430,8 +451,9 @@ class DynamicsPipeline final : public Simulation {
       move_by(wall_hist_[hist_in_], kWallSlots, perm);
       if (cfg_.particle_contacts) {
         move_by(pair_hist_[hist_in_], kPairSlots, perm);
+        // Springs are held by live particles, with live partners only.
         FrictionSlot* slots = pair_hist_[hist_in_].data();
-        backend_.parallel_for(n_ * kPairSlots, [=] COLLIDO_HD(uint32_t q) {
+        backend_.parallel_for(live_ * kPairSlots, [=] COLLIDO_HD(uint32_t q) {
           if (slots[q].key != kNoKey) slots[q].key = iv[slots[q].key];
         });
       }
@@ -443,24 +465,26 @@ class DynamicsPipeline final : public Simulation {
   // numbering that follows space (a lattice, a fresh renumbering) stays, one
   // that a pour has stirred is renumbered. Through the statistics scratch.
   bool numbering_scattered() {
-    if (n_ < 2) return false;
+    const size_t n = live_;
+    if (n < 2) return false;
     const Vec3d* x = pos_.data();
     const double inv_cell = 1.0 / double(pgrid_.cell);
     double* d = scratch_.data();
-    backend_.parallel_for(n_ - 1, [=] COLLIDO_HD(uint32_t k) {
+    backend_.parallel_for(n - 1, [=] COLLIDO_HD(uint32_t k) {
       d[k] = hd_min(length(x[k + 1] - x[k]) * inv_cell, 64.0);
     });
-    return backend_.reduce_sum(d, n_ - 1) > kScatteredCells * double(n_ - 1);
+    return backend_.reduce_sum(d, n - 1) > kScatteredCells * double(n - 1);
   }
 
-  // buf[k * width + s] = old buf[perm[k] * width + s], through the statistics scratch.
+  // buf[k * width + s] = old buf[perm[k] * width + s] for the live prefix,
+  // through the statistics scratch.
   template <class T>
   void move_by(Buf<T>& buf, size_t width, const uint32_t* perm) {
     static_assert(alignof(T) <= alignof(double), "the scratch is an array of doubles");
-    const size_t bytes = n_ * width * sizeof(T);
+    const size_t bytes = live_ * width * sizeof(T);
     T* dst = reinterpret_cast<T*>(scratch_.data());
     const T* src = buf.data();
-    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t k) {
+    backend_.parallel_for(live_, [=] COLLIDO_HD(uint32_t k) {
       for (size_t s = 0; s < width; ++s) dst[k * width + s] = src[size_t(perm[k]) * width + s];
     });
     backend_.copy(buf.data(), dst, bytes);
@@ -509,7 +533,7 @@ class DynamicsPipeline final : public Simulation {
     lap_ = now;
   }
 
-  double fastest_speed() { return n_ ? backend_.reduce_max(speed_.data(), n_) : 0.0; }
+  double fastest_speed() { return backend_.reduce_max(speed_.data(), live_); }
   double automatic_step(double vmax) {
     // Speed may grow under gravity before the next check (bounded inside); a
     // runaway speed must not stall the run (never below a thousandth of the spring step).
@@ -518,10 +542,10 @@ class DynamicsPipeline final : public Simulation {
   }
 
   void release(double t) {
-    released_at_ = t;
+    grow_live(t);
     uint8_t* state = state_.data();
     const double* rel = release_.data();
-    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+    backend_.parallel_for(live_, [=] COLLIDO_HD(uint32_t i) {
       if (state[i] == kWaiting && rel[i] <= t) state[i] = kActive;
     });
   }
@@ -615,11 +639,11 @@ class DynamicsPipeline final : public Simulation {
                       disp,         pending_dt_, dt,            time_,
                       speed_.data(), domain_at(wall_pose(time_)), release_.data(),
                       x_ref_.data()};
-    if (releasing) released_at_ = time_;
+    if (releasing) grow_live(time_);
     if (disp) {
-      disp_max_ = backend_.parallel_max(n_, [=] COLLIDO_HD(uint32_t i) { return op(i); });
+      disp_max_ = backend_.parallel_max(live_, [=] COLLIDO_HD(uint32_t i) { return op(i); });
     } else {
-      backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) { op(i); });
+      backend_.parallel_for(live_, [=] COLLIDO_HD(uint32_t i) { op(i); });
     }
     close_pending_ = false;
     disp_fresh_ = disp;
@@ -638,7 +662,7 @@ class DynamicsPipeline final : public Simulation {
     double* speed = speed_.data();
     const bool rot = rotation_;
     const Domain dom = domain_at(pose);
-    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+    backend_.parallel_for(live_, [=] COLLIDO_HD(uint32_t i) {
       if (P.state[i] != kActive) {
         speed[i] = 0;
         return;
@@ -650,7 +674,7 @@ class DynamicsPipeline final : public Simulation {
   void speeds() {
     const ParticleArrays P = arrays();
     double* speed = speed_.data();
-    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+    backend_.parallel_for(live_, [=] COLLIDO_HD(uint32_t i) {
       speed[i] = P.state[i] == kActive ? length(P.v[i]) : 0.0;
     });
   }
@@ -680,25 +704,23 @@ class DynamicsPipeline final : public Simulation {
   }
 
   // The candidates for this step: the particle grid rebuilt (particle
-  // contacts without a list), and the lists, rebuilt only when particles were
-  // released since the last build or one has moved half the skin (then every
-  // pair now touching was within r_i + r_j + skin at the build, and every wall
-  // triangle touching a particle within r + skin/2 of it, so they are listed).
+  // contacts without a list), and the lists, rebuilt only when a particle was
+  // released that they do not cover or one has moved half the skin (then
+  // every pair now touching was within r_i + r_j + skin at the build, and
+  // every wall triangle touching a particle within r + skin/2 of it, so they
+  // are listed).
   void update_candidates() {
     if (!cfg_.particle_contacts) return;
     if (!nlist_) {
-      build_particle_grid();
+      build_particle_grid(live_, /*with_waiting=*/false);
       return;
     }
-    // Those the release kernel has let go: the measuring pass comes after a
-    // step's time has advanced and before the next step releases at it.
-    const uint64_t released = released_by(released_at_);
-    bool rebuild = !nl_valid_ || released != nl_released_;
+    bool rebuild = !nl_valid_ || live_ > nl_cover_;
     if (!rebuild) {
       if (!disp_fresh_) {  // open_step has not measured the moves since the positions changed
         const ParticleArrays P = arrays();
         const Vec3d* ref = x_ref_.data();
-        disp_max_ = backend_.parallel_max(n_, [=] COLLIDO_HD(uint32_t i) {
+        disp_max_ = backend_.parallel_max(live_, [=] COLLIDO_HD(uint32_t i) {
           const Vec3d d = P.x[i] - ref[i];
           return P.state[i] == kActive ? dot(d, d) : 0.0;
         });
@@ -707,13 +729,28 @@ class DynamicsPipeline final : public Simulation {
     }
     disp_fresh_ = false;
     if (rebuild) build_lists();
-    nl_released_ = released;
   }
 
-  // Particles whose release time has come by t (the release kernel's rule).
-  uint64_t released_by(double t) const {
-    return uint64_t(std::upper_bound(release_sorted_.begin(), release_sorted_.end(), t) -
-                    release_sorted_.begin());
+  // How far the lists reach past the live prefix: the particles due next are
+  // listed where they wait, so their release needs no build (a waiting
+  // particle does not move; once released, its move since the build is
+  // checked like any other's). A pour released one every few steps and built
+  // the lists at each. Those due within twice the last list's life (about
+  // when the skin would call a build anyway), at most a quarter of the live
+  // count past it (at least kCoverAhead): an inlet's slot holds its waiting
+  // particles one on another, and each pair of them would be listed.
+  size_t list_cover() const {
+    const size_t cap = std::min(n_, live_ + std::max<size_t>(kCoverAhead, live_ / 4));
+    if (nl_life_ <= 0) return cap;
+    const size_t due = size_t(
+        std::upper_bound(due_from_.begin(), due_from_.end(), time_ + 2 * nl_life_) -
+        due_from_.begin());
+    return std::clamp(due, live_, cap);
+  }
+
+  // Whether a particle goes into the lists: active, or waiting to be released where it is.
+  COLLIDO_HD static COLLIDO_FORCEINLINE bool listed(uint8_t st) {
+    return st == kActive || st == kWaiting;
   }
 
   // Sorts a short list in place (insertion sort: a few dozen entries).
@@ -728,9 +765,11 @@ class DynamicsPipeline final : public Simulation {
 
   // The lists at the current positions, which their check then measures moves from.
   void build_lists() {
-    build_pair_lists();
+    if (nl_valid_) nl_life_ = time_ - nl_built_at_;
+    nl_built_at_ = time_;
+    build_pair_lists();  // sets nl_cover_
     if (wall_list_) build_wall_lists();
-    backend_.copy(x_ref_.data(), pos_.data(), n_ * sizeof(Vec3d));
+    backend_.copy(x_ref_.data(), pos_.data(), nl_cover_ * sizeof(Vec3d));
     nl_valid_ = true;
     ++times_.neighbour_builds;
   }
@@ -744,16 +783,17 @@ class DynamicsPipeline final : public Simulation {
   // copies, one sum of radii, cells found alike), so every lower entry is found
   // in its partner's upper list.
   void build_pair_lists() {
-    build_particle_grid();
     const int every = cfg_.renumber_every;
     const bool renumber = every < 0   ? numbering_scattered()
                           : every > 0 ? pair_builds_ % uint64_t(every) == 0
                                       : false;
     ++pair_builds_;
     if (renumber) {
+      build_particle_grid(live_, /*with_waiting=*/false);
       reorder_by_cell();
-      build_particle_grid();
     }
+    const size_t n = nl_cover_ = list_cover();
+    build_particle_grid(n, /*with_waiting=*/true);
     const ParticleArrays P = arrays();
     const GridSpec pg = pgrid_;
     const uint32_t* start = cell_start_.data();
@@ -763,18 +803,18 @@ class DynamicsPipeline final : public Simulation {
     const float extra = filter_slack_ + float(skin_) * 1.0001f;
     uint32_t* up_count = nl_start_.data();
     uint32_t* lo_count = lo_start_.data();
-    backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
+    backend_.parallel_for_heavy(n, [=] COLLIDO_HD(uint32_t i) {
       uint32_t up = 0, lo = 0;
-      if (P.state[i] == kActive)
+      if (listed(P.state[i]))
         for_each_grid_candidate(pg, start, end, sidx, sp, extra, i, cast3<float>(P.x[i]),
                                 float(P.r[i]), [&](uint32_t j) { j > i ? ++up : ++lo; });
       up_count[i] = up;
       lo_count[i] = lo;
     });
-    backend_.fill(up_count + n_, 1, 0u);
-    backend_.fill(lo_count + n_, 1, 0u);
-    const uint64_t up_total = backend_.exclusive_scan(up_count, n_ + 1);
-    const uint64_t lo_total = backend_.exclusive_scan(lo_count, n_ + 1);
+    backend_.fill(up_count + n, 1, 0u);
+    backend_.fill(lo_count + n, 1, 0u);
+    const uint64_t up_total = backend_.exclusive_scan(up_count, n + 1);
+    const uint64_t lo_total = backend_.exclusive_scan(lo_count, n + 1);
     if (up_total > nl_list_.size()) {
       const size_t cap = size_t(up_total + up_total / 4 + 16);
       backend_.resize(nl_list_, cap);
@@ -792,8 +832,8 @@ class DynamicsPipeline final : public Simulation {
     const uint32_t* up_first = nl_start_.data();
     const uint32_t* lo_first = lo_start_.data();
     uint32_t* up_list = nl_list_.data();
-    backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
-      if (P.state[i] != kActive) return;
+    backend_.parallel_for_heavy(n, [=] COLLIDO_HD(uint32_t i) {
+      if (!listed(P.state[i])) return;
       uint32_t c = up_first[i];
       for_each_grid_candidate(pg, start, end, sidx, sp, extra, i, cast3<float>(P.x[i]),
                               float(P.r[i]), [&](uint32_t j) {
@@ -804,8 +844,8 @@ class DynamicsPipeline final : public Simulation {
     uint32_t* lo_j = lo_j_.data();
     uint32_t* lo_rec = lo_rec_.data();
     const bool once = once_;  // the records' places are needed only to gather them
-    backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
-      if (P.state[i] != kActive) return;
+    backend_.parallel_for_heavy(n, [=] COLLIDO_HD(uint32_t i) {
+      if (!listed(P.state[i])) return;
       const uint32_t s0 = lo_first[i];
       uint32_t c = s0;
       for_each_grid_candidate(pg, start, end, sidx, sp, extra, i, cast3<float>(P.x[i]),
@@ -835,7 +875,8 @@ class DynamicsPipeline final : public Simulation {
     const uint32_t* nl = nl_list_.data();
     const FrictionSlot* hin = pair_hist_[hist_in_].data();
     FrictionSlot* hout = pair_hist_[hist_in_ ^ 1].data();
-    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+    const size_t n = nl_cover_;
+    backend_.parallel_for(n, [=] COLLIDO_HD(uint32_t i) {
       const FrictionSlot* mine = hin + size_t(i) * kPairSlots;
       FrictionSlot* out = hout + size_t(i) * kPairSlots;
       int c = 0;
@@ -852,7 +893,7 @@ class DynamicsPipeline final : public Simulation {
       if (c < kPairSlots) out[c].key = kNoKey;
     });
     // Back into the current generation (the wall's springs share its index).
-    backend_.copy(pair_hist_[hist_in_].data(), hout, n_ * kPairSlots * sizeof(FrictionSlot));
+    backend_.copy(pair_hist_[hist_in_].data(), hout, n * kPairSlots * sizeof(FrictionSlot));
   }
 
   // Calls f(k) for each wall triangle or piece k within `reach` of x (repeats
@@ -882,20 +923,21 @@ class DynamicsPipeline final : public Simulation {
     const float e = float(half_skin) * 1.0001f;
     uint32_t* start = wl_start_.data();
     uint32_t* count = wl_count_.data();
-    backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
+    const size_t n = nl_cover_;
+    backend_.parallel_for_heavy(n, [=] COLLIDO_HD(uint32_t i) {
       uint32_t c = 0;
-      if (P.state[i] == kActive)
+      if (listed(P.state[i]))
         wall_near(wall, tris_d, P.x[i], P.r[i] + half_skin, e, [&](uint32_t) { ++c; });
       start[i] = c;
     });
-    backend_.fill(start + n_, 1, 0u);
-    const uint64_t total = backend_.exclusive_scan(start, n_ + 1);
+    backend_.fill(start + n, 1, 0u);
+    const uint64_t total = backend_.exclusive_scan(start, n + 1);
     if (total > wl_list_.size()) backend_.resize(wl_list_, size_t(total + total / 4 + 16));
     uint32_t* list = wl_list_.data();
-    backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
+    backend_.parallel_for_heavy(n, [=] COLLIDO_HD(uint32_t i) {
       const uint32_t s0 = start[i];
       uint32_t c = s0;
-      if (P.state[i] == kActive)
+      if (listed(P.state[i]))
         wall_near(wall, tris_d, P.x[i], P.r[i] + half_skin, e, [&](uint32_t k) {
           // In ascending k, each once: the contacts arrive in one order whenever
           // the list was built (the wall's forces are summed in that order).
@@ -911,21 +953,25 @@ class DynamicsPipeline final : public Simulation {
     });
   }
 
-  void build_particle_grid() {
+  // The particle grid over the first n particles: the active ones, and with
+  // with_waiting those waiting too (the lists cover them, see list_cover).
+  void build_particle_grid(size_t n, bool with_waiting) {
     const ParticleArrays P = arrays();
     const GridSpec g = pgrid_;
     const uint32_t none = pgrid_.buckets;  // sorts after every bucket, within the key bits
     uint32_t* key = p_key_.data();
     uint32_t* idx = p_idx_.data();
-    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+    backend_.parallel_for(n, [=] COLLIDO_HD(uint32_t i) {
+      const uint8_t st = P.state[i];
       int cx = 0, cy = 0, cz = 0;
-      key[i] = P.state[i] == kActive && g.cell_of(cast3<float>(P.x[i]), cx, cy, cz)
+      key[i] = (st == kActive || (with_waiting && st == kWaiting)) &&
+                       g.cell_of(cast3<float>(P.x[i]), cx, cy, cz)
                    ? g.bucket(g.linear(cx, cy, cz))
                    : none;
       idx[i] = i;
     });
-    backend_.sort_pairs(key, idx, p_key_sorted_.data(), p_idx_sorted_.data(), n_, pkey_bits_);
-    build_cell_ranges(backend_, p_key_sorted_.data(), n_, cell_start_.data(), cell_end_.data(),
+    backend_.sort_pairs(key, idx, p_key_sorted_.data(), p_idx_sorted_.data(), n, pkey_bits_);
+    build_cell_ranges(backend_, p_key_sorted_.data(), n, cell_start_.data(), cell_end_.data(),
                       pgrid_.buckets, none);
     // A float copy of each particle in cell order: the pair loop reads its
     // neighbours' cells as contiguous 16-byte records and goes to the double
@@ -933,7 +979,7 @@ class DynamicsPipeline final : public Simulation {
     PackedParticle* sp = sorted_.data();
     const uint32_t* sidx = p_idx_sorted_.data();
     const uint32_t* skey = p_key_sorted_.data();
-    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t j) {
+    backend_.parallel_for(n, [=] COLLIDO_HD(uint32_t j) {
       if (skey[j] == none) return;
       const uint32_t i = sidx[j];
       sp[j] = PackedParticle{float(P.x[i].x), float(P.x[i].y), float(P.x[i].z), float(P.r[i])};
@@ -1018,7 +1064,7 @@ class DynamicsPipeline final : public Simulation {
     Vec3d* rec_t = rec_torque_.data();
     Vec3d* rec_roll = rec_roll_.data();
     uint8_t* touched = rec_touched_.data();
-    backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
+    backend_.parallel_for_heavy(live_, [=] COLLIDO_HD(uint32_t i) {
       const uint32_t k0 = nl_start[i], k1 = nl_start[i + 1];
       if (P.state[i] != kActive) {
         for (uint32_t k = k0; k < k1; ++k) touched[k] = 0;
@@ -1066,7 +1112,7 @@ class DynamicsPipeline final : public Simulation {
     const Vec3d* rec_t = rec_torque_.data();
     const Vec3d* rec_roll = rec_roll_.data();
     const uint8_t* touched = rec_touched_.data();
-    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+    backend_.parallel_for(live_, [=] COLLIDO_HD(uint32_t i) {
       if (P.state[i] != kActive) return;
       const double r = P.r[i], m = P.mass[i];
       Vec3d f = grav * m, torque{0, 0, 0};
@@ -1114,7 +1160,7 @@ class DynamicsPipeline final : public Simulation {
     const size_t n = n_;
     const bool friction = law.mu > 0;
     const bool rolling = rot && law.mu_roll > 0;
-    backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
+    backend_.parallel_for_heavy(live_, [=] COLLIDO_HD(uint32_t i) {
       if (P.state[i] != kActive) {
         if (measure)
           stats[kStatElasticPair * n + i] = stats[kStatOverlapPair * n + i] =
@@ -1220,7 +1266,7 @@ class DynamicsPipeline final : public Simulation {
     double* peak = peak_overlap_.data();
     const size_t n = n_;
     const bool friction = law.mu > 0;
-    backend_.parallel_for_heavy(n_, [=] COLLIDO_HD(uint32_t i) {
+    backend_.parallel_for_heavy(live_, [=] COLLIDO_HD(uint32_t i) {
       const uint8_t st = P.state[i];
       if (st != kActive) {
         if (measure)
@@ -1325,7 +1371,7 @@ class DynamicsPipeline final : public Simulation {
     const size_t n = n_;
     const bool rot = rotation_;
     const Vec3d g = cfg_.gravity;
-    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+    backend_.parallel_for(live_, [=] COLLIDO_HD(uint32_t i) {
       const uint8_t st = P.state[i];
       const bool active = st == kActive;
       const double m = P.mass[i];
@@ -1357,6 +1403,10 @@ class DynamicsPipeline final : public Simulation {
   int pkey_bits_ = 32;  // radix sort bits of a particle bucket key, set with pgrid_
   Vec3d lo_{0, 0, 0}, hi_{0, 0, 0};  // the domain, in the local frame (origin: the wall's centre)
   size_t n_ = 0;
+  // The live prefix: particles [0, live_) of the engine's numbering may have
+  // been released, those past it all wait; a step's passes run over the prefix.
+  size_t live_ = 0;
+  std::vector<double> due_from_;  // host: the earliest release at or after each place
   double time_ = 0;
   double last_release_ = 0;  // s: no particle waits after this
   bool all_released_ = false;
@@ -1381,14 +1431,13 @@ class DynamicsPipeline final : public Simulation {
   // [nl_start_[i], nl_start_[i + 1]) of nl_list_, built at the positions x_ref_.
   bool nlist_ = false, nl_valid_ = false;
   double skin_ = 0;
-  uint64_t nl_released_ = 0;
-  double released_at_ = 0;  // s: when the release kernel last ran
+  size_t nl_cover_ = 0;  // the lists hold the particles before this place (list_cover)
+  double nl_built_at_ = 0, nl_life_ = 0;  // s: when they were last built, how long the one before lasted
   // Velocity Verlet's close of the last step (its dt) waits for the next pass.
   bool close_pending_ = false;
   double pending_dt_ = 0;
   bool disp_fresh_ = false;  // disp_max_ is the largest move of the current positions
   double disp_max_ = 0;      // squared, since the lists were built
-  std::vector<double> release_sorted_;  // host: release times in order, to count releases
   // Each list holds the partners whose pair the particle owns (upper, sorted);
   // lo_start_, lo_j_ and lo_rec_ give each particle the partners owning their
   // pair with it (sorted) and where each such pair sits in its owner's upper list.
