@@ -152,7 +152,8 @@ bool is_cuda(const JobInputs& in) { return in.backend == "cuda"; }
 //
 // A job's time is the same kind of sum over its stages (time_terms): set-up (a fixed
 // cost, the wall's division, bins, triangles, placing the particles), the steps (a
-// fixed cost each, a pass over every particle each, waiting ones too, active
+// fixed cost each, a pass over every particle each (the engine's passes once ran
+// over waiting particles too; on logs since, its weight is near 0), active
 // particle-steps, pair contact-steps, a divided wall's lookups) and the frames
 // (snapshots, rendering per pixel and particle, each encoder per pixel). Each backend
 // has weights of its own. The time per frame is the same sum without the set-up,
