@@ -30,6 +30,10 @@ inline constexpr int kWallSlots = kMaxWallContacts;
 inline constexpr int kPairSlots = 8;
 // Waiting particles the neighbour lists hold at least, past the live ones (see list_cover).
 inline constexpr size_t kCoverAhead = 64;
+// An automatic skin grows when a list lived fewer steps than this, up to this
+// share of the smallest radius (the bound of the automatic choice; grow_skin_after).
+inline constexpr uint64_t kShortListSteps = 3;
+inline constexpr double kMaxSkinShare = 0.5;
 
 // Per-particle statistics columns filled by a measuring pass, reduced per frame.
 enum StatColumn : size_t {
@@ -330,10 +334,7 @@ class DynamicsPipeline final : public Simulation {
       backend_.resize(wl_count_, std::max<size_t>(n_, 1));
     }
     if (cfg_.particle_contacts) {
-      uint64_t cells = 0;
-      // A dense table up to a few cells per particle: hashed buckets cost a filter on every read.
-      pgrid_ = make_grid(lo_, hi_, 2 * ts_.r_max + skin_,
-                         std::max<uint64_t>(cfg_.max_dense_cells, 8 * uint64_t(n_)), n_, &cells);
+      make_particle_grid();
       if (nlist_) {
         once_ = cfg_.pairs_once < 0 ? B::kPairForcesOncePerPair : cfg_.pairs_once == 1;
         backend_.resize(nl_start_, n_ + 1);
@@ -343,12 +344,7 @@ class DynamicsPipeline final : public Simulation {
       backend_.resize(p_idx_, std::max<size_t>(n_, 1));
       backend_.resize(p_key_sorted_, std::max<size_t>(n_, 1));
       backend_.resize(p_idx_sorted_, std::max<size_t>(n_, 1));
-      backend_.resize(cell_start_, pgrid_.buckets);
-      backend_.resize(cell_end_, pgrid_.buckets);
       backend_.resize(sorted_, std::max<size_t>(n_, 1));
-      // Radix passes over the bits a bucket number (or the `none` key, buckets) needs.
-      pkey_bits_ = 1;
-      while (pkey_bits_ < 32 && (uint64_t(1) << pkey_bits_) <= pgrid_.buckets) ++pkey_bits_;
       // Float filter slack: rounding of coordinates up to the domain's size, and of the radii.
       const Vec3d ext = hi_ - lo_;
       filter_slack_ =
@@ -363,6 +359,34 @@ class DynamicsPipeline final : public Simulation {
     speeds();
     backend_.sync();
     return backend_.status();
+  }
+
+  // The particle grid for cells of 2 r_max + the skin: its buckets, their ranges'
+  // buffers and the radix sort's key bits.
+  void make_particle_grid() {
+    uint64_t cells = 0;
+    // A dense table up to a few cells per particle: hashed buckets cost a filter on every read.
+    pgrid_ = make_grid(lo_, hi_, 2 * ts_.r_max + skin_,
+                       std::max<uint64_t>(cfg_.max_dense_cells, 8 * uint64_t(n_)), n_, &cells);
+    backend_.resize(cell_start_, pgrid_.buckets);
+    backend_.resize(cell_end_, pgrid_.buckets);
+    // Radix passes over the bits a bucket number (or the `none` key, buckets) needs.
+    pkey_bits_ = 1;
+    while (pkey_bits_ < 32 && (uint64_t(1) << pkey_bits_) <= pgrid_.buckets) ++pkey_bits_;
+  }
+
+  // An automatic skin doubles (up to kMaxSkinShare of the smallest radius, the
+  // grid's cells growing with it) when a list lived fewer than kShortListSteps
+  // steps: particles faster than the scene's expected impacts (a jet piling up,
+  // a particle thrown off a deep overlap) moved half of it every step, and each
+  // build cost more than the list saved. A skin given in the scene stays.
+  void grow_skin_after(uint64_t list_steps) {
+    if (!(cfg_.neighbour_skin < 0) || list_steps >= kShortListSteps) return;
+    const double cap = kMaxSkinShare * ts_.r_min;
+    if (!(skin_ < cap)) return;
+    skin_ = std::min(2 * skin_, cap);
+    ts_.neighbour_skin = skin_;
+    make_particle_grid();
   }
 
   // Calls f(buffer, element count) for every buffer of the changing state, in
@@ -765,8 +789,12 @@ class DynamicsPipeline final : public Simulation {
 
   // The lists at the current positions, which their check then measures moves from.
   void build_lists() {
-    if (nl_valid_) nl_life_ = time_ - nl_built_at_;
+    if (nl_valid_) {
+      nl_life_ = time_ - nl_built_at_;
+      grow_skin_after(steps_ - nl_built_step_);
+    }
     nl_built_at_ = time_;
+    nl_built_step_ = steps_;
     build_pair_lists();  // sets nl_cover_
     if (wall_list_) build_wall_lists();
     backend_.copy(x_ref_.data(), pos_.data(), nl_cover_ * sizeof(Vec3d));
@@ -1433,6 +1461,7 @@ class DynamicsPipeline final : public Simulation {
   double skin_ = 0;
   size_t nl_cover_ = 0;  // the lists hold the particles before this place (list_cover)
   double nl_built_at_ = 0, nl_life_ = 0;  // s: when they were last built, how long the one before lasted
+  uint64_t nl_built_step_ = 0;            // the step count at the last build
   // Velocity Verlet's close of the last step (its dt) waits for the next pass.
   bool close_pending_ = false;
   double pending_dt_ = 0;

@@ -733,6 +733,64 @@ void releases_keep_their_times() {
   }
 }
 TEST(Dynamics, ReleasesKeepTheirTimes) { releases_keep_their_times(); }
+
+// An automatic skin grows when the lists would be built every step: particles
+// fly at 20 m/s where the scene expects impacts of 0.5 m/s, so the automatic
+// step moves the fastest 0.1 radii a step, twice half the smallest skin. The
+// skin doubles (up to half a radius) until the lists last a few steps, and the
+// run matches one that keeps the first skin bit for bit (renumbering off: the
+// lists' sums run in ascending index however often they were built).
+void fast_particles_grow_the_skin() {
+  const TriangleMesh wall = make_cylinder(50, 100, 40);
+  const ParticleSet p = lattice(8, 4.5, 10, 0.5, 20.0, 13);  // 1.125 apart: they meet, then the wall
+  DynamicsConfig cfg;
+  cfg.particle_contacts = true;
+  cfg.impact_speed = 0.5;
+  cfg.renumber_every = 0;
+  DynamicsConfig kept = cfg;
+  kept.neighbour_skin = 0.05;  // the automatic choice at the start: 0.1 r
+  ParticleSet end[2];
+  uint64_t builds[2] = {0, 0}, steps = 0, walls = 0, pairs = 0;
+  for (int k = 0; k < 2; ++k) {
+    auto s = make_sim(wall, k ? kept : cfg, p);
+    ASSERT_TRUE(s);
+    EXPECT_NEAR(s->time_step_info().neighbour_skin, 0.05, 1e-12);
+    s->set_stage_timing(true);
+    FrameStats st;
+    for (int f = 0; f < 20; ++f) {
+      ASSERT_TRUE(s->advance(0.05, &st));
+      walls += st.wall_contacts;
+      pairs += st.particle_contacts;
+    }
+    const double skin = s->time_step_info().neighbour_skin;
+    if (k == 0) {
+      EXPECT_GT(skin, 0.05);
+      EXPECT_LE(skin, 0.25);
+    } else {
+      EXPECT_EQ(skin, 0.05);
+    }
+    builds[k] = s->stage_times().neighbour_builds;
+    steps = s->stage_times().steps;
+    std::printf("skin %s (%.3g m): %llu builds in %llu steps, %llu pair contacts\n", k ? "kept" : "grown", skin,
+                (unsigned long long)builds[k], (unsigned long long)steps, (unsigned long long)pairs);
+    ASSERT_TRUE(s->download(&end[k], nullptr));
+  }
+  EXPECT_GT(steps, 300u);
+  EXPECT_GT(builds[1] * 10, steps * 9);  // kept: about every step
+  EXPECT_LT(builds[0] * 2, builds[1]);   // grown: less than half as often
+  EXPECT_GT(walls, 0u);                  // they reached the wall
+  EXPECT_GT(pairs, 0u);                  // and met (a grid too fine for the grown skin misses them)
+  if (backend_under_test() == Backend::kCpu) {
+    EXPECT_EQ(end[0].x, end[1].x);
+    EXPECT_EQ(end[0].z, end[1].z);
+    EXPECT_EQ(end[0].vz, end[1].vz);
+    return;
+  }
+  double worst = 0;  // nvcc may fuse a kernel's arithmetic differently once the lists differ
+  for (size_t i = 0; i < p.size(); ++i) worst = std::max(worst, std::fabs(end[0].z[i] - end[1].z[i]));
+  EXPECT_LE(worst, 1e-9);
+}
+TEST(Dynamics, FastParticlesGrowTheSkin) { fast_particles_grow_the_skin(); }
 TEST(Dynamics, ElasticBoxKeepsItsEnergy) {
   elastic_box_energy();
 }
@@ -816,6 +874,7 @@ TEST_F(DynamicsCuda, DivisionMethodsPushOnceToo) {
 }
 TEST_F(DynamicsCuda, SavedStateContinuesExactly) { saved_state_continues_exactly(); }
 TEST_F(DynamicsCuda, ReleasesKeepTheirTimes) { releases_keep_their_times(); }
+TEST_F(DynamicsCuda, FastParticlesGrowTheSkin) { fast_particles_grow_the_skin(); }
 TEST_F(DynamicsCuda, NeighbourListFindsEveryContactTheGridDoes) {
   neighbour_list_finds_every_contact();
 }
