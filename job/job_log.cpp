@@ -74,25 +74,29 @@ JobInputs job_inputs(const JobAssessment& a, const std::string& backend, const s
   return in;
 }
 
-const std::vector<std::string>& job_log_columns() {
-  static const std::vector<std::string> cols = {
-      "wall",          "particles",      "triangles",       "pieces",
-      "wall_cells",    "wall_area",      "box_x",           "box_y",
-      "box_z",         "r_min",          "r_max",           "method",
-      "placement",     "release_s",      "particle_contacts", "friction",
-      "gravity",       "duration",       "fps",             "frames",
-      "step_s",        "steps_per_frame", "steps",          "render_width",
-      "render_height", "formats",        "backend",         "device",
-      "threads",       "total_s",        "prepare_s",       "simulate_s",
-      "render_s",      "per_frame_s",    "peak_host_bytes", "peak_device_bytes",
-      "gpu_load",      "output_bytes",   "steps_taken",     "load_avg",
-      "active_steps",  "wall_contact_steps", "pair_contact_steps"};
-  return cols;
-}
-
 const std::vector<std::string>& job_log_optional_columns() {
   static const std::vector<std::string> cols = {"active_steps", "wall_contact_steps",
                                                 "pair_contact_steps"};
+  return cols;
+}
+
+const std::vector<std::string>& job_log_columns() {
+  static const std::vector<std::string> cols = [] {
+    std::vector<std::string> c = {
+        "wall",          "particles",      "triangles",       "pieces",
+        "wall_cells",    "wall_area",      "box_x",           "box_y",
+        "box_z",         "r_min",          "r_max",           "method",
+        "placement",     "release_s",      "particle_contacts", "friction",
+        "gravity",       "duration",       "fps",             "frames",
+        "step_s",        "steps_per_frame", "steps",          "render_width",
+        "render_height", "formats",        "backend",         "device",
+        "threads",       "total_s",        "prepare_s",       "simulate_s",
+        "render_s",      "per_frame_s",    "peak_host_bytes", "peak_device_bytes",
+        "gpu_load",      "output_bytes",   "steps_taken",     "load_avg"};
+    const auto& optional = job_log_optional_columns();  // written last
+    c.insert(c.end(), optional.begin(), optional.end());
+    return c;
+  }();
   return cols;
 }
 
@@ -354,9 +358,9 @@ Expected<std::vector<JobRecord>> parse_job_log(const std::string& text) {
   const auto& cols = job_log_columns();
   constexpr size_t kAbsent = size_t(-1);
   std::vector<size_t> at;
+  const auto& optional = job_log_optional_columns();
   for (const std::string& name : cols) {
     auto it = where.find(name);
-    const auto& optional = job_log_optional_columns();
     if (it == where.end() && std::find(optional.begin(), optional.end(), name) != optional.end()) {
       at.push_back(kAbsent);
       continue;

@@ -47,18 +47,17 @@ void bisect_walk(const Tri& root, double max_edge, Leaf&& leaf) {
   }
 }
 
-void bisect(const Tri& root, double max_edge, std::vector<Tri>& out) {
-  bisect_walk(root, max_edge, [&](const Tri& t) { out.push_back(t); });
-}
-
-void midpoint4(const Tri& root, double max_edge, std::vector<Tri>& out) {
+// Splits every edge at its midpoint until every edge is <= max_edge, handing
+// each final piece to leaf (depth first, a stable order).
+template <class Leaf>
+void midpoint4_walk(const Tri& root, double max_edge, Leaf&& leaf) {
   const double limit2 = max_edge * max_edge;
   std::vector<Tri> stack{root};
   while (!stack.empty()) {
     Tri t = stack.back();
     stack.pop_back();
     if (edge2(t, longest_edge(t)) <= limit2) {
-      out.push_back(t);
+      leaf(t);
       continue;
     }
     const Vec3d ab = (t[0] + t[1]) * 0.5, bc = (t[1] + t[2]) * 0.5, ca = (t[2] + t[0]) * 0.5;
@@ -78,14 +77,36 @@ int obtuse_corner(const Tri& t) {
   return -1;
 }
 
-// Splits an obtuse triangle by the altitude from its obtuse corner into two right triangles.
-void split_obtuse(const Tri& t, int k, std::vector<Tri>& out) {
+// Splits an obtuse triangle by the altitude from its obtuse corner into two right
+// triangles, handed to leaf.
+template <class Leaf>
+void split_obtuse(const Tri& t, int k, Leaf&& leaf) {
   const Vec3d o = t[k], b = t[(k + 1) % 3], c = t[(k + 2) % 3];
   const Vec3d bc = c - b;
   const double s = dot(o - b, bc) / norm2(bc);
   const Vec3d foot = b + bc * s;
-  out.push_back({o, b, foot});
-  out.push_back({o, foot, c});
+  leaf(Tri{o, b, foot});
+  leaf(Tri{o, foot, c});
+}
+
+// One triangle's pieces under a method, each handed to leaf in divide()'s order:
+// the one statement of each method's rule, for dividing and for counting.
+template <class Leaf>
+void divide_triangle(const Tri& root, DivisionMethod method, double r_max, Leaf&& leaf) {
+  switch (method) {
+    case DivisionMethod::kGravity: bisect_walk(root, r_max, leaf); break;
+    case DivisionMethod::kMidpoint4: midpoint4_walk(root, r_max, leaf); break;
+    case DivisionMethod::kCircumcircle:
+      // Bisected to edges of sqrt(3) r_max, each obtuse piece then split in two.
+      bisect_walk(root, std::sqrt(3.0) * r_max, [&](const Tri& p) {
+        const int k = obtuse_corner(p);
+        if (k >= 0)
+          split_obtuse(p, k, leaf);
+        else
+          leaf(p);
+      });
+      break;
+  }
 }
 
 // Smallest sphere through... the circumsphere for non-obtuse triangles; for a
@@ -125,59 +146,21 @@ double midpoint4_piece_count(const TriangleMesh& mesh, double r_max) {
   return count;
 }
 
-namespace {
-
-// Pieces bisect(root, max_edge) makes, counted without making them; *obtuse gets how
-// many of them have an obtuse corner (circumcircle splits each of those in two).
-double bisect_count(const Tri& root, double max_edge, double* obtuse) {
-  double n = 0;
-  bisect_walk(root, max_edge, [&](const Tri& t) {
-    n += 1;
-    if (obtuse && obtuse_corner(t) >= 0) *obtuse += 1;
-  });
-  return n;
-}
-
-}  // namespace
-
 double division_piece_count(const TriangleMesh& mesh, DivisionMethod method, double r_max) {
   if (method == DivisionMethod::kMidpoint4) return midpoint4_piece_count(mesh, r_max);
   double count = 0;
   for (size_t t = 0; t < mesh.triangles.size(); ++t) {
     const Tri root{mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2)};
-    if (method == DivisionMethod::kGravity) {
-      count += bisect_count(root, r_max, nullptr);
-    } else {
-      double obtuse = 0;
-      count += bisect_count(root, std::sqrt(3.0) * r_max, &obtuse) + obtuse;
-    }
+    divide_triangle(root, method, r_max, [&](const Tri&) { count += 1; });
   }
   return count;
 }
 
 DividedMesh divide(const TriangleMesh& mesh, DivisionMethod method, double r_max) {
   DividedMesh out;
-  std::vector<Tri> pieces, right;
   for (size_t t = 0; t < mesh.triangles.size(); ++t) {
     const Tri root{mesh.corner(t, 0), mesh.corner(t, 1), mesh.corner(t, 2)};
-    pieces.clear();
-    switch (method) {
-      case DivisionMethod::kGravity: bisect(root, r_max, pieces); break;
-      case DivisionMethod::kMidpoint4: midpoint4(root, r_max, pieces); break;
-      case DivisionMethod::kCircumcircle: {
-        right.clear();
-        bisect(root, std::sqrt(3.0) * r_max, right);
-        for (const Tri& p : right) {
-          int k = obtuse_corner(p);
-          if (k >= 0)
-            split_obtuse(p, k, pieces);
-          else
-            pieces.push_back(p);
-        }
-        break;
-      }
-    }
-    for (const Tri& p : pieces) {
+    divide_triangle(root, method, r_max, [&](const Tri& p) {
       Vec3d c;
       double r;
       if (method == DivisionMethod::kCircumcircle)
@@ -190,7 +173,7 @@ DividedMesh divide(const TriangleMesh& mesh, DivisionMethod method, double r_max
       out.sphere_radius.push_back(r);
       out.max_sphere_radius = std::max(out.max_sphere_radius, r);
       out.max_edge = std::max(out.max_edge, std::sqrt(edge2(p, longest_edge(p))));
-    }
+    });
   }
   return out;
 }
