@@ -420,6 +420,11 @@ class JobRunner {
              " non-finite (frozen, not written)");
         lost_ = last_.escaped + last_.invalid;
       }
+      if (last_.held > 0 && !held_noted_) {
+        note("frame " + std::to_string(f) + ": " + std::to_string(last_.held) +
+             " particles wait at the inlet for their place (each goes once nothing touches it)");
+        held_noted_ = true;
+      }
       // Say the first time each kind of failure shows, and count every frame it shows in.
       const sim::FrameWarnings w = sim::frame_warnings(last_, sim_->time_step_info());
       if ((w.blow_up && result_.blow_up_frames == 0) ||
@@ -444,6 +449,8 @@ class JobRunner {
       if (Status w = sim::write_pvd(paths_.pvd(), pvd); !w) return w;
     result_.cost.simulate_s = seconds_since(t_loop);
     result_.cost.frames = frames + 1;
+    if (last_.held > 0)
+      note(std::to_string(last_.held) + " particles were due but still waiting for their place at the inlet when the run ended");
     result_.escaped = last_.escaped;
     result_.invalid = last_.invalid;
     if (scene_.dynamics.backend == sim::Backend::kCuda && result_.cost.simulate_s > 0)
@@ -502,6 +509,7 @@ class JobRunner {
   StatsFile stats_;
   sim::FrameStats last_;
   uint64_t lost_ = 0;
+  bool held_noted_ = false;
 };
 
 }  // namespace

@@ -8,7 +8,7 @@
 namespace collido::job {
 
 const char* const kStatsHeader =
-    "frame,time_s,substeps,dt_min_s,dt_max_s,active,waiting,escaped,invalid,wall_contacts,"
+    "frame,time_s,substeps,dt_min_s,dt_max_s,active,waiting,held,escaped,invalid,wall_contacts,"
     "particle_contacts,touching_wall,kinetic_J,potential_J,elastic_J,total_J,max_speed_m_s,"
     "max_overlap,history_overflow,wall_ms\n";
 
@@ -68,10 +68,11 @@ Status StatsFile::append(const sim::FrameStats& s, double wall_ms) {
   if (!f_) return io_error("statistics file is not open");
   const int n = std::fprintf(
       f_,
-      "%llu,%.9g,%llu,%.6g,%.6g,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%.9g,%.9g,%.9g,%.9g,%.6g,%.6g,"
+      "%llu,%.9g,%llu,%.6g,%.6g,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%.9g,%.9g,%.9g,%.9g,%.6g,%.6g,"
       "%llu,%.3f\n",
       (unsigned long long)s.frame, s.time, (unsigned long long)s.substeps, s.dt_min, s.dt_max,
-      (unsigned long long)s.active, (unsigned long long)s.waiting, (unsigned long long)s.escaped,
+      (unsigned long long)s.active, (unsigned long long)s.waiting, (unsigned long long)s.held,
+      (unsigned long long)s.escaped,
       (unsigned long long)s.invalid, (unsigned long long)s.wall_contacts,
       (unsigned long long)s.particle_contacts, (unsigned long long)s.touching_wall, s.kinetic,
       s.potential, s.elastic, s.total_energy(), s.max_speed, s.max_overlap,

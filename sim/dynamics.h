@@ -186,6 +186,7 @@ struct FrameStats {
   uint64_t substeps = 0;          // steps taken in this frame
   double dt_min = 0, dt_max = 0;  // s, over the frame's steps
   uint64_t waiting = 0, active = 0, escaped = 0, invalid = 0;
+  uint64_t held = 0;  // of the waiting, those due whose place is still taken (a jammed inlet)
   uint64_t wall_contacts = 0;      // one per touched wall feature
   uint64_t particle_contacts = 0;  // pairs
   uint64_t touching_wall = 0;      // particles with at least one wall contact

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <type_traits>
 #include <vector>
 
@@ -50,6 +51,7 @@ enum StatColumn : size_t {
   kStatPotential,
   kStatSpeed,
   kStatWaiting,
+  kStatHeld,  // due by the releases decided, waiting for its place (see release_due)
   kStatActive,
   kStatEscaped,
   kStatInvalid,
@@ -151,6 +153,9 @@ class DynamicsPipeline final : public Simulation {
                    : backend_.reduce_sum(scratch_.data() + c * n_, live_);
     }
     col[kStatWaiting] += double(n_ - live_);  // beyond the live prefix every particle waits
+    // Every particle is out once none is due after the releases decided and none due waits.
+    if (!all_released_ && released_to_ >= last_release_ && col[kStatHeld] < 0.5)
+      all_released_ = true;
     st->elastic = col[kStatElasticWall] + col[kStatElasticPair];
     st->max_overlap = std::max(col[kStatOverlapWall], col[kStatOverlapPair]);
     st->wall_contacts = static_cast<uint64_t>(col[kStatWallContacts] + 0.5);
@@ -161,6 +166,7 @@ class DynamicsPipeline final : public Simulation {
     st->potential = col[kStatPotential];
     st->max_speed = col[kStatSpeed];
     st->waiting = static_cast<uint64_t>(col[kStatWaiting] + 0.5);
+    st->held = static_cast<uint64_t>(col[kStatHeld] + 0.5);
     st->active = static_cast<uint64_t>(col[kStatActive] + 0.5);
     st->escaped = static_cast<uint64_t>(col[kStatEscaped] + 0.5);
     st->invalid = static_cast<uint64_t>(col[kStatInvalid] + 0.5);
@@ -216,6 +222,8 @@ class DynamicsPipeline final : public Simulation {
     time_ = in.time;
     steps_ = in.steps;
     all_released_ = in.all_released;
+    // Unknown: held particles count from the next step's releases on.
+    released_to_ = -std::numeric_limits<double>::infinity();
     close_pending_ = false;  // the restored state is a whole step's
     disp_fresh_ = false;
     nl_valid_ = false;  // built afresh for the restored positions
@@ -275,6 +283,7 @@ class DynamicsPipeline final : public Simulation {
     radius_host_ = ps.r;
     release_host_ = ps.release;
     last_release_ = n_ ? *std::max_element(ps.release.begin(), ps.release.end()) : 0.0;
+    all_released_ = !(last_release_ > 0);  // every particle moves from the start
     // Numbered in the order of release, so the released particles are a
     // prefix: the passes of a step skip those still waiting at an inlet (a
     // pour spent a quarter of its time on them) and releasing extends the prefix.
@@ -352,7 +361,7 @@ class DynamicsPipeline final : public Simulation {
                 1e-5 * ts_.r_max);
     }
     // Forces of the initial state, so the first Verlet half kick has them.
-    release(0.0);
+    grow_live(0.0);
     update_candidates();
     forces(0.0, false, 0.0);
     if (rotation_) swap_history();
@@ -463,7 +472,7 @@ class DynamicsPipeline final : public Simulation {
   // friction springs move with their particle and take their partners' new
   // numbers; hand_over_springs then gives each to its pair's new owner.
   // No memory of its own: the moves go through the statistics scratch (free
-  // between frames' measures, 128 bytes a particle) and the inverse through
+  // between frames' measures, 136 bytes a particle) and the inverse through
   // the particle grid's unsorted indices (free once sorted).
   void reorder_by_cell() {
     const uint32_t* perm = p_idx_sorted_.data();  // new k holds old perm[k]
@@ -526,19 +535,24 @@ class DynamicsPipeline final : public Simulation {
     if (timing_) lap_ = std::chrono::steady_clock::now();
     const bool releasing = !all_released_;
     const bool verlet = cfg_.integrator == Integrator::kVelocityVerlet;
-    if (verlet) {
-      open_step(dt, releasing);
-    } else if (releasing) {
-      release(time_);
-    }
-    if (releasing) all_released_ = time_ >= last_release_;
+    // Releases are decided where the positions (and the candidates found for
+    // them) are those of a step boundary: Verlet's step end, after its drift,
+    // or symplectic Euler's step start. Either way a particle starts moving at
+    // the first boundary at or after its release time.
+    const double release_at = verlet ? time_ + dt : time_;
+    if (releasing) grow_live(release_at);
+    if (verlet) open_step(dt);
     lap(times_.drift_ms);
     if (cfg_.particle_contacts) {
       update_candidates();
       lap(times_.grid_ms);
     }
+    if (releasing && !verlet) release_due(release_at);
     // Forces where the positions now are: after Verlet's drift, at the step's end.
     forces(dt, false, verlet ? time_ + dt : time_);
+    // After the forces, so a particle released at the step's end starts with
+    // none (it touched nothing: see release_due) and moves from the next step.
+    if (releasing && verlet) release_due(release_at);
     if (rotation_) swap_history();
     if (verlet) {
       close_pending_ = true, pending_dt_ = dt;
@@ -568,12 +582,66 @@ class DynamicsPipeline final : public Simulation {
                                length(cfg_.gravity));
   }
 
-  void release(double t) {
-    grow_live(t);
+  // Releases the particles due by t whose place is free. A particle released
+  // into one already there would start deep inside it and be fired out at
+  // many times the scene's speeds (a jet whose mouth had jammed blew up so);
+  // it waits instead, and goes at the first boundary where nothing touches it.
+  // Of two due particles that touch each other (an inlet's slot holds its
+  // waiting particles one on another) the one due first goes first (ties by
+  // number). Without particle contacts particles pass through one another and
+  // every due particle goes.
+  // Two passes, so that no particle's decision reads another's new state:
+  // the first marks in flags (unused while a particle waits) those that may
+  // go, the second releases them. all_released_ is settled by measure().
+  void release_due(double t) {
+    released_to_ = t;
     uint8_t* state = state_.data();
+    uint8_t* flags = flags_.data();
     const double* rel = release_.data();
+    if (!cfg_.particle_contacts) {
+      backend_.parallel_for(live_, [=] COLLIDO_HD(uint32_t i) {
+        if (state[i] == kWaiting && rel[i] <= t) state[i] = flags[i] = kActive;
+      });
+      all_released_ = t >= last_release_;
+      return;
+    }
+    const ParticleArrays P = arrays();
+    const bool list = nlist_;
+    const GridSpec pg = pgrid_;
+    const uint32_t* start = cell_start_.data();
+    const uint32_t* end = cell_end_.data();
+    const uint32_t* sidx = p_idx_sorted_.data();
+    const PackedParticle* sp = sorted_.data();
+    const float slack = filter_slack_;
+    const uint32_t* nl_start = nl_start_.data();
+    const uint32_t* nl = nl_list_.data();
+    const uint32_t* lo_start = lo_start_.data();
+    const uint32_t* lo_j = lo_j_.data();
     backend_.parallel_for(live_, [=] COLLIDO_HD(uint32_t i) {
-      if (state[i] == kWaiting && rel[i] <= t) state[i] = kActive;
+      if (P.state[i] != kWaiting || !(rel[i] <= t)) return;
+      const Vec3d xi = P.x[i];
+      const double ri = P.r[i], ti = rel[i];
+      bool taken = false;
+      // j takes i's place: it touches i and is moving, or is due before i.
+      auto check = [&](uint32_t j) {
+        const Vec3d d = xi - P.x[j];
+        const double rs = ri + P.r[j];
+        if (!(dot(d, d) < rs * rs)) return;
+        const uint8_t sj = P.state[j];
+        taken = taken || sj == kActive ||
+                (sj == kWaiting && (rel[j] < ti || (rel[j] == ti && j < i)));
+      };
+      if (list) {  // the lists hold every due particle with its partners (see list_cover)
+        for (uint32_t k = lo_start[i], e = lo_start[i + 1]; k < e && !taken; ++k) check(lo_j[k]);
+        for (uint32_t k = nl_start[i], e = nl_start[i + 1]; k < e && !taken; ++k) check(nl[k]);
+      } else {  // the grid holds the waiting particles of the live prefix too
+        for_each_grid_candidate(pg, start, end, sidx, sp, slack, i, cast3<float>(xi), float(ri),
+                                [&](uint32_t j) { check(j); });
+      }
+      P.flags[i] = taken ? uint8_t(kWaiting) : uint8_t(kActive);
+    });
+    backend_.parallel_for(live_, [=] COLLIDO_HD(uint32_t i) {
+      if (P.state[i] == kWaiting && P.flags[i] == kActive) P.state[i] = kActive;
     });
   }
 
@@ -629,11 +697,10 @@ class DynamicsPipeline final : public Simulation {
   // lists were built (0 when it is not active or there are no lists).
   struct OpenStep {
     ParticleArrays P;
-    bool rot, close, releasing, disp;
-    double h, dt, t;  // the pending step's length, this step's, the time now
+    bool rot, close, disp;
+    double h, dt;  // the pending step's length, this step's
     double* speed;
     Domain dom;  // where the pending step ended
-    const double* rel;
     const Vec3d* ref;
     COLLIDO_HD COLLIDO_FORCEINLINE double operator()(uint32_t i) const {
       uint8_t st = P.state[i];
@@ -643,7 +710,6 @@ class DynamicsPipeline final : public Simulation {
         else
           speed[i] = 0;
       }
-      if (releasing && st == kWaiting && rel[i] <= t) P.state[i] = st = kActive;
       if (st != kActive) return 0.0;
       const Vec3d v = P.v[i] + P.acc[i] * (0.5 * dt);
       const Vec3d x = P.x[i] + v * dt;
@@ -657,16 +723,14 @@ class DynamicsPipeline final : public Simulation {
   };
 
   // Velocity Verlet's first pass of a step, particle by particle in the order
-  // separate passes would take: the last step's pending close, the releases
-  // due now, this step's half kick and drift; with lists, the largest squared
-  // move since they were built, for the check that follows.
-  void open_step(double dt, bool releasing) {
+  // separate passes would take: the last step's pending close, this step's
+  // half kick and drift; with lists, the largest squared move since they were
+  // built, for the check that follows.
+  void open_step(double dt) {
     const bool disp = nlist_ && nl_valid_;
-    const OpenStep op{arrays(),     rotation_, close_pending_,  releasing,
-                      disp,         pending_dt_, dt,            time_,
-                      speed_.data(), domain_at(wall_pose(time_)), release_.data(),
-                      x_ref_.data()};
-    if (releasing) grow_live(time_);
+    const OpenStep op{arrays(), rotation_,     close_pending_,
+                      disp,     pending_dt_,   dt,
+                      speed_.data(), domain_at(wall_pose(time_)), x_ref_.data()};
     if (disp) {
       disp_max_ = backend_.parallel_max(live_, [=] COLLIDO_HD(uint32_t i) { return op(i); });
     } else {
@@ -739,7 +803,8 @@ class DynamicsPipeline final : public Simulation {
   void update_candidates() {
     if (!cfg_.particle_contacts) return;
     if (!nlist_) {
-      build_particle_grid(live_, /*with_waiting=*/false);
+      // With the particles waiting for their place, which release_due looks up.
+      build_particle_grid(live_, /*with_waiting=*/!all_released_);
       return;
     }
     bool rebuild = !nl_valid_ || live_ > nl_cover_;
@@ -1260,8 +1325,9 @@ class DynamicsPipeline final : public Simulation {
           if (P.state[j] == kActive) touch(j, true);
         }
       } else {
-        for_each_grid_candidate(pg, start, end, sidx, sp, slack, i, xf, rf,
-                                [&](uint32_t j) { touch(j, i < j); });
+        for_each_grid_candidate(pg, start, end, sidx, sp, slack, i, xf, rf, [&](uint32_t j) {
+          if (P.state[j] == kActive) touch(j, i < j);
+        });
       }
       P.flags[i] = npair ? uint8_t(kActive | kFlagParticleContact) : uint8_t(kActive);
       if (measure) {
@@ -1407,6 +1473,8 @@ class DynamicsPipeline final : public Simulation {
     const size_t n = n_;
     const bool rot = rotation_;
     const Vec3d g = cfg_.gravity;
+    const double* rel = release_.data();
+    const double t = released_to_;
     backend_.parallel_for(live_, [=] COLLIDO_HD(uint32_t i) {
       const uint8_t st = P.state[i];
       const bool active = st == kActive;
@@ -1422,6 +1490,7 @@ class DynamicsPipeline final : public Simulation {
       stats[kStatPotential * n + i] = pe;
       stats[kStatSpeed * n + i] = sp;
       stats[kStatWaiting * n + i] = st == kWaiting;
+      stats[kStatHeld * n + i] = st == kWaiting && rel[i] <= t;
       stats[kStatActive * n + i] = active;
       stats[kStatEscaped * n + i] = st == kEscaped;
       stats[kStatInvalid * n + i] = st == kInvalid;
@@ -1447,6 +1516,7 @@ class DynamicsPipeline final : public Simulation {
   double time_ = 0;
   double last_release_ = 0;  // s: no particle waits after this
   bool all_released_ = false;
+  double released_to_ = 0;  // s: releases due by then have been decided (release_due)
   bool timing_ = false;
   StepTimes times_;
   std::chrono::steady_clock::time_point lap_;

@@ -5,7 +5,7 @@ import uPlot from '/ui/vendor/uplot/uPlot.esm.js';
 import { h, field } from './dom.js';
 
 const LABELS = {
-  active: 'moving', waiting: 'not yet poured', escaped: 'escaped', invalid: 'invalid', touching_wall: 'touching the wall',
+  active: 'moving', waiting: 'not yet poured', held: 'due, place taken', escaped: 'escaped', invalid: 'invalid', touching_wall: 'touching the wall',
   wall_contacts: 'wall contacts', particle_contacts: 'particle contacts',
   kinetic_J: 'kinetic', elastic_J: 'elastic', potential_J: 'potential', total_J: 'total',
   max_speed_m_s: 'top speed (m/s)', max_overlap: 'largest overlap',
@@ -16,7 +16,7 @@ export const MAIN = [
   ['Energy (J)', ['kinetic_J', 'elastic_J']],
 ];
 export const MORE = [
-  ['Particles', ['active', 'waiting', 'escaped', 'invalid']],
+  ['Particles', ['active', 'waiting', 'held', 'escaped', 'invalid']],
   ['Potential and total energy (J)', ['potential_J', 'total_J']],
   ['Speed and overlap', ['max_speed_m_s', 'max_overlap']],
   ['Work per frame', ['substeps', 'wall_ms']],
