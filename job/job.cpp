@@ -421,8 +421,8 @@ class JobRunner {
         lost_ = last_.escaped + last_.invalid;
       }
       if (last_.held > 0 && !held_noted_) {
-        note("frame " + std::to_string(f) + ": " + std::to_string(last_.held) +
-             " particles wait at the inlet for their place (each goes once nothing touches it)");
+        note("frame " + std::to_string(f) + ": releases wait at the inlet for their place (" +
+             std::to_string(last_.held) + " now; each goes once nothing touches it)");
         held_noted_ = true;
       }
       // Say the first time each kind of failure shows, and count every frame it shows in.
@@ -450,7 +450,8 @@ class JobRunner {
     result_.cost.simulate_s = seconds_since(t_loop);
     result_.cost.frames = frames + 1;
     if (last_.held > 0)
-      note(std::to_string(last_.held) + " particles were due but still waiting for their place at the inlet when the run ended");
+      note("the run ended with releases still waiting at the inlet for their place (" +
+           std::to_string(last_.held) + ")");
     result_.escaped = last_.escaped;
     result_.invalid = last_.invalid;
     if (scene_.dynamics.backend == sim::Backend::kCuda && result_.cost.simulate_s > 0)

@@ -51,7 +51,7 @@ enum StatColumn : size_t {
   kStatPotential,
   kStatSpeed,
   kStatWaiting,
-  kStatHeld,  // due by the releases decided, waiting for its place (see release_due)
+  kStatHeld,  // due by the releases decided, waiting for its place (see takes_place)
   kStatActive,
   kStatEscaped,
   kStatInvalid,
@@ -539,20 +539,19 @@ class DynamicsPipeline final : public Simulation {
     // them) are those of a step boundary: Verlet's step end, after its drift,
     // or symplectic Euler's step start. Either way a particle starts moving at
     // the first boundary at or after its release time.
+    // That is where the forces are evaluated too.
     const double release_at = verlet ? time_ + dt : time_;
     if (releasing) grow_live(release_at);
     if (verlet) open_step(dt);
+    if (releasing && !cfg_.particle_contacts) all_released_ = time_ >= last_release_;
     lap(times_.drift_ms);
     if (cfg_.particle_contacts) {
       update_candidates();
       lap(times_.grid_ms);
     }
-    if (releasing && !verlet) release_due(release_at);
     // Forces where the positions now are: after Verlet's drift, at the step's end.
-    forces(dt, false, verlet ? time_ + dt : time_);
-    // After the forces, so a particle released at the step's end starts with
-    // none (it touched nothing: see release_due) and moves from the next step.
-    if (releasing && verlet) release_due(release_at);
+    forces(dt, false, release_at, releasing);
+    if (releasing) released_to_ = release_at;
     if (rotation_) swap_history();
     if (verlet) {
       close_pending_ = true, pending_dt_ = dt;
@@ -582,67 +581,99 @@ class DynamicsPipeline final : public Simulation {
                                length(cfg_.gravity));
   }
 
-  // Releases the particles due by t whose place is free. A particle released
-  // into one already there would start deep inside it and be fired out at
-  // many times the scene's speeds (a jet whose mouth had jammed blew up so);
-  // it waits instead, and goes at the first boundary where nothing touches it.
-  // Of two due particles that touch each other (an inlet's slot holds its
-  // waiting particles one on another) the one due first goes first (ties by
-  // number). Without particle contacts particles pass through one another and
-  // every due particle goes.
-  // Two passes, so that no particle's decision reads another's new state:
-  // the first marks in flags (unused while a particle waits) those that may
-  // go, the second releases them. all_released_ is settled by measure().
-  void release_due(double t) {
-    released_to_ = t;
-    uint8_t* state = state_.data();
-    uint8_t* flags = flags_.data();
-    const double* rel = release_.data();
-    if (!cfg_.particle_contacts) {
-      backend_.parallel_for(live_, [=] COLLIDO_HD(uint32_t i) {
-        if (state[i] == kWaiting && rel[i] <= t) state[i] = flags[i] = kActive;
-      });
-      all_released_ = t >= last_release_;
-      return;
-    }
-    const ParticleArrays P = arrays();
-    const bool list = nlist_;
-    const GridSpec pg = pgrid_;
-    const uint32_t* start = cell_start_.data();
-    const uint32_t* end = cell_end_.data();
-    const uint32_t* sidx = p_idx_sorted_.data();
-    const PackedParticle* sp = sorted_.data();
-    const float slack = filter_slack_;
-    const uint32_t* nl_start = nl_start_.data();
-    const uint32_t* nl = nl_list_.data();
-    const uint32_t* lo_start = lo_start_.data();
-    const uint32_t* lo_j = lo_j_.data();
-    backend_.parallel_for(live_, [=] COLLIDO_HD(uint32_t i) {
-      if (P.state[i] != kWaiting || !(rel[i] <= t)) return;
-      const Vec3d xi = P.x[i];
-      const double ri = P.r[i], ti = rel[i];
-      bool taken = false;
-      // j takes i's place: it touches i and is moving, or is due before i.
-      auto check = [&](uint32_t j) {
-        const Vec3d d = xi - P.x[j];
-        const double rs = ri + P.r[j];
-        if (!(dot(d, d) < rs * rs)) return;
-        const uint8_t sj = P.state[j];
-        taken = taken || sj == kActive ||
-                (sj == kWaiting && (rel[j] < ti || (rel[j] == ti && j < i)));
-      };
-      if (list) {  // the lists hold every due particle with its partners (see list_cover)
-        for (uint32_t k = lo_start[i], e = lo_start[i + 1]; k < e && !taken; ++k) check(lo_j[k]);
-        for (uint32_t k = nl_start[i], e = nl_start[i + 1]; k < e && !taken; ++k) check(nl[k]);
-      } else {  // the grid holds the waiting particles of the live prefix too
-        for_each_grid_candidate(pg, start, end, sidx, sp, slack, i, cast3<float>(xi), float(ri),
-                                [&](uint32_t j) { check(j); });
+  // A particle's candidate partners as this step found them: its lists (the
+  // lower, then the upper, each in ascending index: the same contacts in the
+  // same order whenever they were built, so a run resumed from a checkpoint
+  // repeats the original bit for bit) or the grid's 27 cells around it.
+  struct PairCandidates {
+    bool list;
+    GridSpec pg;
+    const uint32_t *start, *end, *sidx;
+    const PackedParticle* sp;
+    float slack;
+    const uint32_t *nl_start, *nl, *lo_start, *lo_j;
+    template <class F>
+    COLLIDO_HD COLLIDO_FORCEINLINE void each(uint32_t i, Vec3f xf, float rf, F&& f) const {
+      if (list) {
+        for (uint32_t k = lo_start[i], e = lo_start[i + 1]; k < e; ++k) f(lo_j[k]);
+        for (uint32_t k = nl_start[i], e = nl_start[i + 1]; k < e; ++k) f(nl[k]);
+      } else {
+        for_each_grid_candidate(pg, start, end, sidx, sp, slack, i, xf, rf, f);
       }
-      P.flags[i] = taken ? uint8_t(kWaiting) : uint8_t(kActive);
-    });
+    }
+  };
+  PairCandidates pair_candidates() {
+    return {nlist_,          pgrid_,          cell_start_.data(), cell_end_.data(),
+            p_idx_sorted_.data(), sorted_.data(), filter_slack_,   nl_start_.data(),
+            nl_list_.data(), lo_start_.data(), lo_j_.data()};
+  }
+
+  // A particle due where another one is (touching it, in double) waits: released
+  // into it, it would start deep inside and be fired out at many times the
+  // scene's speeds (a jet whose mouth had jammed blew up so). It goes at the
+  // first step boundary where nothing touches it. Of two due particles that
+  // touch each other (an inlet's slot holds its waiting particles one on
+  // another) the one due first goes first, ties by number. Without particle
+  // contacts particles pass through one another and every due particle goes.
+  // With them the decision is taken in the pair forces' pass, where the
+  // candidates are at hand (decide_releases on the CPU's pairs-once path), and
+  // marked in flags, unused while a particle waits: kActive = may go. No
+  // decision reads another's new state, so the CPU and the GPU decide alike.
+  // The release itself is the next pass's (release_marked): Verlet's next
+  // opening pass, whose particle then moves from that step; symplectic Euler's
+  // closing pass of the same step.
+
+  // Whether j takes due particle i's place: it touches i and is moving, or is due before i.
+  COLLIDO_HD static COLLIDO_FORCEINLINE bool takes_place(const ParticleArrays& P,
+                                                         const double* rel, uint32_t i,
+                                                         uint32_t j) {
+    const Vec3d d = P.x[i] - P.x[j];
+    const double rs = P.r[i] + P.r[j];
+    if (!(dot(d, d) < rs * rs)) return false;
+    const uint8_t sj = P.state[j];
+    return sj == kActive ||
+           (sj == kWaiting && (rel[j] < rel[i] || (rel[j] == rel[i] && j < i)));
+  }
+
+  // Whether particle i waits for release by t (decided by then or not).
+  COLLIDO_HD static COLLIDO_FORCEINLINE bool due(const ParticleArrays& P, const double* rel,
+                                                 uint32_t i, double t) {
+    return P.state[i] == kWaiting && rel[i] <= t;
+  }
+
+  // Releases particle i if it was let go (flags) or, without particle
+  // contacts, is due by free_t; returns its state.
+  COLLIDO_HD static COLLIDO_FORCEINLINE uint8_t release_marked(const ParticleArrays& P,
+                                                               const double* rel, uint32_t i,
+                                                               double free_t) {
+    const uint8_t st = P.state[i];
+    if (st == kWaiting && (P.flags[i] == kActive || rel[i] <= free_t))
+      return P.state[i] = P.flags[i] = kActive;
+    return st;
+  }
+  // The time by which every due particle goes unasked (no particle contacts), else none.
+  double free_release_time() const {
+    return cfg_.particle_contacts ? -std::numeric_limits<double>::infinity() : time_;
+  }
+
+  // The decisions for the particles due by t, on a pass of their own (the
+  // pairs-once path's passes do not walk both lists of a waiting particle).
+  void decide_releases(double t) {
+    const ParticleArrays P = arrays();
+    const double* rel = release_.data();
+    const PairCandidates cand = pair_candidates();
     backend_.parallel_for(live_, [=] COLLIDO_HD(uint32_t i) {
-      if (P.state[i] == kWaiting && P.flags[i] == kActive) P.state[i] = kActive;
+      if (due(P, rel, i, t)) decide_release(P, rel, cand, i);
     });
+  }
+  COLLIDO_HD static COLLIDO_FORCEINLINE void decide_release(const ParticleArrays& P,
+                                                            const double* rel,
+                                                            const PairCandidates& cand,
+                                                            uint32_t i) {
+    bool taken = false;
+    cand.each(i, cast3<float>(P.x[i]), float(P.r[i]),
+              [&](uint32_t j) { taken = taken || takes_place(P, rel, i, j); });
+    P.flags[i] = taken ? uint8_t(kWaiting) : uint8_t(kActive);
   }
 
   // The wall's pose at time t, in the engine's local frame.
@@ -702,8 +733,10 @@ class DynamicsPipeline final : public Simulation {
     double* speed;
     Domain dom;  // where the pending step ended
     const Vec3d* ref;
+    const double* rel;
+    double free_t;  // see release_marked
     COLLIDO_HD COLLIDO_FORCEINLINE double operator()(uint32_t i) const {
-      uint8_t st = P.state[i];
+      uint8_t st = release_marked(P, rel, i, free_t);
       if (close) {
         if (st == kActive)
           st = close_particle(P, i, h, true, rot, speed, dom);
@@ -728,9 +761,13 @@ class DynamicsPipeline final : public Simulation {
   // built, for the check that follows.
   void open_step(double dt) {
     const bool disp = nlist_ && nl_valid_;
-    const OpenStep op{arrays(), rotation_,     close_pending_,
-                      disp,     pending_dt_,   dt,
-                      speed_.data(), domain_at(wall_pose(time_)), x_ref_.data()};
+    const OpenStep op{arrays(),      rotation_,
+                      close_pending_, disp,
+                      pending_dt_,   dt,
+                      speed_.data(), domain_at(wall_pose(time_)),
+                      x_ref_.data(), release_.data(),
+                      all_released_ ? -std::numeric_limits<double>::infinity()
+                                    : free_release_time()};
     if (disp) {
       disp_max_ = backend_.parallel_max(live_, [=] COLLIDO_HD(uint32_t i) { return op(i); });
     } else {
@@ -753,8 +790,10 @@ class DynamicsPipeline final : public Simulation {
     double* speed = speed_.data();
     const bool rot = rotation_;
     const Domain dom = domain_at(pose);
+    const double* rel = release_.data();
+    const double free_t = free_release_time();
     backend_.parallel_for(live_, [=] COLLIDO_HD(uint32_t i) {
-      if (P.state[i] != kActive) {
+      if (release_marked(P, rel, i, free_t) != kActive) {
         speed[i] = 0;
         return;
       }
@@ -803,7 +842,7 @@ class DynamicsPipeline final : public Simulation {
   void update_candidates() {
     if (!cfg_.particle_contacts) return;
     if (!nlist_) {
-      // With the particles waiting for their place, which release_due looks up.
+      // With the particles waiting for their place, which takes_place looks up.
       build_particle_grid(live_, /*with_waiting=*/!all_released_);
       return;
     }
@@ -1093,13 +1132,15 @@ class DynamicsPipeline final : public Simulation {
   // statistics only (no accelerations, no friction memory), so measuring
   // never changes the run.
   // The laps time a step's stages; the measuring pass is not a step.
-  void forces(double dt, bool measure, double t) {
+  // decide: take the release decisions for the particles due by t (see takes_place).
+  void forces(double dt, bool measure, double t, bool decide = false) {
     if (cfg_.particle_contacts) {
       if (once_ && !measure) {
+        if (decide) decide_releases(t);
         pair_records(dt);
         pair_gather();
       } else {
-        pair_forces(dt, measure);
+        pair_forces(dt, measure, decide ? t : -std::numeric_limits<double>::infinity());
       }
       if (!measure) lap(times_.pair_ms);
     }
@@ -1239,24 +1280,16 @@ class DynamicsPipeline final : public Simulation {
     });
   }
 
-  void pair_forces(double dt, bool measure) {
+  // decide_t: the releases due by then are decided on the way (-inf: none).
+  void pair_forces(double dt, bool measure, double decide_t) {
     const ParticleArrays P = arrays();
-    const GridSpec pg = pgrid_;
     const ContactLaw law = pair_law_;
     const bool rot = rotation_;
     const Vec3d grav = cfg_.gravity;
     const FrictionSlot* hin = pair_hist_[hist_in_].data();
     FrictionSlot* hout = pair_hist_[hist_in_ ^ 1].data();
-    const uint32_t* start = cell_start_.data();
-    const uint32_t* end = cell_end_.data();
-    const uint32_t* sidx = p_idx_sorted_.data();
-    const PackedParticle* sp = sorted_.data();
-    const float slack = filter_slack_;
-    const bool list = nlist_;
-    const uint32_t* nl_start = nl_start_.data();
-    const uint32_t* nl = nl_list_.data();
-    const uint32_t* lo_start = lo_start_.data();
-    const uint32_t* lo_j = lo_j_.data();
+    const PairCandidates cand = pair_candidates();
+    const double* rel = release_.data();
     double* stats = scratch_.data();
     const size_t n = n_;
     const bool friction = law.mu > 0;
@@ -1266,6 +1299,8 @@ class DynamicsPipeline final : public Simulation {
         if (measure)
           stats[kStatElasticPair * n + i] = stats[kStatOverlapPair * n + i] =
               stats[kStatPairContacts * n + i] = stats[kStatOverflowPair * n + i] = 0;
+        else if (due(P, rel, i, decide_t))
+          decide_release(P, rel, cand, i);
         return;
       }
       const Vec3d xi = P.x[i], vi = P.v[i];
@@ -1311,24 +1346,10 @@ class DynamicsPipeline final : public Simulation {
           }
         }
       };
-      if (list) {
-        // The lower list and then the upper, each in ascending index (sorted
-        // when built): the same contacts in the same order whenever the list
-        // was built, so a run resumed from a checkpoint repeats the original
-        // bit for bit, and pair_gather sums alike.
-        for (uint32_t k = lo_start[i], e = lo_start[i + 1]; k < e; ++k) {
-          const uint32_t j = lo_j[k];
-          if (P.state[j] == kActive) touch(j, false);
-        }
-        for (uint32_t k = nl_start[i], e = nl_start[i + 1]; k < e; ++k) {
-          const uint32_t j = nl[k];
-          if (P.state[j] == kActive) touch(j, true);
-        }
-      } else {
-        for_each_grid_candidate(pg, start, end, sidx, sp, slack, i, xf, rf, [&](uint32_t j) {
-          if (P.state[j] == kActive) touch(j, i < j);
-        });
-      }
+      // With lists, in the order pair_gather sums them too.
+      cand.each(i, xf, rf, [&](uint32_t j) {
+        if (P.state[j] == kActive) touch(j, i < j);
+      });
       P.flags[i] = npair ? uint8_t(kActive | kFlagParticleContact) : uint8_t(kActive);
       if (measure) {
         stats[kStatElasticPair * n + i] = elastic;
@@ -1377,7 +1398,7 @@ class DynamicsPipeline final : public Simulation {
                   stats[kStatOverflowWall * n + i] = 0;
         else
           P.acc[i] = Vec3d{0, 0, 0};
-        P.flags[i] = st;
+        if (st != kWaiting) P.flags[i] = st;  // a waiting particle's holds its release decision
         return;
       }
       const Vec3d xi = pose.moving ? pose.to_body(P.x[i]) : P.x[i];
@@ -1516,7 +1537,7 @@ class DynamicsPipeline final : public Simulation {
   double time_ = 0;
   double last_release_ = 0;  // s: no particle waits after this
   bool all_released_ = false;
-  double released_to_ = 0;  // s: releases due by then have been decided (release_due)
+  double released_to_ = 0;  // s: releases due by then have been decided (see takes_place)
   bool timing_ = false;
   StepTimes times_;
   std::chrono::steady_clock::time_point lap_;

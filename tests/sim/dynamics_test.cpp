@@ -294,8 +294,13 @@ void pour_into(const TriangleMesh& wall, int per_layer_side, int layers, uint64_
       for (int j = 0; j < per_layer_side; ++j)
         pos.push_back({(i - 0.5 * (per_layer_side - 1)) * spacing,
                        (j - 0.5 * (per_layer_side - 1)) * spacing, 20});
-  // Layers leave the inlet at 10 m/s every 0.3 s: 3 m apart, clear of the one before.
-  vel.assign(pos.size(), Vec3d{0, 0, -10});
+  // Layers leave the inlet at 10 m/s every 0.3 s: 3 m apart, clear of the one
+  // before. A little sideways speed keeps them from stacking into columns: at
+  // one place after another, straight down, they would (upright, in exact
+  // arithmetic), and columns of ten reach the inlet, where releases then wait.
+  SplitMix64 rng(17);
+  for (size_t i = 0; i < pos.size(); ++i)
+    vel.push_back({rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5), -10});
   p = particles_at(pos, vel, r);
   const size_t per_layer = size_t(per_layer_side) * per_layer_side;
   for (size_t i = 0; i < p.size(); ++i) p.release[i] = 0.3 * double(i / per_layer);
@@ -798,8 +803,12 @@ void a_release_waits_for_its_place() {
         continue;
       }
       // Out once, and only once, nothing touches it where it waits.
-      if (b_out < 0) EXPECT_EQ(b_active, ab >= 2.0) << "run " << run << " step " << m << " A-B " << ab;
-      if (d_out < 0) EXPECT_EQ(d_active, cd >= 2.0) << "run " << run << " step " << m << " C-D " << cd;
+      if (b_out < 0) {
+        EXPECT_EQ(b_active, ab >= 2.0) << "run " << run << " step " << m << " A-B " << ab;
+      }
+      if (d_out < 0) {
+        EXPECT_EQ(d_active, cd >= 2.0) << "run " << run << " step " << m << " C-D " << cd;
+      }
       EXPECT_EQ(flags[C] & kStateMask, kActive) << "run " << run << " step " << m;
       EXPECT_EQ(flags[E] & kStateMask, kActive) << "run " << run << " step " << m;
       if (b_active && b_out < 0) b_out = m;
