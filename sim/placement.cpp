@@ -10,6 +10,8 @@ namespace collido::sim {
 
 // Largest inlet radius in particle spacings: a disc of about 3 million slots.
 constexpr double kMaxInletSlots = 1000;
+// Half-angle of an inlet's spray, as its tangent (about 3 degrees).
+constexpr double kInletSpread = 0.05;
 
 const char* to_string(PlacementKind k) {
   return k == PlacementKind::kFill ? "fill" : k == PlacementKind::kPour ? "pour" : "jet";
@@ -195,6 +197,7 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
 // (no arrangement of a disc's particles delivers more at that speed).
 struct InletLayout {
   Vec3d v, centre;
+  Vec3d u, w;               // unit vectors across the inlet
   std::vector<Vec3d> disc;  // slot offsets from the centre
   double tau = 0;           // s between two releases of one slot
 };
@@ -265,6 +268,7 @@ Status inlet_layout(const Bounds3d& box, const ParticleSpec& ps, const Placement
   }
   if (pl.rate > 0) tau = double(disc.size()) / pl.rate;
   out->v = v;
+  out->u = u, out->w = w;
   out->centre = centre;
   out->tau = tau;
   return Status::ok();
@@ -289,13 +293,21 @@ Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSp
   for (size_t k = phase.size(); k > 1; --k)
     std::swap(phase[k - 1], phase[std::min(k - 1, size_t(rng.uniform() * double(k)))]);
   const double jitter = 0.02 * r;
+  const double speed = length(v);
   for (uint64_t i = 0; i < ps.count; ++i) {
     const size_t slot = i % disc.size();
     const Vec3d p = lay.centre + disc[slot];
     out->x[i] = p.x + rng.uniform(-jitter, jitter);
     out->y[i] = p.y + rng.uniform(-jitter, jitter);
     out->z[i] = p.z + rng.uniform(-jitter, jitter);
-    out->vx[i] = v.x, out->vy[i] = v.y, out->vz[i] = v.z;
+    // Each leaves within a cone of kInletSpread about the inlet's direction, at its
+    // speed: a collimated stream stacks its particles into columns on a flat floor,
+    // which stand up to the inlet, where releases then wait for their place.
+    const double reach = kInletSpread * std::sqrt(rng.uniform()), turn = 2 * M_PI * rng.uniform();
+    const Vec3d d = v * (1.0 / speed) + lay.u * (reach * std::cos(turn)) +
+                    lay.w * (reach * std::sin(turn));
+    const Vec3d vi = d * (speed / length(d));
+    out->vx[i] = vi.x, out->vy[i] = vi.y, out->vz[i] = vi.z;
     out->release[i] = (double(i / disc.size()) + phase[slot]) * lay.tau;
   }
   return Status::ok();

@@ -258,7 +258,15 @@ TEST(Placement, JetNeedsVelocityAndInletsNeedRoom) {
   pl.inlet_radius = 2;
   auto p = place_particles(wall, ps, pl, {0, 0, -9.81}, 1);
   ASSERT_TRUE(p) << p.status().message();
-  EXPECT_DOUBLE_EQ(p->vx[0], 10);
+  // Each at the jet's speed, within its spray of 3 degrees (tangent 0.05), not all along one line.
+  double widest = 0;
+  for (size_t i = 0; i < p->size(); ++i) {
+    EXPECT_NEAR(std::hypot(p->vx[i], p->vy[i], p->vz[i]), 10, 1e-12);
+    const double across = std::hypot(p->vy[i], p->vz[i]) / p->vx[i];
+    EXPECT_LE(across, 0.05 * (1 + 1e-12));
+    widest = std::max(widest, across);
+  }
+  EXPECT_GT(widest, 0.01);
   pl.inlet_radius = 0.1;  // smaller than one particle
   EXPECT_FALSE(place_particles(wall, ps, pl, {0, 0, -9.81}, 1));
   EXPECT_EQ(refusal(wall, ps, pl, {0, 0, -9.81}).rfind("placement.inlet_radius", 0), 0u);
