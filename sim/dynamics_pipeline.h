@@ -538,8 +538,8 @@ class DynamicsPipeline final : public Simulation {
     // Releases are decided where the positions (and the candidates found for
     // them) are those of a step boundary: Verlet's step end, after its drift,
     // or symplectic Euler's step start. Either way a particle starts moving at
-    // the first boundary at or after its release time.
-    // That is where the forces are evaluated too.
+    // the first boundary at or after its release time. The forces are
+    // evaluated there too, in the pass that takes the decisions.
     const double release_at = verlet ? time_ + dt : time_;
     if (releasing) grow_live(release_at);
     if (verlet) open_step(dt);
@@ -635,7 +635,7 @@ class DynamicsPipeline final : public Simulation {
            (sj == kWaiting && (rel[j] < rel[i] || (rel[j] == rel[i] && j < i)));
   }
 
-  // Whether particle i waits for release by t (decided by then or not).
+  // Whether particle i is waiting and due by t.
   COLLIDO_HD static COLLIDO_FORCEINLINE bool due(const ParticleArrays& P, const double* rel,
                                                  uint32_t i, double t) {
     return P.state[i] == kWaiting && rel[i] <= t;
@@ -766,8 +766,7 @@ class DynamicsPipeline final : public Simulation {
                       pending_dt_,   dt,
                       speed_.data(), domain_at(wall_pose(time_)),
                       x_ref_.data(), release_.data(),
-                      all_released_ ? -std::numeric_limits<double>::infinity()
-                                    : free_release_time()};
+                      free_release_time()};
     if (disp) {
       disp_max_ = backend_.parallel_max(live_, [=] COLLIDO_HD(uint32_t i) { return op(i); });
     } else {
