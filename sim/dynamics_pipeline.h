@@ -1510,7 +1510,7 @@ class DynamicsPipeline final : public Simulation {
       stats[kStatPotential * n + i] = pe;
       stats[kStatSpeed * n + i] = sp;
       stats[kStatWaiting * n + i] = st == kWaiting;
-      stats[kStatHeld * n + i] = st == kWaiting && rel[i] <= t;
+      stats[kStatHeld * n + i] = due(P, rel, i, t);
       stats[kStatActive * n + i] = active;
       stats[kStatEscaped * n + i] = st == kEscaped;
       stats[kStatInvalid * n + i] = st == kInvalid;

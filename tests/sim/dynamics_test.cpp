@@ -509,7 +509,7 @@ void pairs_once_or_from_both_sides_agree() {
         for (std::vector<double>* a : {&p.x, &p.y, &p.z, &p.vx, &p.vy, &p.vz})
           std::swap((*a)[i - 1], (*a)[j]);
       }
-    if (scene != 0)  // the pour's particles just clear of one another
+    if (scene != 0)  // mixed radii; the pour's (scene 2) keep its particles just clear of one another
       for (double& r : p.r) r = scene == 2 ? rng.uniform(0.99, 1.0) : rng.uniform(0.9, 1.05);
     DynamicsConfig cfg;
     cfg.particle_contacts = true;
