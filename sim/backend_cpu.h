@@ -42,7 +42,7 @@ class CpuBackend {
   // Loop bodies with many live values: the GPU caps their registers; threads here.
   template <class F>
   void parallel_for_heavy(size_t n, F f) {
-    cpu_parallel_for(*pool_, n, f);
+    cpu_parallel_for(*pool_, n, f, kHeavyGrain);
   }
   // Runs f(i) for every i < n and returns the largest value it returned (0
   // when n == 0); f returns doubles >= 0.
@@ -51,7 +51,7 @@ class CpuBackend {
     if (n == 0) return 0;
     std::mutex m;
     double best = 0;
-    pool_->run_chunks(n, 4096, [&](size_t begin, size_t end) {
+    pool_->run_chunks(n, kLightGrain, [&](size_t begin, size_t end) {
       double local = 0;
       for (size_t i = begin; i < end; ++i) local = std::max(local, f(static_cast<uint32_t>(i)));
       std::lock_guard<std::mutex> lock(m);

@@ -3,6 +3,8 @@
 #include <sched.h>
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <condition_variable>
 #include <cstdlib>
@@ -17,14 +19,34 @@ namespace collido::sim {
 
 // Persistent workers: a frame of 10^6 particles is a few ms, so starting
 // threads for every loop would cost more than the loop.
+//
+// A dynamics step is several loops of a few hundred microseconds each, back
+// to back. Two things made a second thread useless there (a 6,000-particle
+// pour: 22.0 s on one thread, 22.6 s on two): a worker slept on a condition
+// variable between loops, and waking it took about as long as the loop; and
+// the caller waited for every worker to check in, even one still waking after
+// the caller had done all the work itself. So a worker now spins a short while
+// for the next loop before it sleeps, and a loop ends when its indices are
+// done, whoever ran them.
+//
+// Claims go through one 64-bit ticket, the loop's generation over the next
+// free index. A claim is a compare-and-swap of the ticket the claimer read,
+// so a thread that read a loop's fields and then lost the race to that loop's
+// end claims nothing: the caller closes the ticket (index past any count)
+// before it writes the next loop's fields, and a generation comes back only
+// after 2^32 loops.
 struct ThreadPool::Impl {
+  static constexpr uint64_t kClosed = 0xFFFFFFFFu;
+  // How long an idle worker keeps looking for the next loop before it sleeps.
+  static constexpr auto kSpin = std::chrono::microseconds(200);
+
   explicit Impl(int threads) : size(threads) {
     for (int t = 1; t < threads; ++t) workers.emplace_back([this] { worker(); });
   }
   ~Impl() {
     {
       std::lock_guard<std::mutex> lk(m);
-      stop = true;
+      stop.store(true);
     }
     cv.notify_all();
     for (auto& w : workers) w.join();
@@ -39,54 +61,102 @@ struct ThreadPool::Impl {
       fn(0, n);
       return;
     }
-    {
-      std::lock_guard<std::mutex> lk(m);
-      body = &fn;
-      count = n;
-      grain = g;
-      next.store(0);
-      active = static_cast<int>(workers.size());
-      ++generation;
+    // Indices live in the ticket's low 32 bits: a longer loop runs in parts.
+    constexpr size_t kPart = size_t(1) << 31;
+    for (size_t base = 0; base < n; base += kPart) {
+      const size_t len = std::min(kPart, n - base);
+      const std::function<void(size_t, size_t)> part = [&](size_t b, size_t e) {
+        fn(base + b, base + e);
+      };
+      run_part(len, g, base == 0 && len == n ? fn : part);
     }
-    cv.notify_all();
-    drain();
-    std::unique_lock<std::mutex> lk(m);
-    done_cv.wait(lk, [this] { return active == 0; });
-    body = nullptr;
   }
 
-  void drain() {
+  // One loop of n < 2^31 indices on every thread.
+  void run_part(size_t n, size_t g, const std::function<void(size_t, size_t)>& fn) {
+    body.store(&fn, std::memory_order_relaxed);
+    count.store(n, std::memory_order_relaxed);
+    grain.store(g, std::memory_order_relaxed);
+    finished.store(0, std::memory_order_relaxed);
+    const uint64_t gen = ++generation;
+    ticket.store(gen << 32);  // publishes the fields above (seq_cst)
+    if (sleepers.load() > 0) {
+      std::lock_guard<std::mutex> lk(m);
+      cv.notify_all();
+    }
+    work(gen);
+    // The rest is in workers' hands: wait for it, briefly spinning first.
+    const auto until = std::chrono::steady_clock::now() + kSpin;
+    while (finished.load(std::memory_order_acquire) != n) {
+      if (std::chrono::steady_clock::now() > until) {
+        std::unique_lock<std::mutex> lk(m);
+        done_cv.wait(lk, [&] { return finished.load(std::memory_order_acquire) == n; });
+        break;
+      }
+      cpu_relax();
+    }
+    ticket.store((gen << 32) | kClosed);  // no late claim reaches the next loop's fields
+  }
+
+  // Claims and runs chunks of loop `gen` until none is left (or the loop is over).
+  void work(uint64_t gen) {
+    uint64_t t = ticket.load();
     for (;;) {
-      const size_t begin = next.fetch_add(grain);
-      if (begin >= count) return;
-      (*body)(begin, std::min(count, begin + grain));
+      if ((t >> 32) != gen) return;
+      const size_t idx = t & kClosed, n = count.load(std::memory_order_relaxed);
+      if (idx >= n) return;
+      const size_t end = std::min(n, idx + grain.load(std::memory_order_relaxed));
+      const auto* fn = body.load(std::memory_order_relaxed);
+      if (!ticket.compare_exchange_weak(t, (gen << 32) | end)) continue;  // t reloaded
+      // Claimed: loop `gen` cannot end before this chunk is counted, so its fields hold.
+      (*fn)(idx, end);
+      if (finished.fetch_add(end - idx, std::memory_order_acq_rel) + (end - idx) == n) {
+        std::lock_guard<std::mutex> lk(m);
+        done_cv.notify_one();
+      }
+      t = ticket.load();
     }
   }
+
   void worker() {
     uint64_t seen = 0;
     for (;;) {
-      {
-        std::unique_lock<std::mutex> lk(m);
-        cv.wait(lk, [&] { return stop || generation != seen; });
-        if (stop) return;
-        seen = generation;
+      const auto until = std::chrono::steady_clock::now() + kSpin;
+      uint64_t gen = ticket.load() >> 32;
+      for (int spins = 0; gen == seen && !stop.load(std::memory_order_relaxed); ++spins) {
+        if ((spins & 63) == 63 && std::chrono::steady_clock::now() > until) {
+          std::unique_lock<std::mutex> lk(m);
+          ++sleepers;
+          cv.wait(lk, [&] { return stop.load() || (ticket.load() >> 32) != seen; });
+          --sleepers;
+        }
+        cpu_relax();
+        gen = ticket.load() >> 32;
       }
-      drain();
-      std::lock_guard<std::mutex> lk(m);
-      if (--active == 0) done_cv.notify_one();
+      if (stop.load()) return;
+      seen = gen;
+      work(gen);
     }
+  }
+
+  static void cpu_relax() {
+#if defined(__x86_64__) || defined(__i386__)
+    __builtin_ia32_pause();
+#elif defined(__aarch64__)
+    asm volatile("yield");
+#endif
   }
 
   const int size;
   std::vector<std::thread> workers;
   std::mutex run_mutex, m;
   std::condition_variable cv, done_cv;
-  bool stop = false;
-  uint64_t generation = 0;
-  int active = 0;
-  const std::function<void(size_t, size_t)>* body = nullptr;
-  size_t count = 0, grain = 1;
-  std::atomic<size_t> next{0};
+  std::atomic<bool> stop{false};
+  std::atomic<int> sleepers{0};
+  uint32_t generation = 0;  // the caller's count of loops, wrapping (under run_mutex)
+  std::atomic<uint64_t> ticket{0};
+  std::atomic<const std::function<void(size_t, size_t)>*> body{nullptr};
+  std::atomic<size_t> count{0}, grain{1}, finished{0};
 };
 
 ThreadPool::ThreadPool(int threads)

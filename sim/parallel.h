@@ -40,9 +40,15 @@ int usable_cpus();
 // The pool shared by callers that bring none: usable_cpus() threads, made at first use.
 ThreadPool& default_pool();
 
+// Indices a chunk holds at least: a loop no longer than this runs on the
+// calling thread alone. Light loops (a few ns an index: kicks, copies) and
+// heavy ones (contact forces, list builds: about a microsecond an index).
+inline constexpr size_t kLightGrain = 1024;
+inline constexpr size_t kHeavyGrain = 64;
+
 // Calls f(i) for every i in [0, n) on the pool's threads, in dynamically balanced chunks.
 template <class F>
-void cpu_parallel_for(ThreadPool& pool, size_t n, F&& f, size_t grain = 4096) {
+void cpu_parallel_for(ThreadPool& pool, size_t n, F&& f, size_t grain = kLightGrain) {
   if (n == 0) return;
   pool.run_chunks(n, grain, [&f](size_t begin, size_t end) {
     for (size_t i = begin; i < end; ++i) f(static_cast<uint32_t>(i));

@@ -4,6 +4,7 @@
 #include <sched.h>
 
 #include <atomic>
+#include <chrono>
 #include <thread>
 #include <vector>
 
@@ -19,6 +20,43 @@ TEST(ThreadPool, RunsEveryIndexOnce) {
     std::vector<std::atomic<int>> hits(100003);
     cpu_parallel_for(pool, hits.size(), [&](uint32_t i) { hits[i]++; }, 7);
     for (const auto& h : hits) ASSERT_EQ(h.load(), 1);
+  }
+}
+
+// Loops back to back, as a dynamics step issues them: of every length around
+// the grains (none, one index, a chunk, a few), some with one slow index that
+// keeps a chunk claimed while the caller has run out of work, some after the
+// workers have gone to sleep. Every index runs once per loop, and a loop
+// returns only when all of its indices are done.
+TEST(ThreadPool, BackToBackLoopsRunEveryIndexOnce) {
+  for (int threads : {2, 4}) {
+    ThreadPool pool(threads);
+    std::vector<std::atomic<int>> hits(5000);
+    for (int round = 0; round < 400; ++round) {
+      const size_t n = std::vector<size_t>{0, 1, 63, 64, 65, 700, 1024, 1025, 4999}[round % 9];
+      const size_t grain = round % 2 ? kHeavyGrain : kLightGrain;
+      const size_t slow = round % 5 == 0 && n ? n - 1 : n;  // this index sleeps
+      if (round % 97 == 0) std::this_thread::sleep_for(std::chrono::milliseconds(2));
+      cpu_parallel_for(
+          pool, n,
+          [&](uint32_t i) {
+            if (i == slow) std::this_thread::sleep_for(std::chrono::microseconds(300));
+            hits[i]++;
+          },
+          grain);
+      for (size_t i = 0; i < hits.size(); ++i)
+        ASSERT_EQ(hits[i].exchange(0), i < n ? 1 : 0) << "round " << round << " index " << i;
+    }
+  }
+}
+
+// A pool made and dropped at once, its workers still starting or spinning.
+TEST(ThreadPool, StopsWhileItsWorkersWait) {
+  for (int k = 0; k < 50; ++k) {
+    ThreadPool pool(3);
+    std::atomic<uint64_t> sum{0};
+    if (k % 2) cpu_parallel_for(pool, 3000, [&](uint32_t i) { sum += i; }, kHeavyGrain);
+    EXPECT_EQ(sum.load(), k % 2 ? 2999ull * 3000 / 2 : 0);
   }
 }
 
