@@ -893,6 +893,17 @@ class DynamicsPipeline final : public Simulation {
     }
   }
 
+  // Sorts a short list of keys in place and moves the values with them.
+  COLLIDO_HD static COLLIDO_FORCEINLINE void sort_short_by_key(uint32_t* key, uint32_t* value,
+                                                               uint32_t n) {
+    for (uint32_t k = 1; k < n; ++k) {
+      const uint32_t kv = key[k], vv = value[k];
+      uint32_t b = k;
+      for (; b > 0 && key[b - 1] > kv; --b) key[b] = key[b - 1], value[b] = value[b - 1];
+      key[b] = kv, value[b] = vv;
+    }
+  }
+
   // The lists at the current positions, which their check then measures moves from.
   void build_lists() {
     if (nl_valid_) {
@@ -912,10 +923,11 @@ class DynamicsPipeline final : public Simulation {
   // pair it owns (larger index: the upper list) and those that own their pair
   // with it (the lower list, with where each pair sits in the owner's upper
   // list), both in ascending index.
-  // A count pass, two scans, a fill pass per list (each sorted in place, a few
-  // dozen entries). The candidate test is symmetric in i and j (the same float
-  // copies, one sum of radii, cells found alike), so every lower entry is found
-  // in its partner's upper list.
+  // A count pass, two scans, the upper lists' fill pass, and the lower lists
+  // filled from the upper ones (each list sorted in place, a few dozen
+  // entries). The candidate test is symmetric in i and j (the same float
+  // copies, one sum of radii, cells found alike), so the count pass counts
+  // every lower entry the upper lists give.
   void build_pair_lists() {
     const int every = cfg_.renumber_every;
     const bool renumber = every < 0   ? numbering_scattered()
@@ -975,28 +987,31 @@ class DynamicsPipeline final : public Simulation {
                               });
       sort_short(up_list + up_first[i], c - up_first[i]);
     });
+    // The lower lists are the upper ones turned around: each upper entry (i, j)
+    // goes to j's lower list with its place, through a counter per particle
+    // (the unsorted grid keys, free until the next build), then each lower
+    // list is sorted. A third walk of the grid cost as much as each of the two
+    // above (a pour builds its lists every few dozen steps).
     uint32_t* lo_j = lo_j_.data();
     uint32_t* lo_rec = lo_rec_.data();
+    uint32_t* fill = p_key_.data();
     const bool once = once_;  // the records' places are needed only to gather them
-    backend_.parallel_for_heavy(n, [=] COLLIDO_HD(uint32_t i) {
-      if (!listed(P.state[i])) return;
-      const uint32_t s0 = lo_first[i];
-      uint32_t c = s0;
-      for_each_grid_candidate(pg, start, end, sidx, sp, extra, i, cast3<float>(P.x[i]),
-                              float(P.r[i]), [&](uint32_t j) {
-                                if (j < i) lo_j[c++] = j;
-                              });
-      sort_short(lo_j + s0, c - s0);
-      if (!once) return;
-      for (uint32_t a = s0; a < c; ++a) {  // i's place in the sorted upper list of j
-        const uint32_t j = lo_j[a];
-        uint32_t lo = up_first[j], hi = up_first[j + 1];
-        while (lo < hi) {
-          const uint32_t mid = lo + (hi - lo) / 2;
-          if (up_list[mid] < i) lo = mid + 1; else hi = mid;
-        }
-        lo_rec[a] = lo;
+    backend_.fill(fill, n, 0u);
+    backend_.parallel_for(n, [=] COLLIDO_HD(uint32_t i) {
+      for (uint32_t k = up_first[i], e = up_first[i + 1]; k < e; ++k) {
+        const uint32_t j = up_list[k];
+        const uint32_t a = lo_first[j] + atomic_add_u32(&fill[j], 1u);
+        if (a >= lo_first[j + 1]) continue;  // never: the count pass found the same pairs
+        lo_j[a] = i;
+        if (once) lo_rec[a] = k;
       }
+    });
+    backend_.parallel_for(n, [=] COLLIDO_HD(uint32_t j) {
+      const uint32_t s0 = lo_first[j], e = lo_first[j + 1];
+      if (once)
+        sort_short_by_key(lo_j + s0, lo_rec + s0, e - s0);
+      else
+        sort_short(lo_j + s0, e - s0);
     });
     if (renumber && rotation_) hand_over_springs();
   }
