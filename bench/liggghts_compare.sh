@@ -5,9 +5,12 @@
 # history, 0.1 of the critical step) and the same scene in LIGGGHTS 3.8 (Debian's
 # package, installed here when missing): hooke/stiffness with kt = 2/7 kn and the
 # same damping, tangential history, primitive walls, the same step.
-# Usage: bash bench/liggghts_compare.sh BUILD_DIR [STEPS]   (repo root)
+# Usage: bash bench/liggghts_compare.sh BUILD_DIR [STEPS] [ROUNDS]   (repo root)
+# Each round runs LIGGGHTS and then collidoscope; on a shared machine single
+# runs move by tens of per cent, so the summary gives each one's median and the
+# median of the rounds' ratios.
 set -euo pipefail
-build=${1:?BUILD_DIR}; steps=${2:-200}
+build=${1:?BUILD_DIR}; steps=${2:-200}; rounds=${3:-1}
 app="$build/app/collidoscope"
 if ! command -v liggghts >/dev/null; then
   if [ "$(id -u)" = 0 ]; then DEBIAN_FRONTEND=noninteractive apt-get install -y liggghts >/dev/null
@@ -69,10 +72,18 @@ run {steps}
 """)
 print(f"# {n} particles, step {dt:.6g} s, {steps} timed steps")
 PY
-echo "## LIGGGHTS $(dpkg-query -W -f='${Version}' liggghts 2>/dev/null), 1 process"
-(cd "$work" && liggghts -in in.block -log "$work/log.liggghts" >/dev/null)
-loop=$(grep "^Loop time" "$work/log.liggghts" | tail -1)
-echo "$loop"
-awk -v s="$steps" '{print "LIGGGHTS ms/step:", 1000 * $4 / s}' <<<"$loop"
-echo "## collidoscope bench run, 1 thread"
-"$app" bench run --counts $n --pairs on --steps "$steps" --threads 1 | grep -E "^\| $n"
+echo "## LIGGGHTS $(dpkg-query -W -f='${Version}' liggghts 2>/dev/null), 1 process; collidoscope bench run, 1 thread"
+echo "| round | LIGGGHTS ms/step | collidoscope ms/step | ratio |"
+echo "|---:|---:|---:|---:|"
+for round in $(seq 1 "$rounds"); do
+  (cd "$work" && liggghts -in in.block -log "$work/log.liggghts" >/dev/null)
+  lig=$(grep "^Loop time" "$work/log.liggghts" | tail -1 | awk -v s="$steps" '{printf "%.4f", 1000 * $4 / s}')
+  ours=$("$app" bench run --counts $n --pairs on --steps "$steps" --threads 1 |
+         awk -F'|' -v n=$n '$2 + 0 == n {gsub(/ /, "", $4); print $4}')
+  echo "| $round | $lig | $ours | $(awk -v a="$ours" -v b="$lig" 'BEGIN {printf "%.3f", a / b}') |"
+  echo "$lig $ours" >>"$work/rounds"
+done
+sort -n -k1 "$work/rounds" | awk '{a[NR] = $1} END {m = (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2; printf "median LIGGGHTS %.4f ms/step; ", m}'
+sort -n -k2 "$work/rounds" | awk '{a[NR] = $2} END {m = (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2; printf "collidoscope %.4f; ", m}'
+awk '{print $2 / $1}' "$work/rounds" | sort -g |
+  awk '{a[NR] = $1} END {m = (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2; printf "median ratio %.3f (%d rounds)\n", m, NR}'

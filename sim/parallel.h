@@ -42,7 +42,7 @@ ThreadPool& default_pool();
 
 // Indices a chunk holds at least: a loop no longer than this runs on the
 // calling thread alone. Light loops (a few ns an index: kicks, copies) and
-// heavy ones (contact forces, list builds: about a microsecond an index).
+// heavy ones (contact forces, list builds: up to about a microsecond an index).
 inline constexpr size_t kLightGrain = 1024;
 inline constexpr size_t kHeavyGrain = 64;
 
