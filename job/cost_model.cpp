@@ -152,14 +152,17 @@ bool is_cuda(const JobInputs& in) { return in.backend == "cuda"; }
 //
 // A job's time is the same kind of sum over its stages (time_terms): set-up (a fixed
 // cost, the wall's division, bins, triangles, placing the particles), the steps (a
-// fixed cost each, a pass over every particle each (the engine's passes once ran
-// over waiting particles too; on logs since, its weight is near 0), active
-// particle-steps, pair contact-steps, a divided wall's lookups) and the frames
+// fixed cost each, and another with particle contacts: a GPU step of a few thousand
+// particles is its kernels' latency, about 45 µs with contacts whatever the count,
+// which took the H200's total from 20.9 to 18.3 %), a pass over every particle each
+// (the engine's passes once ran over waiting particles too; on logs since, its
+// weight is near 0), active particle-steps, pair contact-steps, a divided wall's
+// lookups) and the frames
 // (snapshots, rendering per pixel and particle, each encoder per pixel). Each backend
 // has weights of its own. The time per frame is the same sum without the set-up,
 // divided by the frames, with the total's weights (fitted on the per-frame times
 // directly it was worse: 56 against 32 % on the CPU log; docs/gvm.md).
-constexpr size_t kTimeTerms = 24;  // per backend
+constexpr size_t kTimeTerms = 25;  // per backend
 constexpr size_t kMaxPriorTerms = 2 * kTimeTerms;
 
 // The time terms of a job (see above); the set-up's are zero when per_frame, and the
@@ -180,7 +183,7 @@ void time_terms(const JobInputs& in, const CostDrivers& d, bool per_frame, doubl
   const double frame_cost = is_cuda(in) ? 0 : frames;
   const double v[kTimeTerms] = {
       setup,  // set-up: a fixed cost
-      steps, steps * n, steps * n * contacts, active, active * contacts,
+      steps, steps * contacts, steps * n, steps * n * contacts, active, active * contacts,
       d.pair_contacts * steps,  // the steps
       active * divided[0], active * divided[1], active * divided[2],
       setup * in.pieces * divided[0], setup * in.pieces * divided[1],
