@@ -83,7 +83,8 @@ for round in $(seq 1 "$rounds"); do
   echo "| $round | $lig | $ours | $(awk -v a="$ours" -v b="$lig" 'BEGIN {printf "%.3f", a / b}') |"
   echo "$lig $ours" >>"$work/rounds"
 done
-sort -n -k1 "$work/rounds" | awk '{a[NR] = $1} END {m = (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2; printf "median LIGGGHTS %.4f ms/step; ", m}'
-sort -n -k2 "$work/rounds" | awk '{a[NR] = $2} END {m = (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2; printf "collidoscope %.4f; ", m}'
-awk '{print $2 / $1}' "$work/rounds" | sort -g |
-  awk '{a[NR] = $1} END {m = (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2; printf "median ratio %.3f (%d rounds)\n", m, NR}'
+# The median of the numbers on stdin, one a line.
+median() { sort -g | awk '{a[NR] = $1} END {print (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2}'; }
+printf "median LIGGGHTS %.4f ms/step; collidoscope %.4f; median ratio %.3f (%d rounds)\n" \
+  "$(awk '{print $1}' "$work/rounds" | median)" "$(awk '{print $2}' "$work/rounds" | median)" \
+  "$(awk '{print $2 / $1}' "$work/rounds" | median)" "$rounds"

@@ -883,24 +883,19 @@ class DynamicsPipeline final : public Simulation {
     return st == kActive || st == kWaiting;
   }
 
-  // Sorts a short list in place (insertion sort: a few dozen entries).
-  COLLIDO_HD static COLLIDO_FORCEINLINE void sort_short(uint32_t* a, uint32_t n) {
+  // Sorts a short list in place (insertion sort: a few dozen entries), moving
+  // the values `with` along when given.
+  COLLIDO_HD static COLLIDO_FORCEINLINE void sort_short(uint32_t* a, uint32_t n,
+                                                        uint32_t* with = nullptr) {
     for (uint32_t k = 1; k < n; ++k) {
-      const uint32_t v = a[k];
+      const uint32_t v = a[k], vw = with ? with[k] : 0;
       uint32_t b = k;
-      for (; b > 0 && a[b - 1] > v; --b) a[b] = a[b - 1];
+      for (; b > 0 && a[b - 1] > v; --b) {
+        a[b] = a[b - 1];
+        if (with) with[b] = with[b - 1];
+      }
       a[b] = v;
-    }
-  }
-
-  // Sorts a short list of keys in place and moves the values with them.
-  COLLIDO_HD static COLLIDO_FORCEINLINE void sort_short_by_key(uint32_t* key, uint32_t* value,
-                                                               uint32_t n) {
-    for (uint32_t k = 1; k < n; ++k) {
-      const uint32_t kv = key[k], vv = value[k];
-      uint32_t b = k;
-      for (; b > 0 && key[b - 1] > kv; --b) key[b] = key[b - 1], value[b] = value[b - 1];
-      key[b] = kv, value[b] = vv;
+      if (with) with[b] = vw;
     }
   }
 
@@ -1007,11 +1002,8 @@ class DynamicsPipeline final : public Simulation {
       }
     });
     backend_.parallel_for(n, [=] COLLIDO_HD(uint32_t j) {
-      const uint32_t s0 = lo_first[j], e = lo_first[j + 1];
-      if (once)
-        sort_short_by_key(lo_j + s0, lo_rec + s0, e - s0);
-      else
-        sort_short(lo_j + s0, e - s0);
+      const uint32_t s0 = lo_first[j];
+      sort_short(lo_j + s0, lo_first[j + 1] - s0, once ? lo_rec + s0 : nullptr);
     });
     if (renumber && rotation_) hand_over_springs();
   }

@@ -68,16 +68,16 @@ struct ThreadPool::Impl {
     }
     // Indices live in the ticket's low 32 bits: a longer loop runs in parts.
     constexpr size_t kPart = size_t(1) << 31;
+    if (n <= kPart) return run_part(n, g, fn);
     for (size_t base = 0; base < n; base += kPart) {
-      const size_t len = std::min(kPart, n - base);
       const std::function<void(size_t, size_t)> part = [&](size_t b, size_t e) {
         fn(base + b, base + e);
       };
-      run_part(len, g, base == 0 && len == n ? fn : part);
+      run_part(std::min(kPart, n - base), g, part);
     }
   }
 
-  // One loop of n < 2^31 indices on every thread.
+  // One loop of n <= 2^31 indices on every thread.
   void run_part(size_t n, size_t g, const std::function<void(size_t, size_t)>& fn) {
     body.store(&fn, std::memory_order_relaxed);
     count.store(n, std::memory_order_relaxed);
