@@ -24,26 +24,37 @@ void fastest_frames_ms(const std::vector<Detector*>& dets, int min_frames, std::
   ms->assign(n, 1e300);
   status->assign(n, Status::ok());
   std::vector<double> spent(n, 0.0);
+  std::vector<int> frames(n, 0), turns(n, 0);
   std::vector<bool> live(n);
   DetectResult r;
   for (size_t i = 0; i < n; ++i) {
     live[i] = dets[i] != nullptr;
     if (live[i] && !((*status)[i] = dets[i]->detect(&r))) live[i] = false;  // the warm-up frame
   }
-  for (int round = 0; round < kAutoMaxFrames; ++round) {
-    bool more = false;
-    for (size_t i = 0; i < n; ++i)
-      more = more || (live[i] && (round < min_frames || spent[i] < kAutoTimingBudgetMs));
-    if (!more) break;
+  // A detector leaves the rounds once it has its frames and its time: a slow
+  // one is not run again only because a fast one needs more frames.
+  auto wants = [&](size_t i) {
+    return live[i] && frames[i] < kAutoMaxFrames &&
+           (frames[i] < min_frames || turns[i] < kAutoMinTurns || spent[i] < kAutoTimingBudgetMs);
+  };
+  for (bool more = true; more;) {
+    more = false;
     for (size_t i = 0; i < n; ++i) {
-      if (!live[i]) continue;
-      if (!((*status)[i] = dets[i]->detect(&r))) {
-        live[i] = false;
-        continue;
+      // A turn of a few frames in a row: the first refills the caches the
+      // other detectors' turns took over, and the fastest frame counts, so
+      // every setting is timed warm, as it runs frame after frame in a job.
+      if (wants(i)) ++turns[i];
+      for (int k = 0; k < kAutoFramesPerTurn && wants(i); ++k) {
+        if (!((*status)[i] = dets[i]->detect(&r))) {
+          live[i] = false;
+          break;
+        }
+        (*ms)[i] = std::min((*ms)[i], r.times.frame_ms);
+        spent[i] += r.times.frame_ms;
+        ++frames[i];
+        if (i == 0 && last_of_first) *last_of_first = r;
       }
-      (*ms)[i] = std::min((*ms)[i], r.times.frame_ms);
-      spent[i] += r.times.frame_ms;
-      if (i == 0 && last_of_first) *last_of_first = r;
+      more = more || wants(i);
     }
   }
 }

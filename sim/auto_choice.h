@@ -27,7 +27,8 @@ struct AutoRequest {
   // 2e5 on the CPU).
   size_t max_sample = 0;
   // Timed frames per candidate: at least this many (0 = 9 on the GPU, 5 on the
-  // CPU) and at least kAutoTimingBudgetMs of frames, at most kAutoMaxFrames.
+  // CPU), in at least kAutoMinTurns turns, and at least kAutoTimingBudgetMs of
+  // frames, at most kAutoMaxFrames (fastest_frames_ms).
   // The fastest frame counts: the work is deterministic, so anything slower is
   // interference (other processes, clocks), which the minimum filters best,
   // given enough frames that one ran undisturbed.
@@ -55,14 +56,18 @@ struct AutoChoice {
 
 inline constexpr double kAutoTimingBudgetMs = 20;
 inline constexpr int kAutoMaxFrames = 200;
+inline constexpr int kAutoFramesPerTurn = 3;
+inline constexpr int kAutoMinTurns = 4;
 
 // How the automatic choice and the study time a setting: the fastest of at
-// least `min_frames` frames (after one warm-up), timing for at least
-// kAutoTimingBudgetMs and at most kAutoMaxFrames frames. Several detectors are
-// timed in rounds, one frame of each per round, so a slow spell of the machine
-// (another process, a clock change) falls on all of them alike. (*ms)[i] is
-// dets[i]'s fastest frame; (*status)[i] its error, after which it is dropped
-// (a null detector is skipped). last_of_first: the first detector's last frame.
+// least `min_frames` frames (after one warm-up) in at least kAutoMinTurns
+// turns, timing for at least kAutoTimingBudgetMs and at most kAutoMaxFrames
+// frames. Several detectors are timed in rounds, a turn of kAutoFramesPerTurn
+// frames in a row for each that still needs frames, so a slow spell of the
+// machine (another process, a clock change) falls on all of them alike, while
+// each is timed with its own data in the caches. (*ms)[i] is dets[i]'s
+// fastest frame; (*status)[i] its error, after which it is dropped (a null
+// detector is skipped). last_of_first: the first detector's last frame.
 void fastest_frames_ms(const std::vector<Detector*>& dets, int min_frames, std::vector<double>* ms,
                        std::vector<Status>* status, DetectResult* last_of_first = nullptr);
 // One detector: its fastest frame, or its error.

@@ -141,11 +141,18 @@ class CudaBackend {
   void sync() { check(cudaDeviceSynchronize(), "kernel"); }
   Status status() const { return ok_ ? Status::ok() : Status(ErrorCode::kBackend, error_); }
 
+  // The CUB wrappers below do nothing once an error is recorded: after a
+  // failed allocation their buffers are null, and a CUB kernel writing
+  // there would poison the process's CUDA context for every other detector
+  // and job (a clear "out of memory" is what the caller should see).
   uint64_t exclusive_scan(uint32_t* d, size_t n) {
+    if (n == 0 || !ok_) return 0;
     resize(scan_out_, n);
     size_t bytes = 0;
     cub::DeviceScan::ExclusiveSum(nullptr, bytes, d, scan_out_.data(), static_cast<int>(n));
-    cub::DeviceScan::ExclusiveSum(temp(bytes), bytes, d, scan_out_.data(), static_cast<int>(n));
+    void* t = temp(bytes);
+    if (!ok_) return 0;
+    check(cub::DeviceScan::ExclusiveSum(t, bytes, d, scan_out_.data(), static_cast<int>(n)), "scan");
     uint32_t last_in = 0, last_out = 0;
     to_host(&last_in, d + n - 1, sizeof last_in);
     to_host(&last_out, scan_out_.data() + n - 1, sizeof last_out);
@@ -155,11 +162,13 @@ class CudaBackend {
 
   // Sum and maximum of n doubles (0 when n == 0); one small read-back each.
   double reduce_sum(const double* d, size_t n) {
-    if (n == 0) return 0;
+    if (n == 0 || !ok_) return 0;
     resize(scalar_, 1);
     size_t bytes = 0;
     cub::DeviceReduce::Sum(nullptr, bytes, d, scalar_.data(), static_cast<int>(n));
-    check(cub::DeviceReduce::Sum(temp(bytes), bytes, d, scalar_.data(), static_cast<int>(n)), "reduce");
+    void* t = temp(bytes);
+    if (!ok_) return 0;
+    check(cub::DeviceReduce::Sum(t, bytes, d, scalar_.data(), static_cast<int>(n)), "reduce");
     double v = 0;
     to_host(&v, scalar_.data(), sizeof v);
     return v;
@@ -183,11 +192,13 @@ class CudaBackend {
     return v;
   }
   double reduce_max(const double* d, size_t n) {
-    if (n == 0) return 0;
+    if (n == 0 || !ok_) return 0;
     resize(scalar_, 1);
     size_t bytes = 0;
     cub::DeviceReduce::Max(nullptr, bytes, d, scalar_.data(), static_cast<int>(n));
-    check(cub::DeviceReduce::Max(temp(bytes), bytes, d, scalar_.data(), static_cast<int>(n)), "reduce");
+    void* t = temp(bytes);
+    if (!ok_) return 0;
+    check(cub::DeviceReduce::Max(t, bytes, d, scalar_.data(), static_cast<int>(n)), "reduce");
     double v = 0;
     to_host(&v, scalar_.data(), sizeof v);
     return v;
@@ -196,21 +207,27 @@ class CudaBackend {
   // Radix sort of (key, value) pairs over the low key_bits bits of the keys.
   void sort_pairs(const uint32_t* kin, const uint32_t* vin, uint32_t* kout, uint32_t* vout, size_t n,
                   int key_bits = 32) {
+    if (n == 0 || !ok_) return;
     size_t bytes = 0;
     cub::DeviceRadixSort::SortPairs(nullptr, bytes, kin, kout, vin, vout, static_cast<int>(n), 0, key_bits);
-    check(cub::DeviceRadixSort::SortPairs(temp(bytes), bytes, kin, kout, vin, vout, static_cast<int>(n), 0, key_bits),
-          "sort");
+    void* t = temp(bytes);
+    if (!ok_) return;
+    check(cub::DeviceRadixSort::SortPairs(t, bytes, kin, kout, vin, vout, static_cast<int>(n), 0, key_bits), "sort");
   }
 
   uint32_t dedup_min(uint64_t* key, float* dist, size_t n, uint64_t* kout, float* dout) {
-    if (n == 0) return 0;
+    if (n == 0 || !ok_) return 0;
     size_t bytes = 0;
     cub::DeviceRadixSort::SortPairs(nullptr, bytes, key, kout, dist, dout, static_cast<int>(n));
-    check(cub::DeviceRadixSort::SortPairs(temp(bytes), bytes, key, kout, dist, dout, static_cast<int>(n)), "sort");
+    void* t = temp(bytes);
+    if (!ok_) return 0;
+    check(cub::DeviceRadixSort::SortPairs(t, bytes, key, kout, dist, dout, static_cast<int>(n)), "sort");
     resize(runs_, 1);
     bytes = 0;
     cub::DeviceReduce::ReduceByKey(nullptr, bytes, kout, key, dout, dist, runs_.data(), cuda_detail::MinOp(), static_cast<int>(n));
-    check(cub::DeviceReduce::ReduceByKey(temp(bytes), bytes, kout, key, dout, dist, runs_.data(), cuda_detail::MinOp(),
+    t = temp(bytes);
+    if (!ok_) return 0;
+    check(cub::DeviceReduce::ReduceByKey(t, bytes, kout, key, dout, dist, runs_.data(), cuda_detail::MinOp(),
                                          static_cast<int>(n)),
           "reduce_by_key");
     uint32_t runs = 0;
@@ -221,13 +238,16 @@ class CudaBackend {
   }
 
   void sort_segments(uint32_t* tri, uint64_t* cell, const uint32_t* start, uint32_t buckets, uint64_t total) {
-    if (total == 0) return;
+    if (total == 0 || !ok_) return;
     resize(seg_tri_, total);
     resize(seg_cell_, total);
+    if (!ok_) return;
     size_t bytes = 0;
     cub::DeviceSegmentedSort::SortPairs(nullptr, bytes, tri, seg_tri_.data(), cell, seg_cell_.data(),
                                         static_cast<int>(total), static_cast<int>(buckets), start, start + 1);
-    check(cub::DeviceSegmentedSort::SortPairs(temp(bytes), bytes, tri, seg_tri_.data(), cell, seg_cell_.data(),
+    void* t = temp(bytes);
+    if (!ok_) return;
+    check(cub::DeviceSegmentedSort::SortPairs(t, bytes, tri, seg_tri_.data(), cell, seg_cell_.data(),
                                               static_cast<int>(total), static_cast<int>(buckets), start, start + 1),
           "segmented sort");
     copy(tri, seg_tri_.data(), total * sizeof(uint32_t));

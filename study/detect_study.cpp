@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <memory>
 
 #include "sim/accuracy.h"
 #include "sim/auto_choice.h"
@@ -45,16 +46,6 @@ Expected<std::vector<Scene>> study_scenes(const StudyOptions& o) {
     out.push_back({f.substr(0, f.size() - 4), std::move(*mesh), 0.5 * r, r});
   }
   return out;
-}
-
-// Times a setting as the automatic choice does (sim::fastest_frame_ms), so the
-// two measure alike: the fastest of at least `repeats` frames and 20 ms.
-Status time_frames(sim::Detector& det, int repeats, double* ms, uint64_t* band) {
-  det.set_frame_options(false, false);
-  sim::DetectResult r;
-  if (Status s = sim::fastest_frame_ms(det, repeats, ms, &r); !s) return s;
-  *band = r.band_pairs;
-  return Status::ok();
 }
 
 std::string verdict_of(const sim::ContactDiff& d) {
@@ -116,7 +107,13 @@ Status run_detect_study(const StudyOptions& o, std::vector<DetectRow>* rows) {
         s.ref = std::move(rr.contacts);
         sets.push_back(std::move(s));
       }
-    const size_t first_row = rows->size();
+    // The settings, each prepared once for the scene's largest set.
+    struct Setting {
+      sim::DetectConfig cfg;
+      DetectRow base;
+      std::unique_ptr<sim::Detector> det;  // while its batch is measured; null: could not be prepared
+    };
+    std::vector<Setting> settings;
     for (sim::Method m : methods)
       for (sim::Traversal tr : {sim::Traversal::kParticle, sim::Traversal::kWall})
         for (double gf : sim::kAutoGridFactors) {
@@ -126,63 +123,119 @@ Status run_detect_study(const StudyOptions& o, std::vector<DetectRow>* rows) {
             if (tr == sim::Traversal::kWall || gf != sim::kAutoGridFactors[0]) continue;
             gf = 0;
           }
-          sim::DetectConfig cfg;
+          Setting st;
+          sim::DetectConfig& cfg = st.cfg;
           cfg.method = m, cfg.traversal = tr, cfg.backend = o.backend, cfg.pool = o.pool;
           cfg.r_max = sc.r_hi, cfg.grid_length = gf * sc.r_hi;
           cfg.precision = sim::Precision::kExact, cfg.time_stages = false;
-          auto det = sim::Detector::create(sc.mesh, cfg, counts.back());
-          DetectRow base;
+          DetectRow& base = st.base;
           base.backend = sim::to_string(o.backend), base.scene = sc.name;
           base.triangles = sc.mesh.triangles.size(), base.method = sim::to_string(m);
           base.traversal = sim::to_string(tr), base.grid_factor = gf, base.grid_length = cfg.grid_length;
-          if (!det) {
-            for (const Set& s : sets)
-              for (const char* prec : {"exact", "float"}) {
-                DetectRow row = base;
-                row.placement = s.placement, row.particles = s.n, row.precision = prec;
-                row.verdict = "failed", row.note = det.status().message();
-                rows->push_back(row);
-              }
-            continue;
-          }
-          const sim::PrepareInfo& info = (*det)->info();
-          base.triangles_used = info.triangles_used, base.prepare_ms = info.prepare_ms;
-          const double inputs = 16.0 * double(counts.back()) + 36.0 * double(info.triangles_original);
-          base.extra_bytes_per_particle = (double(info.device_bytes) - inputs) / double(counts.back());
-          for (const Set& s : sets) {
-            if (Status st = (*det)->set_particles(s.p); !st) return st;
-            for (sim::Precision prec : {sim::Precision::kExact, sim::Precision::kFloat}) {
-              (void)(*det)->set_precision(prec);
-              DetectRow row = base;
-              row.placement = s.placement, row.particles = s.n, row.precision = sim::to_string(prec);
-              if (Status st = time_frames(**det, repeats, &row.frame_ms, &row.band_pairs); !st) return st;
-              sim::DetectResult got;
-              (*det)->set_frame_options(true, false);
-              if (Status st = (*det)->detect(&got); !st) return st;
-              const sim::ContactDiff d = sim::compare_contacts(sc.mesh, s.p, s.ref, got.contacts, 0.0);
-              row.contacts = s.ref.size(), row.missed = d.missed + d.borderline, row.invented = d.invented;
-              row.max_distance_error = d.max_distance_error / sc.r_hi;
-              row.verdict = verdict_of(d);
-              rows->push_back(row);
-            }
-            (void)(*det)->set_precision(sim::Precision::kExact);
-          }
-          if (o.progress)
-            o.progress("  " + sc.name + ": " + sim::to_string(m) + "/" + sim::to_string(tr) +
-                       (gf > 0 ? " grid " + std::to_string(gf).substr(0, 3) + " r_max" : ""));
+          settings.push_back(std::move(st));
         }
-    // What the automatic choice picks for each set, marked on the matching row.
+    // Settings timed together are held together. On the CPU that is all of
+    // them (their timings drift with the machine's other work, so they share
+    // the rounds). On the GPU, whose timings are steady, one method and
+    // traversal at a time: 33 detectors of 10^6 particles touching wall2 hold
+    // more than the H200's memory (the divided walls' pair buffers).
+    std::vector<std::pair<size_t, size_t>> batches;  // [begin, end) of settings
+    for (size_t i = 0; i < settings.size(); ++i) {
+      const sim::DetectConfig& c = settings[i].cfg;
+      if (i > 0 && (!cuda || (c.method == settings[i - 1].cfg.method &&
+                              c.traversal == settings[i - 1].cfg.traversal)))
+        batches.back().second = i + 1;
+      else
+        batches.push_back({i, i + 1});
+    }
+    const size_t first_row = rows->size();
+    const sim::Precision precisions[] = {sim::Precision::kExact, sim::Precision::kFloat};
+    for (const auto& [begin, end] : batches) {
+      std::vector<sim::Detector*> dets;
+      for (size_t i = begin; i < end; ++i) {
+        Setting& st = settings[i];
+        auto det = sim::Detector::create(sc.mesh, st.cfg, counts.back());
+        if (det) {
+          st.det = std::move(*det);
+          const sim::PrepareInfo& info = st.det->info();
+          st.base.triangles_used = info.triangles_used, st.base.prepare_ms = info.prepare_ms;
+          const double inputs = 16.0 * double(counts.back()) + 36.0 * double(info.triangles_original);
+          st.base.extra_bytes_per_particle = (double(info.device_bytes) - inputs) / double(counts.back());
+          st.det->set_frame_options(false, false);
+        } else {
+          st.base.verdict = "failed", st.base.note = det.status().message();
+        }
+        dets.push_back(st.det.get());
+      }
+      for (const Set& s : sets) {
+        for (sim::Detector* d : dets)
+          if (d)
+            if (Status e = d->set_particles(s.p); !e) return e;
+        // Timing: the batch's settings in the same rounds (sim::fastest_frames_ms,
+        // as the automatic choice times its candidates), so a slow spell of the
+        // machine falls on all alike; and that twice per precision, passes
+        // alternating exact, float, exact, float. The two passes bound what a
+        // repeat of the study would measure (frame_ms and frame_ms_other_pass).
+        std::vector<double> ms[2][2];  // [precision][pass]
+        for (int pass = 0; pass < 2; ++pass)
+          for (int p = 0; p < 2; ++p) {
+            for (sim::Detector* d : dets)
+              if (d) (void)d->set_precision(precisions[p]);
+            std::vector<Status> status;
+            sim::fastest_frames_ms(dets, repeats, &ms[p][pass], &status);
+            for (Status& e : status)
+              if (!e) return e;
+          }
+        for (size_t i = begin; i < end; ++i) {
+          Setting& st = settings[i];
+          for (int p = 0; p < 2; ++p) {
+            DetectRow row = st.base;
+            row.placement = s.placement, row.particles = s.n, row.precision = sim::to_string(precisions[p]);
+            if (!st.det) {
+              rows->push_back(row);
+              continue;
+            }
+            row.frame_ms = std::min(ms[p][0][i - begin], ms[p][1][i - begin]);
+            row.frame_ms_other_pass = std::max(ms[p][0][i - begin], ms[p][1][i - begin]);
+            (void)st.det->set_precision(precisions[p]);
+            st.det->set_frame_options(true, false);
+            sim::DetectResult got;
+            if (Status e = st.det->detect(&got); !e) return e;
+            st.det->set_frame_options(false, false);
+            const sim::ContactDiff d = sim::compare_contacts(sc.mesh, s.p, s.ref, got.contacts, 0.0);
+            row.contacts = s.ref.size(), row.missed = d.missed + d.borderline, row.invented = d.invented;
+            row.band_pairs = got.band_pairs;
+            row.max_distance_error = d.max_distance_error / sc.r_hi;
+            row.verdict = verdict_of(d);
+            rows->push_back(row);
+          }
+        }
+        if (o.progress)
+          o.progress("  " + sc.name + ": " + s.placement + ", " + std::to_string(s.n) + " particles, " +
+                     std::to_string(end - begin) + " settings timed together (" + settings[begin].base.method +
+                     (cuda ? "/" + settings[begin].base.traversal : std::string(" and the rest")) + ")");
+      }
+      for (size_t i = begin; i < end; ++i) settings[i].det.reset();  // before the next batch prepares
+    }
+    // What the automatic choice picks for each set, marked on the matching
+    // row, and what it measured of each candidate, beside the study's passes.
     for (const Set& s : sets) {
       sim::DetectConfig base;
       base.backend = o.backend, base.pool = o.pool, base.r_max = sc.r_hi;
       auto choice = sim::choose_detection(sc.mesh, s.p, base, sim::AutoRequest{});
       if (!choice) return choice.status();
+      auto same_setting = [&](const DetectRow& r, sim::Method m, sim::Traversal t, double grid) {
+        return r.placement == s.placement && r.particles == s.n && r.precision == "exact" &&
+               r.method == sim::to_string(m) && r.traversal == sim::to_string(t) &&
+               std::fabs(r.grid_length - grid) <= 1e-9 * grid;
+      };
       for (size_t k = first_row; k < rows->size(); ++k) {
         DetectRow& r = (*rows)[k];
-        if (r.placement == s.placement && r.particles == s.n && r.precision == "exact" &&
-            r.method == sim::to_string(choice->method) && r.traversal == sim::to_string(choice->traversal) &&
-            std::fabs(r.grid_length - choice->grid_length) <= 1e-9 * choice->grid_length)
-          r.is_auto = true;
+        if (same_setting(r, choice->method, choice->traversal, choice->grid_length))
+          r.is_auto = true, r.note = choice->reason;
+        for (const sim::AutoCandidate& c : choice->candidates)
+          if (c.error.empty() && same_setting(r, c.method, c.traversal, c.grid_length))
+            r.frame_ms_choice = c.frame_ms;
       }
     }
     if (o.progress)

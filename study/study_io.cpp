@@ -23,7 +23,10 @@ Row row_of(const DetectRow& r) {
           {"placement", r.placement}, {"particles", r.particles}, {"method", r.method},
           {"traversal", r.traversal}, {"grid_factor", r.grid_factor}, {"grid_length", r.grid_length},
           {"precision", r.precision}, {"triangles_used", r.triangles_used}, {"prepare_ms", r.prepare_ms},
-          {"frame_ms", r.frame_ms}, {"extra_bytes_per_particle", r.extra_bytes_per_particle},
+          {"frame_ms", r.frame_ms},
+          {"frame_ms_other_pass", measured(r.frame_ms_other_pass, r.frame_ms_other_pass > 0)},
+          {"frame_ms_choice", measured(r.frame_ms_choice, r.frame_ms_choice > 0)},
+          {"extra_bytes_per_particle", r.extra_bytes_per_particle},
           {"contacts", r.contacts}, {"missed", r.missed}, {"invented", r.invented},
           {"max_distance_error", r.max_distance_error}, {"band_pairs", r.band_pairs},
           {"verdict", r.verdict}, {"auto", r.is_auto}, {"note", r.note}};

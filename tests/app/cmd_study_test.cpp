@@ -57,6 +57,10 @@ TEST(CmdStudy, QuickDetectionOnWall1) {
       EXPECT_NE(r.at("band_pairs"), "0");    // and says it decided pairs in doubt
       ++float_wrong;
     }
+    if (r.at("method") != "reference") {  // two timed passes, frame_ms the faster
+      EXPECT_GT(std::stod(r.at("frame_ms")), 0);
+      EXPECT_GE(std::stod(r.at("frame_ms_other_pass")), std::stod(r.at("frame_ms")));
+    }
     if (r.at("auto") == "1") {
       ++autos;
       EXPECT_EQ(r.at("precision"), "exact");

@@ -524,7 +524,7 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     await pareto.waitFor();
     await page.waitForFunction((el) => el.complete && el.naturalWidth > 0, await pareto.elementHandle());
     await page.locator('img[src="/ui/study/gpu/paper_table4.png"]').waitFor();
-    await page.getByText(/method auto picked bin\/particle/).first().waitFor();
+    await page.getByText(/method auto picked (bin|bvh)\/particle.*on the Pareto front/).first().waitFor();
     await checkA11y(page, 'methods');
     await shot(page, '13-methods');
   });
