@@ -19,7 +19,7 @@ std::vector<Method> auto_method_candidates(const TriangleMesh& mesh, double r_ma
 }
 
 void fastest_frames_ms(const std::vector<Detector*>& dets, int min_frames, std::vector<double>* ms,
-                       std::vector<Status>* status, DetectResult* last_of_first) {
+                       std::vector<Status>* status) {
   const size_t n = dets.size();
   ms->assign(n, 1e300);
   status->assign(n, Status::ok());
@@ -52,20 +52,10 @@ void fastest_frames_ms(const std::vector<Detector*>& dets, int min_frames, std::
         (*ms)[i] = std::min((*ms)[i], r.times.frame_ms);
         spent[i] += r.times.frame_ms;
         ++frames[i];
-        if (i == 0 && last_of_first) *last_of_first = r;
       }
       more = more || wants(i);
     }
   }
-}
-
-Status fastest_frame_ms(Detector& det, int min_frames, double* ms, DetectResult* last) {
-  std::vector<double> best;
-  std::vector<Status> status;
-  fastest_frames_ms({&det}, min_frames, &best, &status, last);
-  if (!status[0]) return status[0];
-  *ms = best[0];
-  return Status::ok();
 }
 
 namespace {

@@ -67,11 +67,9 @@ inline constexpr int kAutoMinTurns = 4;
 // machine (another process, a clock change) falls on all of them alike, while
 // each is timed with its own data in the caches. (*ms)[i] is dets[i]'s
 // fastest frame; (*status)[i] its error, after which it is dropped (a null
-// detector is skipped). last_of_first: the first detector's last frame.
+// detector is skipped).
 void fastest_frames_ms(const std::vector<Detector*>& dets, int min_frames, std::vector<double>* ms,
-                       std::vector<Status>* status, DetectResult* last_of_first = nullptr);
-// One detector: its fastest frame, or its error.
-Status fastest_frame_ms(Detector& det, int min_frames, double* ms, DetectResult* last = nullptr);
+                       std::vector<Status>* status);
 
 // The grid lengths tried, in units of r_max (the study's grid).
 inline constexpr double kAutoGridFactors[] = {1.0, 1.5, 2.0, 3.0};

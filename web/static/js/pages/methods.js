@@ -55,8 +55,8 @@ function paretoPicker(set, groups) {
     const verdict = !a ? 'The automatic choice was not measured here.'
       : `method auto picked ${a.method}/${a.traversal}${a.grid_factor ? ` with grid ${a.grid_factor} r_max` : ''} (${a.frame_ms.toPrecision(3)} ms, exact): `
         + (g.auto_on_front ? 'on the Pareto front.'
-          : g.auto_on_front_beyond_repeat ? 'on the Pareto front within the study\u2019s repeat (a faster setting was not faster in both timed passes).'
-            : g.auto_on_front_within_5pct ? 'within 5 % of the front, outside the study\u2019s repeat.' : 'off the front.');
+          : g.auto_on_front_beyond_repeat ? 'on the Pareto front within its measurements\u2019 spread (no setting was faster in every measurement).'
+            : g.auto_on_front_within_5pct ? 'within 5 % of the front, beyond its measurements\u2019 spread.' : 'off the front.');
     slot.replaceChildren(
       figure(`/ui/study/${set}/pareto_${g.backend}_${g.scene}_${g.placement}.png`,
         `Time per frame against contact error: ${label(g)}`),
