@@ -3,6 +3,8 @@
 # reports them. Usage (repo root, with the carried prefix of gtest/nlohmann
 # that bench/make_gpu_carry.sh unpacks):
 #   bash bench/study_gpu.sh OUT_DIR [tests|study-walls|study-meshes|study-dynamics|bench|bench-large]...
+# The study's parts land in OUT_DIR/{walls,meshes,dynamics}; one table of them:
+#   /usr/bin/python3 bench/study_merge.py bench/data/study_gpu OUT_DIR/{walls,meshes,dynamics}/study.json
 set -uo pipefail
 out=${1:?OUT_DIR}; shift
 cmake -S . -B build-dev -DCMAKE_BUILD_TYPE=Release -DCMAKE_PREFIX_PATH="$PWD/gpu-carry/prefix" \
