@@ -24,7 +24,7 @@ void fastest_frames_ms(const std::vector<Detector*>& dets, int min_frames, std::
   ms->assign(n, 1e300);
   status->assign(n, Status::ok());
   std::vector<double> spent(n, 0.0);
-  std::vector<int> frames(n, 0), turns(n, 0);
+  std::vector<int> frames(n, 0);
   std::vector<bool> live(n);
   DetectResult r;
   for (size_t i = 0; i < n; ++i) {
@@ -34,8 +34,7 @@ void fastest_frames_ms(const std::vector<Detector*>& dets, int min_frames, std::
   // A detector leaves the rounds once it has its frames and its time: a slow
   // one is not run again only because a fast one needs more frames.
   auto wants = [&](size_t i) {
-    return live[i] && frames[i] < kAutoMaxFrames &&
-           (frames[i] < min_frames || turns[i] < kAutoMinTurns || spent[i] < kAutoTimingBudgetMs);
+    return live[i] && frames[i] < kAutoMaxFrames && (frames[i] < min_frames || spent[i] < kAutoTimingBudgetMs);
   };
   for (bool more = true; more;) {
     more = false;
@@ -43,7 +42,6 @@ void fastest_frames_ms(const std::vector<Detector*>& dets, int min_frames, std::
       // A turn of a few frames in a row: the first refills the caches the
       // other detectors' turns took over, and the fastest frame counts, so
       // every setting is timed warm, as it runs frame after frame in a job.
-      if (wants(i)) ++turns[i];
       for (int k = 0; k < kAutoFramesPerTurn && wants(i); ++k) {
         if (!((*status)[i] = dets[i]->detect(&r))) {
           live[i] = false;
@@ -118,7 +116,7 @@ Expected<AutoChoice> choose_detection(const TriangleMesh& mesh, const Particles&
   if (!(base.r_max > 0)) return invalid_argument("automatic choice: r_max must be positive");
   const bool gpu = base.backend == Backend::kCuda;
   const size_t max_sample = req.max_sample ? req.max_sample : (gpu ? 4000000 : 200000);
-  const int repeats = req.repeats > 0 ? req.repeats : (gpu ? 9 : 5);
+  const int repeats = req.repeats > 0 ? req.repeats : kAutoMinFrames;
   const Particles sample = sample_of(particles, max_sample);
   std::vector<Method> methods =
       req.method ? auto_method_candidates(mesh, base.r_max, base.backend) : std::vector<Method>{base.method};

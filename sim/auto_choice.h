@@ -26,9 +26,8 @@ struct AutoRequest {
   // under a millisecond and a subset's fixed costs would weigh differently, and
   // 2e5 on the CPU).
   size_t max_sample = 0;
-  // Timed frames per candidate: at least this many (0 = 9 on the GPU, 5 on the
-  // CPU), in at least kAutoMinTurns turns, and at least kAutoTimingBudgetMs of
-  // frames, at most kAutoMaxFrames (fastest_frames_ms).
+  // Timed frames per candidate: at least this many (0 = kAutoMinFrames) and at
+  // least kAutoTimingBudgetMs of frames, at most kAutoMaxFrames (fastest_frames_ms).
   // The fastest frame counts: the work is deterministic, so anything slower is
   // interference (other processes, clocks), which the minimum filters best,
   // given enough frames that one ran undisturbed.
@@ -57,12 +56,13 @@ struct AutoChoice {
 inline constexpr double kAutoTimingBudgetMs = 20;
 inline constexpr int kAutoMaxFrames = 200;
 inline constexpr int kAutoFramesPerTurn = 3;
-inline constexpr int kAutoMinTurns = 4;
+// Frames timed at least: three turns, so the fastest frame is picked from
+// three moments between the other detectors' turns.
+inline constexpr int kAutoMinFrames = 3 * kAutoFramesPerTurn;
 
 // How the automatic choice and the study time a setting: the fastest of at
-// least `min_frames` frames (after one warm-up) in at least kAutoMinTurns
-// turns, timing for at least kAutoTimingBudgetMs and at most kAutoMaxFrames
-// frames. Several detectors are timed in rounds, a turn of kAutoFramesPerTurn
+// least `min_frames` frames (after one warm-up), timing for at least
+// kAutoTimingBudgetMs and at most kAutoMaxFrames frames. Several detectors are timed in rounds, a turn of kAutoFramesPerTurn
 // frames in a row for each that still needs frames, so a slow spell of the
 // machine (another process, a clock change) falls on all of them alike, while
 // each is timed with its own data in the caches. (*ms)[i] is dets[i]'s

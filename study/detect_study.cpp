@@ -69,7 +69,6 @@ Status run_detect_study(const StudyOptions& o, std::vector<DetectRow>* rows) {
                  counts.end());
     if (counts.empty()) counts.push_back(o.max_particles);
   }
-  const int repeats = o.quick ? 5 : 9;
   const sim::Method methods[] = {sim::Method::kBin, sim::Method::kGravity, sim::Method::kCircumcircle,
                                  sim::Method::kMidpoint4, sim::Method::kBvh};
   for (const Scene& sc : *scenes) {
@@ -182,7 +181,7 @@ Status run_detect_study(const StudyOptions& o, std::vector<DetectRow>* rows) {
             for (sim::Detector* d : dets)
               if (d) (void)d->set_precision(precisions[p]);
             std::vector<Status> status;
-            sim::fastest_frames_ms(dets, repeats, &ms[p][pass], &status);
+            sim::fastest_frames_ms(dets, sim::kAutoMinFrames, &ms[p][pass], &status);
             for (Status& e : status)
               if (!e) return e;
           }

@@ -36,7 +36,7 @@ struct DetectRow {
   size_t triangles_used = 0;
   double prepare_ms = 0, extra_bytes_per_particle = 0;
   // The setting is timed in two passes (sim::fastest_frames_ms: the fastest
-  // of at least 5 (quick) or 9 frames), in the same rounds as the other
+  // of at least sim::kAutoMinFrames frames), in the same rounds as the other
   // settings of its batch (all of them on the CPU, one method and traversal
   // on the GPU): frame_ms is the faster pass, frame_ms_other_pass the slower
   // (what a repeat could give; the charts call one setting faster than

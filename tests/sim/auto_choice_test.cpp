@@ -10,6 +10,65 @@
 namespace collido::sim {
 namespace {
 
+// A detector whose frames take the times it is told, logging its turns: its
+// first frame after another detector ran is slower (cold caches).
+class ScriptedDetector : public Detector {
+ public:
+  ScriptedDetector(int id, double warm_ms, std::vector<int>* log, int fail_at = -1)
+      : Detector(DetectConfig{}), id_(id), warm_ms_(warm_ms), log_(log), fail_at_(fail_at) {}
+  Status set_particles(const Particles&) override { return Status::ok(); }
+  Status detect(DetectResult* out) override {
+    const bool cold = log_->empty() || log_->back() != id_;
+    log_->push_back(id_);
+    if (++calls_ == fail_at_) return invalid_argument("scripted failure");
+    *out = DetectResult{};
+    out->times.frame_ms = cold ? 2 * warm_ms_ : warm_ms_;
+    return Status::ok();
+  }
+  int calls() const { return calls_; }
+
+ private:
+  int id_;
+  double warm_ms_;
+  std::vector<int>* log_;
+  int fail_at_, calls_ = 0;
+};
+
+TEST(AutoChoice, FramesAreTimedInTurnsAndEachDetectorStopsWhenItHasItsOwn) {
+  std::vector<int> log;
+  ScriptedDetector fast(0, 0.05, &log), slow(1, 10.0, &log), failing(2, 1.0, &log, 5);
+  std::vector<double> ms;
+  std::vector<Status> status;
+  fastest_frames_ms({&fast, nullptr, &slow, &failing}, kAutoMinFrames, &ms, &status);
+  // The fastest frame is a warm one: the cold first frame of each turn never counts.
+  EXPECT_DOUBLE_EQ(ms[0], 0.05);
+  EXPECT_DOUBLE_EQ(ms[2], 10.0);
+  EXPECT_TRUE(status[0] && status[1] && status[2]);
+  EXPECT_FALSE(status[3]);  // failed at its fifth frame and was dropped
+  EXPECT_EQ(failing.calls(), 5);
+  // The slow one has its frames and its 20 ms after the minimum: a warm-up and
+  // kAutoMinFrames frames, not the hundreds the fast one needs for its 20 ms.
+  EXPECT_EQ(slow.calls(), 1 + kAutoMinFrames);
+  EXPECT_EQ(fast.calls(), 1 + kAutoMaxFrames);
+  // After the warm-ups the detectors take turns of kAutoFramesPerTurn frames
+  // in a row (the failing one's last turn ends at its failure), and the fast
+  // one runs on alone once the others have their frames.
+  ASSERT_GE(log.size(), 3u);
+  EXPECT_EQ(std::vector<int>(log.begin(), log.begin() + 3), (std::vector<int>{0, 1, 2}));
+  using Runs = std::vector<std::pair<int, int>>;  // (detector, frames in a row)
+  Runs runs;
+  for (size_t k = 3; k < log.size(); ++k)
+    if (!runs.empty() && runs.back().first == log[k])
+      ++runs.back().second;
+    else
+      runs.push_back({log[k], 1});
+  const Runs expected_start{{0, 3}, {1, 3}, {2, 3}, {0, 3}, {1, 3},
+                                                        {2, 1}, {0, 3}, {1, 3}};
+  ASSERT_EQ(runs.size(), expected_start.size() + 1);
+  EXPECT_EQ(Runs(runs.begin(), runs.end() - 1), expected_start);
+  EXPECT_EQ(runs.back().first, 0);  // alone until its 200 frames
+}
+
 TEST(AutoChoice, PicksTheFastestCandidateAndSaysWhy) {
   const TriangleMesh wall = make_cylinder(50, 100, 40);
   const Particles p = particles_near_surface(wall, 20000, 0.5, 1, 0.5, 1.5, 3);
