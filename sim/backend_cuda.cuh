@@ -141,18 +141,13 @@ class CudaBackend {
   void sync() { check(cudaDeviceSynchronize(), "kernel"); }
   Status status() const { return ok_ ? Status::ok() : Status(ErrorCode::kBackend, error_); }
 
-  // The CUB wrappers below do nothing once an error is recorded: after a
-  // failed allocation their buffers are null, and a CUB kernel writing
-  // there would poison the process's CUDA context for every other detector
-  // and job (a clear "out of memory" is what the caller should see).
   uint64_t exclusive_scan(uint32_t* d, size_t n) {
-    if (n == 0 || !ok_) return 0;
+    if (n == 0) return 0;
     resize(scan_out_, n);
-    size_t bytes = 0;
-    cub::DeviceScan::ExclusiveSum(nullptr, bytes, d, scan_out_.data(), static_cast<int>(n));
-    void* t = temp(bytes);
-    if (!ok_) return 0;
-    check(cub::DeviceScan::ExclusiveSum(t, bytes, d, scan_out_.data(), static_cast<int>(n)), "scan");
+    if (!cub_call("scan", [&](void* t, size_t& bytes) {
+          return cub::DeviceScan::ExclusiveSum(t, bytes, d, scan_out_.data(), static_cast<int>(n));
+        }))
+      return 0;
     uint32_t last_in = 0, last_out = 0;
     to_host(&last_in, d + n - 1, sizeof last_in);
     to_host(&last_out, scan_out_.data() + n - 1, sizeof last_out);
@@ -162,13 +157,12 @@ class CudaBackend {
 
   // Sum and maximum of n doubles (0 when n == 0); one small read-back each.
   double reduce_sum(const double* d, size_t n) {
-    if (n == 0 || !ok_) return 0;
+    if (n == 0) return 0;
     resize(scalar_, 1);
-    size_t bytes = 0;
-    cub::DeviceReduce::Sum(nullptr, bytes, d, scalar_.data(), static_cast<int>(n));
-    void* t = temp(bytes);
-    if (!ok_) return 0;
-    check(cub::DeviceReduce::Sum(t, bytes, d, scalar_.data(), static_cast<int>(n)), "reduce");
+    if (!cub_call("reduce", [&](void* t, size_t& bytes) {
+          return cub::DeviceReduce::Sum(t, bytes, d, scalar_.data(), static_cast<int>(n));
+        }))
+      return 0;
     double v = 0;
     to_host(&v, scalar_.data(), sizeof v);
     return v;
@@ -192,13 +186,12 @@ class CudaBackend {
     return v;
   }
   double reduce_max(const double* d, size_t n) {
-    if (n == 0 || !ok_) return 0;
+    if (n == 0) return 0;
     resize(scalar_, 1);
-    size_t bytes = 0;
-    cub::DeviceReduce::Max(nullptr, bytes, d, scalar_.data(), static_cast<int>(n));
-    void* t = temp(bytes);
-    if (!ok_) return 0;
-    check(cub::DeviceReduce::Max(t, bytes, d, scalar_.data(), static_cast<int>(n)), "reduce");
+    if (!cub_call("reduce", [&](void* t, size_t& bytes) {
+          return cub::DeviceReduce::Max(t, bytes, d, scalar_.data(), static_cast<int>(n));
+        }))
+      return 0;
     double v = 0;
     to_host(&v, scalar_.data(), sizeof v);
     return v;
@@ -207,29 +200,24 @@ class CudaBackend {
   // Radix sort of (key, value) pairs over the low key_bits bits of the keys.
   void sort_pairs(const uint32_t* kin, const uint32_t* vin, uint32_t* kout, uint32_t* vout, size_t n,
                   int key_bits = 32) {
-    if (n == 0 || !ok_) return;
-    size_t bytes = 0;
-    cub::DeviceRadixSort::SortPairs(nullptr, bytes, kin, kout, vin, vout, static_cast<int>(n), 0, key_bits);
-    void* t = temp(bytes);
-    if (!ok_) return;
-    check(cub::DeviceRadixSort::SortPairs(t, bytes, kin, kout, vin, vout, static_cast<int>(n), 0, key_bits), "sort");
+    if (n == 0) return;
+    cub_call("sort", [&](void* t, size_t& bytes) {
+      return cub::DeviceRadixSort::SortPairs(t, bytes, kin, kout, vin, vout, static_cast<int>(n), 0, key_bits);
+    });
   }
 
   uint32_t dedup_min(uint64_t* key, float* dist, size_t n, uint64_t* kout, float* dout) {
-    if (n == 0 || !ok_) return 0;
-    size_t bytes = 0;
-    cub::DeviceRadixSort::SortPairs(nullptr, bytes, key, kout, dist, dout, static_cast<int>(n));
-    void* t = temp(bytes);
-    if (!ok_) return 0;
-    check(cub::DeviceRadixSort::SortPairs(t, bytes, key, kout, dist, dout, static_cast<int>(n)), "sort");
+    if (n == 0) return 0;
+    if (!cub_call("sort", [&](void* t, size_t& bytes) {
+          return cub::DeviceRadixSort::SortPairs(t, bytes, key, kout, dist, dout, static_cast<int>(n));
+        }))
+      return 0;
     resize(runs_, 1);
-    bytes = 0;
-    cub::DeviceReduce::ReduceByKey(nullptr, bytes, kout, key, dout, dist, runs_.data(), cuda_detail::MinOp(), static_cast<int>(n));
-    t = temp(bytes);
-    if (!ok_) return 0;
-    check(cub::DeviceReduce::ReduceByKey(t, bytes, kout, key, dout, dist, runs_.data(), cuda_detail::MinOp(),
-                                         static_cast<int>(n)),
-          "reduce_by_key");
+    if (!cub_call("reduce_by_key", [&](void* t, size_t& bytes) {
+          return cub::DeviceReduce::ReduceByKey(t, bytes, kout, key, dout, dist, runs_.data(), cuda_detail::MinOp(),
+                                                static_cast<int>(n));
+        }))
+      return 0;
     uint32_t runs = 0;
     to_host(&runs, runs_.data(), sizeof runs);
     copy(kout, key, runs * sizeof(uint64_t));
@@ -238,18 +226,15 @@ class CudaBackend {
   }
 
   void sort_segments(uint32_t* tri, uint64_t* cell, const uint32_t* start, uint32_t buckets, uint64_t total) {
-    if (total == 0 || !ok_) return;
+    if (total == 0) return;
     resize(seg_tri_, total);
     resize(seg_cell_, total);
-    if (!ok_) return;
-    size_t bytes = 0;
-    cub::DeviceSegmentedSort::SortPairs(nullptr, bytes, tri, seg_tri_.data(), cell, seg_cell_.data(),
-                                        static_cast<int>(total), static_cast<int>(buckets), start, start + 1);
-    void* t = temp(bytes);
-    if (!ok_) return;
-    check(cub::DeviceSegmentedSort::SortPairs(t, bytes, tri, seg_tri_.data(), cell, seg_cell_.data(),
-                                              static_cast<int>(total), static_cast<int>(buckets), start, start + 1),
-          "segmented sort");
+    if (!cub_call("segmented sort", [&](void* t, size_t& bytes) {
+          return cub::DeviceSegmentedSort::SortPairs(t, bytes, tri, seg_tri_.data(), cell, seg_cell_.data(),
+                                                     static_cast<int>(total), static_cast<int>(buckets), start,
+                                                     start + 1);
+        }))
+      return;
     copy(tri, seg_tri_.data(), total * sizeof(uint32_t));
     copy(cell, seg_cell_.data(), total * sizeof(uint64_t));
   }
@@ -263,6 +248,20 @@ class CudaBackend {
     const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
     kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f);
     check(cudaGetLastError(), "kernel launch");
+  }
+
+  // One CUB call the CUB way: a size query (call with null scratch), the
+  // scratch, the call. Nothing runs once an error is recorded: after a failed
+  // allocation the buffers are null, and a CUB kernel writing there would
+  // poison the process's CUDA context for every other detector and job (the
+  // caller should see the first error, "out of memory"). Returns whether it ran.
+  template <class Call>
+  bool cub_call(const char* what, Call call) {
+    if (!ok_) return false;
+    size_t bytes = 0;
+    call(nullptr, bytes);
+    void* t = temp(bytes);
+    return ok_ && check(call(t, bytes), what);
   }
 
   bool check(cudaError_t e, const char* what) {
