@@ -31,6 +31,9 @@ const std::vector<FlagSpec> kFlags = {
     {"pairs-once", true,
      "auto | on | off: a listed pair's force evaluated once, or by both particles (default auto: "
      "the backend's choice)"},
+    {"lanes", true,
+     "auto | 1 | 2 | 4 | 8: GPU threads sharing a particle's pairs (default auto: the backend's "
+     "choice)"},
     {"steps", true, "timed steps per configuration (default 50)"},
     {"warmup", true, "untimed steps first (default 5)"},
     {"threads", true, "CPU threads (default: all cores)"},
@@ -108,6 +111,11 @@ int bench_run(const Args& args) {
   if (once != "auto" && once != "on" && once != "off")
     return usage_error("bench run", "--pairs-once must be auto, on or off");
   const int pairs_once = once == "auto" ? -1 : once == "on" ? 1 : 0;
+  const std::string lanes_arg = p->get("lanes", "auto");
+  if (lanes_arg != "auto" && lanes_arg != "1" && lanes_arg != "2" && lanes_arg != "4" &&
+      lanes_arg != "8")
+    return usage_error("bench run", "--lanes must be auto, 1, 2, 4 or 8");
+  const int pair_lanes = lanes_arg == "auto" ? 0 : std::stoi(lanes_arg);
   const std::string renumber = p->get("renumber", "auto");
   int renumber_every = -1;
   if (renumber == "never") {
@@ -169,6 +177,7 @@ int bench_run(const Args& args) {
       cfg.material.rolling_friction = rolling;
       cfg.neighbour_skin = skin;
       cfg.pairs_once = pairs_once;
+      cfg.pair_lanes = pair_lanes;
       cfg.renumber_every = renumber_every;
       cfg.contact_model = model;
       // The linear spring of the earlier benchmarks; Hertz sizes its modulus itself.

@@ -8,6 +8,7 @@
 #include <numeric>
 #include <vector>
 
+#include "sim/hd.h"
 #include "sim/parallel.h"
 #include "sim/status.h"
 
@@ -43,6 +44,12 @@ class CpuBackend {
   template <class F>
   void parallel_for_heavy(size_t n, F f) {
     cpu_parallel_for(*pool_, n, f, kHeavyGrain);
+  }
+  // f(i, group) for every i < n, one thread an item (see LaneGroup).
+  uint32_t lanes_for(size_t, double, uint32_t) const { return 1; }
+  template <class F>
+  void parallel_for_lanes(size_t n, uint32_t, F f) {
+    cpu_parallel_for(*pool_, n, [&f](uint32_t i) { f(i, LaneGroup{}); }, kHeavyGrain);
   }
   // Runs f(i) for every i < n and returns the largest value it returned (0
   // when n == 0); f returns doubles >= 0.

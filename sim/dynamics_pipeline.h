@@ -601,6 +601,18 @@ class DynamicsPipeline final : public Simulation {
         for_each_grid_candidate(pg, start, end, sidx, sp, slack, i, xf, rf, f);
       }
     }
+    // With lists, i's candidates by number, in the order of each().
+    struct Listed {
+      const uint32_t *lo, *up;
+      uint32_t n_lo, count;
+      COLLIDO_HD COLLIDO_FORCEINLINE uint32_t operator[](uint32_t c) const {
+        return c < n_lo ? lo[c] : up[c - n_lo];
+      }
+    };
+    COLLIDO_HD COLLIDO_FORCEINLINE Listed listed(uint32_t i) const {
+      const uint32_t l0 = lo_start[i], n_lo = lo_start[i + 1] - l0, u0 = nl_start[i];
+      return {lo_j + l0, nl + u0, n_lo, n_lo + (nl_start[i + 1] - u0)};
+    }
   };
   PairCandidates pair_candidates() {
     return {nlist_,          pgrid_,          cell_start_.data(), cell_end_.data(),
@@ -956,6 +968,7 @@ class DynamicsPipeline final : public Simulation {
     backend_.fill(lo_count + n, 1, 0u);
     const uint64_t up_total = backend_.exclusive_scan(up_count, n + 1);
     const uint64_t lo_total = backend_.exclusive_scan(lo_count, n + 1);
+    nl_per_particle_ = n ? double(up_total + lo_total) / double(n) : 0.0;
     if (up_total > nl_list_.size()) {
       const size_t cap = size_t(up_total + up_total / 4 + 16);
       backend_.resize(nl_list_, cap);
@@ -1300,8 +1313,15 @@ class DynamicsPipeline final : public Simulation {
     const size_t n = n_;
     const bool friction = law.mu > 0;
     const bool rolling = rot && law.mu_roll > 0;
-    backend_.parallel_for_heavy(live_, [=] COLLIDO_HD(uint32_t i) {
+    // With lists, a few lanes a particle where the GPU would have idle SMs
+    // and the particles have candidates to share: each lane takes every
+    // lanes-th candidate, and they file the springs in order.
+    const uint32_t lanes = cand.list && !measure ? backend_.lanes_for(live_, nl_per_particle_,
+                                                                      uint32_t(cfg_.pair_lanes))
+                                                : 1u;
+    auto particle = [=] COLLIDO_HD(uint32_t i, LaneGroup g) {
       if (P.state[i] != kActive) {
+        if (g.lane != 0) return;
         if (measure)
           stats[kStatElasticPair * n + i] = stats[kStatOverlapPair * n + i] =
               stats[kStatPairContacts * n + i] = stats[kStatOverflowPair * n + i] = 0;
@@ -1314,7 +1334,8 @@ class DynamicsPipeline final : public Simulation {
       const double r = P.r[i], m = P.mass[i];
       const Vec3f xf = cast3<float>(xi);
       const float rf = float(r);
-      Vec3d f = grav * m, torque{0, 0, 0};
+      // Gravity first on the first lane, so one lane sums as a single loop does.
+      Vec3d f = g.lane == 0 ? grav * m : Vec3d{0, 0, 0}, torque{0, 0, 0};
       double elastic = 0, overlap_max = 0;
       uint32_t npair = 0, slots = 0, overflow = 0;
       // No springs are kept without friction (the buffers are empty): no pointer into them.
@@ -1322,40 +1343,66 @@ class DynamicsPipeline final : public Simulation {
       FrictionSlot* new_slots = friction ? hout + size_t(i) * kPairSlots : nullptr;
       // One candidate j: the exact test in double, then the contact's force.
       // owner: i is the pair's particle of lower index (it keeps the spring).
-      auto touch = [&](uint32_t j, bool owner) {
+      // Returns whether the spring goes into i's slots (*spring).
+      auto touch = [&](uint32_t j, bool owner, Vec3d* spring) {
         const Vec3d d = xi - P.x[j];
         const double rs = r + P.r[j];
         const double dist2 = dot(d, d);
-        if (!(dist2 < rs * rs)) return;
+        if (!(dist2 < rs * rs)) return false;
         // The pair's spring is kept by its owner, as that particle sees it.
-        Vec3d spring{0, 0, 0};
+        *spring = Vec3d{0, 0, 0};
         if (friction)
-          spring = owner ? find_spring(old_slots, kPairSlots, j)
-                         : find_spring(hin + size_t(j) * kPairSlots, kPairSlots, i) * -1.0;
-        const PairContact c = pair_contact(law, rot, P, i, j, vi, wi, r, m, d, dist2, rs, &spring, dt);
+          *spring = owner ? find_spring(old_slots, kPairSlots, j)
+                          : find_spring(hin + size_t(j) * kPairSlots, kPairSlots, i) * -1.0;
+        const PairContact c = pair_contact(law, rot, P, i, j, vi, wi, r, m, d, dist2, rs, spring, dt);
         f = f + c.cf.f;
         if (rot) torque = torque + c.cf.torque * r;
         if (rolling) torque = torque + c.roll;
         elastic += 0.5 * c.cf.elastic;  // each side holds half the pair's springs
         overlap_max = hd_max(overlap_max, (rs - sqrt(dist2)) / r);
         ++npair;
-        // Slots are counted on the measuring pass too (it writes none), so that the
-        // partners beyond kPairSlots reach the frame's statistics.
-        if (friction && owner) {
-          if (slots < uint32_t(kPairSlots)) {
-            if (!measure)
-              new_slots[slots] =
-                  FrictionSlot{j, float(spring.x), float(spring.y), float(spring.z)};
-            ++slots;
-          } else {
-            ++overflow;
-          }
+        return friction && owner;
+      };
+      // Files the springs of a round of lanes in candidate order. Slots are
+      // counted on the measuring pass too (it writes none), so that the
+      // partners beyond kPairSlots reach the frame's statistics.
+      auto file = [&](bool keep, uint32_t j, Vec3d spring) {
+        const uint32_t at = slots + g.count_before(keep);
+        slots += g.count(keep);
+        if (!keep) return;
+        if (at >= uint32_t(kPairSlots)) {
+          ++overflow;
+        } else if (!measure) {
+          new_slots[at] = FrictionSlot{j, float(spring.x), float(spring.y), float(spring.z)};
         }
       };
-      // With lists, in the order pair_gather sums them too.
-      cand.each(i, xf, rf, [&](uint32_t j) {
-        if (P.state[j] == kActive) touch(j, i < j);
-      });
+      bool shared = false;  // whether the lanes hold shares to add up
+      if (g.size > 1) {  // lanes come with lists; the candidates in the order each() gives
+        const auto js = cand.listed(i);
+        const uint32_t total = js.count;
+        shared = total > 1;  // else the first lane has it all (a particle in flight, mostly)
+        for (uint32_t base = 0; base < total; base += g.size) {
+          const uint32_t c = base + g.lane;
+          const uint32_t j = c < total ? js[c] : 0;
+          Vec3d spring{0, 0, 0};
+          const bool keep = c < total && P.state[j] == kActive && touch(j, i < j, &spring);
+          file(keep, j, spring);
+        }
+      } else {  // the lists in the order pair_gather sums them too, or the grid's cells
+        cand.each(i, xf, rf, [&](uint32_t j) {
+          Vec3d spring{0, 0, 0};
+          if (P.state[j] == kActive) file(touch(j, i < j, &spring), j, spring);
+        });
+      }
+      if (shared) {
+        f = g.sum(f);
+        if (rot) torque = g.sum(torque);
+        elastic = g.sum(elastic);
+        overlap_max = g.max(overlap_max);
+        npair = g.sum(npair);
+        overflow = g.sum(overflow);
+      }
+      if (g.lane != 0) return;
       P.flags[i] = npair ? uint8_t(kActive | kFlagParticleContact) : uint8_t(kActive);
       if (measure) {
         stats[kStatElasticPair * n + i] = elastic;
@@ -1368,7 +1415,11 @@ class DynamicsPipeline final : public Simulation {
       if (friction && slots < uint32_t(kPairSlots))
         new_slots[slots].key = kNoKey;  // terminates the list
       if (rot) P.alpha[i] = torque * (1.0 / (0.4 * m * r * r));
-    });
+    };
+    if (lanes > 1)
+      backend_.parallel_for_lanes(live_, lanes, particle);
+    else
+      backend_.parallel_for_heavy(live_, [=] COLLIDO_HD(uint32_t i) { particle(i, LaneGroup{}); });
   }
 
   // Wall contacts, one per touched feature: on top of pair_forces' accelerations when the
@@ -1566,6 +1617,7 @@ class DynamicsPipeline final : public Simulation {
   bool nlist_ = false, nl_valid_ = false;
   double skin_ = 0;
   size_t nl_cover_ = 0;  // the lists hold the particles before this place (list_cover)
+  double nl_per_particle_ = 0;  // candidates a particle in the lists (both sides), on average
   double nl_built_at_ = 0, nl_life_ = 0;  // s: when they were last built, how long the one before lasted
   uint64_t nl_built_step_ = 0;            // the step count at the last build
   // Velocity Verlet's close of the last step (its dt) waits for the next pass.

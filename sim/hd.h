@@ -72,4 +72,46 @@ COLLIDO_HD COLLIDO_FORCEINLINE Vec3T<To> cast3(Vec3T<From> a) {
   return {static_cast<To>(a.x), static_cast<To>(a.y), static_cast<To>(a.z)};
 }
 
+// The threads that share one item of parallel_for_lanes: `size` consecutive
+// lanes of a warp on the GPU (mask: theirs), or one thread (size 1, the default). Each lane
+// works on a share of the item and the group combines the shares. The sums
+// run as a butterfly, so every lane gets the same bits; with one lane they
+// return their argument, so a one-thread loop's arithmetic is unchanged.
+struct LaneGroup {
+  uint32_t lane = 0, size = 1, mask = 1;
+  COLLIDO_HD COLLIDO_FORCEINLINE double sum(double v) const {
+#if defined(__CUDA_ARCH__)
+    for (uint32_t o = size >> 1; o > 0; o >>= 1) v += __shfl_xor_sync(mask, v, o);
+#endif
+    return v;
+  }
+  COLLIDO_HD COLLIDO_FORCEINLINE uint32_t sum(uint32_t v) const {
+#if defined(__CUDA_ARCH__)
+    for (uint32_t o = size >> 1; o > 0; o >>= 1) v += __shfl_xor_sync(mask, v, o);
+#endif
+    return v;
+  }
+  COLLIDO_HD COLLIDO_FORCEINLINE Vec3d sum(Vec3d v) const { return {sum(v.x), sum(v.y), sum(v.z)}; }
+  COLLIDO_HD COLLIDO_FORCEINLINE double max(double v) const {
+#if defined(__CUDA_ARCH__)
+    for (uint32_t o = size >> 1; o > 0; o >>= 1) v = fmax(v, __shfl_xor_sync(mask, v, o));
+#endif
+    return v;
+  }
+  // How many lanes before this one have b set, and how many in all.
+  COLLIDO_HD COLLIDO_FORCEINLINE uint32_t count_before(bool b) const {
+#if defined(__CUDA_ARCH__)
+    if (size > 1) return __popc(__ballot_sync(mask, b) & mask & ((1u << (threadIdx.x & 31)) - 1u));
+#endif
+    (void)b;
+    return 0;
+  }
+  COLLIDO_HD COLLIDO_FORCEINLINE uint32_t count(bool b) const {
+#if defined(__CUDA_ARCH__)
+    if (size > 1) return __popc(__ballot_sync(mask, b) & mask);
+#endif
+    return b ? 1u : 0u;
+  }
+};
+
 }  // namespace collido::sim

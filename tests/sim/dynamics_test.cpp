@@ -560,6 +560,61 @@ void pairs_once_or_from_both_sides_agree() {
 }
 TEST(Dynamics, PairsOnceOrFromBothSidesAgreeBitForBit) { pairs_once_or_from_both_sides_agree(); }
 
+// Several GPU threads sharing a particle's candidates (pair_lanes) find the
+// same contacts and file the same springs as one: only their sums' order
+// differs, so the trajectories agree to rounding. Dense pressed lattices with
+// friction (springs filed in order by lanes that each hold a share), mixed
+// radii, and one with rolling resistance and Hertz-Mindlin. The CPU always
+// runs one lane: the same bits.
+void pair_lanes_agree() {
+  const TriangleMesh wall = make_cylinder(50, 100, 40);
+  for (int scene = 0; scene < 3; ++scene) {
+    ParticleSet p = lattice(10, 9.9, -0.05, 1, 5.0, 11);  // 1.98 apart: pressed together
+    SplitMix64 rng(7);
+    if (scene > 0)
+      for (double& r : p.r) r = rng.uniform(0.9, 1.05);
+    DynamicsConfig cfg;
+    cfg.particle_contacts = true;
+    cfg.pairs_once = 0;  // the GPU's way, on both backends
+    cfg.material.friction = 0.4;
+    cfg.material.rolling_friction = scene == 1 ? 0.05 : 0;
+    cfg.material.restitution = 0.5;
+    if (scene == 1) cfg.contact_model = ContactModel::kHertzMindlin;
+    ParticleSet end[2];
+    uint64_t contacts[2][30], overflow[2] = {0, 0};
+    const int lanes[2] = {1, scene == 0 ? 8 : scene == 1 ? 4 : 2};
+    for (int k = 0; k < 2; ++k) {
+      DynamicsConfig c = cfg;
+      c.pair_lanes = lanes[k];
+      auto s = make_sim(wall, c, p);
+      ASSERT_TRUE(s);
+      for (int f = 0; f < 30; ++f) {
+        ASSERT_TRUE(s->step(10, s->time_step_info().spring_step));
+        const FrameStats now = measure(*s);
+        contacts[k][f] = now.particle_contacts;
+        overflow[k] += now.history_overflow;
+      }
+      ASSERT_TRUE(s->download(&end[k], nullptr));
+    }
+    uint64_t all = 0;
+    for (int f = 0; f < 30; ++f) {
+      ASSERT_EQ(contacts[0][f], contacts[1][f]) << "scene " << scene << ", frame " << f;
+      all += contacts[0][f];
+    }
+    EXPECT_GT(all, 5000u) << "scene " << scene;
+    EXPECT_EQ(overflow[0], overflow[1]) << "scene " << scene;
+    double worst = 0;
+    for (size_t i = 0; i < p.size(); ++i)
+      worst = std::max({worst, std::fabs(end[0].x[i] - end[1].x[i]),
+                        std::fabs(end[0].y[i] - end[1].y[i]), std::fabs(end[0].z[i] - end[1].z[i])});
+    if (backend_under_test() == Backend::kCpu)
+      EXPECT_EQ(worst, 0.0) << "scene " << scene;
+    else
+      EXPECT_LE(worst, 1e-9) << "scene " << scene;
+  }
+}
+TEST(Dynamics, PairLanesAgreeWithOneLane) { pair_lanes_agree(); }
+
 // A neighbour list renumbers the particles in the order of their cells (here
 // at its first build and every 4th after, renumber_every), handing each
 // friction spring to its pair's new owner; the grid searched every step keeps
@@ -975,6 +1030,7 @@ TEST_F(DynamicsCuda, NeighbourListFindsEveryContactTheGridDoes) {
 TEST_F(DynamicsCuda, PairsOnceOrFromBothSidesAgreeBitForBit) {
   pairs_once_or_from_both_sides_agree();
 }
+TEST_F(DynamicsCuda, PairLanesAgreeWithOneLane) { pair_lanes_agree(); }
 TEST_F(DynamicsCuda, StepsOneAtATimeOrTogetherAgreeBitForBit) {
   steps_one_at_a_time_or_together_agree();
 }
