@@ -45,6 +45,11 @@ class CpuBackend {
   void parallel_for_heavy(size_t n, F f) {
     cpu_parallel_for(*pool_, n, f, kHeavyGrain);
   }
+  // A tree walk: the GPU caps its registers; threads here.
+  template <class F>
+  void parallel_for_walk(size_t n, F f) {
+    cpu_parallel_for(*pool_, n, f);
+  }
   // f(i, group) for every i < n, one thread an item (see LaneGroup).
   uint32_t lanes_for(size_t, double, uint32_t) const { return 1; }
   template <class F>

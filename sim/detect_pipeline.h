@@ -412,7 +412,7 @@ class GridDetector final : public Detector {
     const PairSink out = sink();
     const Narrow nw = narrow();
     uint32_t* band_total = band_counter();
-    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t j) {
+    backend_.parallel_for_walk(n_, [=] COLLIDO_HD(uint32_t j) {
       const uint32_t i = sidx[j];
       uint32_t n = 0, band = 0;
       if (skey[j] != kInvalidMorton) {
