@@ -115,7 +115,7 @@ int bench_run(const Args& args) {
   if (lanes_arg != "auto" && lanes_arg != "1" && lanes_arg != "2" && lanes_arg != "4" &&
       lanes_arg != "8")
     return usage_error("bench run", "--lanes must be auto, 1, 2, 4 or 8");
-  const int pair_lanes = lanes_arg == "auto" ? 0 : std::stoi(lanes_arg);
+  const int lanes = lanes_arg == "auto" ? 0 : std::stoi(lanes_arg);
   const std::string renumber = p->get("renumber", "auto");
   int renumber_every = -1;
   if (renumber == "never") {
@@ -177,7 +177,7 @@ int bench_run(const Args& args) {
       cfg.material.rolling_friction = rolling;
       cfg.neighbour_skin = skin;
       cfg.pairs_once = pairs_once;
-      cfg.pair_lanes = pair_lanes;
+      cfg.lanes = lanes;
       cfg.renumber_every = renumber_every;
       cfg.contact_model = model;
       // The linear spring of the earlier benchmarks; Hertz sizes its modulus itself.

@@ -258,9 +258,9 @@ Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const Particl
     return invalid_argument("renumber_every must be -1 (when scattered), 0 (never) or a count of builds");
   if (c.pairs_once < -1 || c.pairs_once > 1)
     return invalid_argument("pairs_once must be -1 (the backend's choice), 0 or 1");
-  if (!(c.pair_lanes == 0 || c.pair_lanes == 1 || c.pair_lanes == 2 || c.pair_lanes == 4 ||
-        c.pair_lanes == 8))
-    return invalid_argument("pair_lanes must be 0 (the backend's choice), 1, 2, 4 or 8");
+  if (!(c.lanes == 0 || c.lanes == 1 || c.lanes == 2 || c.lanes == 4 ||
+        c.lanes == 8))
+    return invalid_argument("lanes must be 0 (the backend's choice), 1, 2, 4 or 8");
   if (p.size() == 0) return invalid_argument("particles: a run needs at least one particle");
   if (p.size() > (size_t(1) << 31)) return invalid_argument("particles: more than 2^31 particles");
   for (size_t i = 0; i < p.size(); ++i) {

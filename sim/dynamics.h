@@ -125,11 +125,12 @@ struct DynamicsConfig {
   // of the two particles for itself. -1: the backend's faster way; 0: each
   // particle; 1: once per pair. The trajectories are the same bit for bit.
   int pairs_once = -1;
-  // With a neighbour list and pairs from both sides (the GPU): the threads
-  // that share a particle's candidates, 1, 2, 4 or 8; 0: the backend's choice
-  // (several only where few particles would leave the GPU idle). The CPU
-  // runs one. The sums' order differs between counts, nothing else.
-  int pair_lanes = 0;
+  // With neighbour lists on the GPU: the threads that share a particle's
+  // candidates (pairs from both sides, the wall's), 1, 2, 4 or 8; 0: the
+  // backend's choice (several only where few particles would leave the GPU
+  // idle). The CPU runs one. Only the order of the pair forces' sum differs
+  // between counts; the wall's forces are the same bits.
+  int lanes = 0;
   // When the particles are renumbered in the order of their cells (for
   // locality; results keep the caller's numbering): -1 at a list build where
   // the numbering has scattered (kScatteredCells); 0 never; N at the first

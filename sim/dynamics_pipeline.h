@@ -1086,6 +1086,7 @@ class DynamicsPipeline final : public Simulation {
     });
     backend_.fill(start + n, 1, 0u);
     const uint64_t total = backend_.exclusive_scan(start, n + 1);
+    wl_per_particle_ = n ? double(total) / double(n) : 0.0;
     if (total > wl_list_.size()) backend_.resize(wl_list_, size_t(total + total / 4 + 16));
     uint32_t* list = wl_list_.data();
     backend_.parallel_for_heavy(n, [=] COLLIDO_HD(uint32_t i) {
@@ -1317,7 +1318,7 @@ class DynamicsPipeline final : public Simulation {
     // and the particles have candidates to share: each lane takes every
     // lanes-th candidate, and they file the springs in order.
     const uint32_t lanes = cand.list && !measure ? backend_.lanes_for(live_, nl_per_particle_,
-                                                                      uint32_t(cfg_.pair_lanes))
+                                                                      uint32_t(cfg_.lanes))
                                                 : 1u;
     auto particle = [=] COLLIDO_HD(uint32_t i, LaneGroup g) {
       if (P.state[i] != kActive) {
@@ -1446,9 +1447,16 @@ class DynamicsPipeline final : public Simulation {
     double* peak = peak_overlap_.data();
     const size_t n = n_;
     const bool friction = law.mu > 0;
-    backend_.parallel_for_heavy(live_, [=] COLLIDO_HD(uint32_t i) {
+    // With the wall's lists, lanes share a particle's candidates as in
+    // pair_forces; the contacts they find are offered to the set in candidate
+    // order on every lane, so the set, and the forces, are one lane's bit for bit.
+    const uint32_t lanes = listed && !measure ? backend_.lanes_for(live_, wl_per_particle_,
+                                                                   uint32_t(cfg_.lanes))
+                                              : 1u;
+    auto particle = [=] COLLIDO_HD(uint32_t i, LaneGroup g) {
       const uint8_t st = P.state[i];
       if (st != kActive) {
+        if (g.lane != 0) return;
         if (measure)
           stats[kStatElasticWall * n + i] = stats[kStatOverlapWall * n + i] =
               stats[kStatWallContacts * n + i] = stats[kStatTouching * n + i] =
@@ -1463,7 +1471,8 @@ class DynamicsPipeline final : public Simulation {
       // Candidates from the prepared wall; most particles have none and stop here.
       WallContactSet<kMaxWallContacts> set;
       const double r2 = r * r, tol = 1e-9 * r;
-      auto consider = [&](uint32_t k, uint32_t orig) {
+      // Candidate k's contact offered to *into when it touches.
+      auto probe = [&](uint32_t k, uint32_t orig, auto* into) {
         const PlanarTriangleD& t = tris_d[k];
         Vec3d q;
         double h = 0;
@@ -1479,9 +1488,28 @@ class DynamicsPipeline final : public Simulation {
         } else {
           nrm = (xi - q) * (1.0 / d);
         }
-        set.offer(WallContact{q, nrm, d, orig}, tol);
+        into->offer(WallContact{q, nrm, d, orig}, tol);
       };
-      if (listed) {
+      auto consider = [&](uint32_t k, uint32_t orig) { probe(k, orig, &set); };
+      if (g.size > 1) {  // lanes come with the lists
+        const uint32_t q0 = wl_start[i], total = wl_count[i];
+        for (uint32_t base = 0; base < total; base += g.size) {
+          const uint32_t c = base + g.lane;
+          WallContactSet<1> mine;  // this lane's candidate, if it touches
+          if (c < total) {
+            const uint32_t k = wl[q0 + c];
+            probe(k, wall.original_of(k), &mine);
+          }
+          for (uint32_t hits = g.bits(mine.n > 0); hits; hits &= hits - 1) {
+            const uint32_t src = LaneGroup::lowest(hits);
+            const WallContact& w = mine.c[0];
+            set.offer(WallContact{g.from(src, w.q), g.from(src, w.n), g.from(src, w.dist),
+                                  g.from(src, w.triangle)},
+                      tol);
+          }
+        }
+        if (g.lane != 0) return;
+      } else if (listed) {
         for (uint32_t q = wl_start[i], e = q + wl_count[i]; q < e; ++q)
           consider(wl[q], wall.original_of(wl[q]));
       } else {
@@ -1541,7 +1569,11 @@ class DynamicsPipeline final : public Simulation {
         const Vec3d al = torque * (1.0 / (0.4 * m * r * r));
         P.alpha[i] = add ? P.alpha[i] + al : al;
       }
-    });
+    };
+    if (lanes > 1)
+      backend_.parallel_for_lanes(live_, lanes, particle);
+    else
+      backend_.parallel_for_heavy(live_, [=] COLLIDO_HD(uint32_t i) { particle(i, LaneGroup{}); });
   }
 
   // Kinetic and potential energy, speed and state counts for the measuring pass.
@@ -1618,6 +1650,7 @@ class DynamicsPipeline final : public Simulation {
   double skin_ = 0;
   size_t nl_cover_ = 0;  // the lists hold the particles before this place (list_cover)
   double nl_per_particle_ = 0;  // candidates a particle in the lists (both sides), on average
+  double wl_per_particle_ = 0;  // wall triangles a particle in its lists, on average (at most)
   double nl_built_at_ = 0, nl_life_ = 0;  // s: when they were last built, how long the one before lasted
   uint64_t nl_built_step_ = 0;            // the step count at the last build
   // Velocity Verlet's close of the last step (its dt) waits for the next pass.

@@ -98,6 +98,39 @@ struct LaneGroup {
 #endif
     return v;
   }
+  // The lowest set bit's number (bits != 0).
+  COLLIDO_HD static COLLIDO_FORCEINLINE uint32_t lowest(uint32_t bits) {
+#if defined(__CUDA_ARCH__)
+    return uint32_t(__ffs(int(bits)) - 1);
+#else
+    return uint32_t(__builtin_ctz(bits));
+#endif
+  }
+  // The lanes with b set, as bits by lane number.
+  COLLIDO_HD COLLIDO_FORCEINLINE uint32_t bits(bool b) const {
+#if defined(__CUDA_ARCH__)
+    if (size > 1) return (__ballot_sync(mask, b) & mask) >> ((threadIdx.x & 31u) & ~(size - 1u));
+#endif
+    return b ? 1u : 0u;
+  }
+  // Lane `lane`'s v, on every lane.
+  COLLIDO_HD COLLIDO_FORCEINLINE double from(uint32_t lane, double v) const {
+#if defined(__CUDA_ARCH__)
+    if (size > 1) return __shfl_sync(mask, v, lane, size);
+#endif
+    (void)lane;
+    return v;
+  }
+  COLLIDO_HD COLLIDO_FORCEINLINE uint32_t from(uint32_t lane, uint32_t v) const {
+#if defined(__CUDA_ARCH__)
+    if (size > 1) return __shfl_sync(mask, v, lane, size);
+#endif
+    (void)lane;
+    return v;
+  }
+  COLLIDO_HD COLLIDO_FORCEINLINE Vec3d from(uint32_t lane, Vec3d v) const {
+    return {from(lane, v.x), from(lane, v.y), from(lane, v.z)};
+  }
   // How many lanes before this one have b set, and how many in all.
   COLLIDO_HD COLLIDO_FORCEINLINE uint32_t count_before(bool b) const {
 #if defined(__CUDA_ARCH__)

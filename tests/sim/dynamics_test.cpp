@@ -560,9 +560,10 @@ void pairs_once_or_from_both_sides_agree() {
 }
 TEST(Dynamics, PairsOnceOrFromBothSidesAgreeBitForBit) { pairs_once_or_from_both_sides_agree(); }
 
-// Several GPU threads sharing a particle's candidates (pair_lanes) find the
-// same contacts and file the same springs as one: only their sums' order
-// differs, so the trajectories agree to rounding. Dense pressed lattices with
+// Several GPU threads sharing a particle's candidates (lanes) find the same
+// contacts and file the same springs as one: only the pair forces' sums run
+// in another order, so the trajectories agree to rounding (the wall's
+// contacts are offered in candidate order, its forces one lane's bits). Dense pressed lattices with
 // friction (springs filed in order by lanes that each hold a share), mixed
 // radii, and one with rolling resistance and Hertz-Mindlin. The CPU always
 // runs one lane: the same bits.
@@ -585,7 +586,7 @@ void pair_lanes_agree() {
     const int lanes[2] = {1, scene == 0 ? 8 : scene == 1 ? 4 : 2};
     for (int k = 0; k < 2; ++k) {
       DynamicsConfig c = cfg;
-      c.pair_lanes = lanes[k];
+      c.lanes = lanes[k];
       auto s = make_sim(wall, c, p);
       ASSERT_TRUE(s);
       for (int f = 0; f < 30; ++f) {
@@ -614,6 +615,53 @@ void pair_lanes_agree() {
   }
 }
 TEST(Dynamics, PairLanesAgreeWithOneLane) { pair_lanes_agree(); }
+
+// The wall's candidates shared by lanes give one lane's forces bit for bit:
+// particles 3 apart (no pair touches) sliding with friction on the floor of
+// a 40-sided cylinder and along the corner with its side (two contacts a
+// particle), 8 lanes against one.
+void wall_lanes_agree() {
+  const TriangleMesh wall = make_cylinder(50, 100, 40);
+  std::vector<Vec3d> at, vel;
+  SplitMix64 rng(3);
+  for (int i = 0; i < 10; ++i)
+    for (int j = 0; j < 10; ++j) {
+      at.push_back({-13.5 + 3 * i, -13.5 + 3 * j, 1.0});
+      vel.push_back({rng.uniform(-2, 2), rng.uniform(-2, 2), 0});
+    }
+  for (int k = 0; k < 40; ++k) {
+    const double a = 2 * M_PI * (k + 0.3) / 40;
+    at.push_back({48.9 * std::cos(a), 48.9 * std::sin(a), 1.0});  // into the corner
+    vel.push_back({std::cos(a) - std::sin(a), std::sin(a) + std::cos(a), 0});
+  }
+  const ParticleSet p = particles_at(at, vel, 1.0);
+  DynamicsConfig cfg;
+  cfg.particle_contacts = true;  // the wall's lists come with the pairs'
+  cfg.material.friction = 0.4;
+  cfg.material.restitution = 0.5;
+  ParticleSet end[2];
+  uint64_t walls = 0;
+  for (int k = 0; k < 2; ++k) {
+    DynamicsConfig c = cfg;
+    c.lanes = k == 0 ? 1 : 8;
+    auto s = make_sim(wall, c, p);
+    ASSERT_TRUE(s);
+    for (int f = 0; f < 20; ++f) {
+      ASSERT_TRUE(s->step(200, s->time_step_info().spring_step));
+      const FrameStats now = measure(*s);
+      EXPECT_EQ(now.particle_contacts, 0u);
+      if (k == 0) walls += now.wall_contacts;
+    }
+    ASSERT_TRUE(s->download(&end[k], nullptr));
+  }
+  EXPECT_GT(walls, 20u * 120);  // the floor's 100, and the corner's
+  EXPECT_EQ(end[0].x, end[1].x);
+  EXPECT_EQ(end[0].y, end[1].y);
+  EXPECT_EQ(end[0].z, end[1].z);
+  EXPECT_EQ(end[0].vx, end[1].vx);
+  EXPECT_EQ(end[0].vz, end[1].vz);
+}
+TEST(Dynamics, WallLanesGiveOneLanesBits) { wall_lanes_agree(); }
 
 // A neighbour list renumbers the particles in the order of their cells (here
 // at its first build and every 4th after, renumber_every), handing each
@@ -1031,6 +1079,7 @@ TEST_F(DynamicsCuda, PairsOnceOrFromBothSidesAgreeBitForBit) {
   pairs_once_or_from_both_sides_agree();
 }
 TEST_F(DynamicsCuda, PairLanesAgreeWithOneLane) { pair_lanes_agree(); }
+TEST_F(DynamicsCuda, WallLanesGiveOneLanesBits) { wall_lanes_agree(); }
 TEST_F(DynamicsCuda, StepsOneAtATimeOrTogetherAgreeBitForBit) {
   steps_one_at_a_time_or_together_agree();
 }
