@@ -748,10 +748,14 @@ class DynamicsPipeline final : public Simulation {
     const double* rel;
     double free_t;  // see release_marked
     COLLIDO_HD COLLIDO_FORCEINLINE double operator()(uint32_t i) const {
+      const bool moved = P.state[i] == kActive;  // in the pending step
       uint8_t st = release_marked(P, rel, i, free_t);
       if (close) {
+        // A particle released here did not move in the pending step: no
+        // closing kick for it (its acceleration is already gravity's, for its
+        // first kick below), only the checks.
         if (st == kActive)
-          st = close_particle(P, i, h, true, rot, speed, dom);
+          st = close_particle(P, i, moved ? h : 0.0, true, rot, speed, dom);
         else
           speed[i] = 0;
       }
@@ -804,11 +808,14 @@ class DynamicsPipeline final : public Simulation {
     const double* rel = release_.data();
     const double free_t = free_release_time();
     backend_.parallel_for(live_, [=] COLLIDO_HD(uint32_t i) {
+      const bool moved = P.state[i] == kActive;  // in the step being closed
       if (release_marked(P, rel, i, free_t) != kActive) {
         speed[i] = 0;
         return;
       }
-      close_particle(P, i, dt, verlet, rot, speed, dom);
+      // Verlet closes a step that a particle released now did not move in
+      // (see OpenStep); symplectic Euler's closing pass is its release's step.
+      close_particle(P, i, verlet && !moved ? 0.0 : dt, verlet, rot, speed, dom);
     });
   }
 
@@ -1461,8 +1468,8 @@ class DynamicsPipeline final : public Simulation {
           stats[kStatElasticWall * n + i] = stats[kStatOverlapWall * n + i] =
               stats[kStatWallContacts * n + i] = stats[kStatTouching * n + i] =
                   stats[kStatOverflowWall * n + i] = 0;
-        else
-          P.acc[i] = Vec3d{0, 0, 0};
+        else  // a waiting particle is released into free flight: its first kick is gravity's
+          P.acc[i] = st == kWaiting ? grav : Vec3d{0, 0, 0};
         if (st != kWaiting) P.flags[i] = st;  // a waiting particle's holds its release decision
         return;
       }
