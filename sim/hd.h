@@ -79,13 +79,8 @@ COLLIDO_HD COLLIDO_FORCEINLINE Vec3T<To> cast3(Vec3T<From> a) {
 // return their argument, so a one-thread loop's arithmetic is unchanged.
 struct LaneGroup {
   uint32_t lane = 0, size = 1, mask = 1;
-  COLLIDO_HD COLLIDO_FORCEINLINE double sum(double v) const {
-#if defined(__CUDA_ARCH__)
-    for (uint32_t o = size >> 1; o > 0; o >>= 1) v += __shfl_xor_sync(mask, v, o);
-#endif
-    return v;
-  }
-  COLLIDO_HD COLLIDO_FORCEINLINE uint32_t sum(uint32_t v) const {
+  template <class T>  // double or uint32_t
+  COLLIDO_HD COLLIDO_FORCEINLINE T sum(T v) const {
 #if defined(__CUDA_ARCH__)
     for (uint32_t o = size >> 1; o > 0; o >>= 1) v += __shfl_xor_sync(mask, v, o);
 #endif
@@ -114,14 +109,8 @@ struct LaneGroup {
     return b ? 1u : 0u;
   }
   // Lane `lane`'s v, on every lane.
-  COLLIDO_HD COLLIDO_FORCEINLINE double from(uint32_t lane, double v) const {
-#if defined(__CUDA_ARCH__)
-    if (size > 1) return __shfl_sync(mask, v, lane, size);
-#endif
-    (void)lane;
-    return v;
-  }
-  COLLIDO_HD COLLIDO_FORCEINLINE uint32_t from(uint32_t lane, uint32_t v) const {
+  template <class T>  // double or uint32_t
+  COLLIDO_HD COLLIDO_FORCEINLINE T from(uint32_t lane, T v) const {
 #if defined(__CUDA_ARCH__)
     if (size > 1) return __shfl_sync(mask, v, lane, size);
 #endif
