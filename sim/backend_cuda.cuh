@@ -171,8 +171,13 @@ class CudaBackend {
     if (work >= 3 && n <= sms * 128) return 4;
     return 1;
   }
+  // f(i, group) for every i < n, `lanes` threads an item (one: the heavy kernel).
   template <class F>
   void parallel_for_lanes(size_t n, uint32_t lanes, F f) {
+    if (lanes <= 1) {
+      parallel_for_heavy(n, [=] __device__(uint32_t i) { f(i, LaneGroup{}); });
+      return;
+    }
     if (n == 0 || !ok_) return;
     const size_t threads = n * lanes;
     const uint32_t blocks = static_cast<uint32_t>((threads + 255) / 256);

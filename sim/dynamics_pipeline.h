@@ -1424,10 +1424,7 @@ class DynamicsPipeline final : public Simulation {
         new_slots[slots].key = kNoKey;  // terminates the list
       if (rot) P.alpha[i] = torque * (1.0 / (0.4 * m * r * r));
     };
-    if (lanes > 1)
-      backend_.parallel_for_lanes(live_, lanes, particle);
-    else
-      backend_.parallel_for_heavy(live_, [=] COLLIDO_HD(uint32_t i) { particle(i, LaneGroup{}); });
+    backend_.parallel_for_lanes(live_, lanes, particle);
   }
 
   // Wall contacts, one per touched feature: on top of pair_forces' accelerations when the
@@ -1577,10 +1574,7 @@ class DynamicsPipeline final : public Simulation {
         P.alpha[i] = add ? P.alpha[i] + al : al;
       }
     };
-    if (lanes > 1)
-      backend_.parallel_for_lanes(live_, lanes, particle);
-    else
-      backend_.parallel_for_heavy(live_, [=] COLLIDO_HD(uint32_t i) { particle(i, LaneGroup{}); });
+    backend_.parallel_for_lanes(live_, lanes, particle);
   }
 
   // Kinetic and potential energy, speed and state counts for the measuring pass.

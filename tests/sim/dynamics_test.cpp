@@ -563,10 +563,10 @@ TEST(Dynamics, PairsOnceOrFromBothSidesAgreeBitForBit) { pairs_once_or_from_both
 // Several GPU threads sharing a particle's candidates (lanes) find the same
 // contacts and file the same springs as one: only the pair forces' sums run
 // in another order, so the trajectories agree to rounding (the wall's
-// contacts are offered in candidate order, its forces one lane's bits). Dense pressed lattices with
-// friction (springs filed in order by lanes that each hold a share), mixed
-// radii, and one with rolling resistance and Hertz-Mindlin. The CPU always
-// runs one lane: the same bits.
+// contacts are offered in candidate order, its forces one lane's bits).
+// Dense pressed lattices with friction (springs filed in order by lanes that
+// each hold a share), mixed radii, and one with rolling resistance and
+// Hertz-Mindlin.
 void pair_lanes_agree() {
   const TriangleMesh wall = make_cylinder(50, 100, 40);
   for (int scene = 0; scene < 3; ++scene) {
@@ -614,7 +614,7 @@ void pair_lanes_agree() {
       EXPECT_LE(worst, 1e-9) << "scene " << scene;
   }
 }
-TEST(Dynamics, PairLanesAgreeWithOneLane) { pair_lanes_agree(); }
+// GPU only (DynamicsCuda below): the CPU runs one lane whatever is asked.
 
 // The wall's candidates shared by lanes give one lane's forces bit for bit:
 // particles 3 apart (no pair touches) sliding with friction on the floor of
@@ -661,7 +661,7 @@ void wall_lanes_agree() {
   EXPECT_EQ(end[0].vx, end[1].vx);
   EXPECT_EQ(end[0].vz, end[1].vz);
 }
-TEST(Dynamics, WallLanesGiveOneLanesBits) { wall_lanes_agree(); }
+// GPU only, as above.
 
 // A neighbour list renumbers the particles in the order of their cells (here
 // at its first build and every 4th after, renumber_every), handing each
