@@ -41,13 +41,17 @@ Expected<ResolvedScene> resolve_scene(const JobSpec& spec) {
   return out;
 }
 
-Expected<sim::TriangleMesh> load_scene_wall(const scene::Scene& scene) {
+Expected<sim::TriangleMesh> load_scene_wall(scene::Scene* scene) {
   sim::MeshReport report;
-  auto wall = load_wall(scene.wall, &report);
+  auto wall = load_wall(scene->wall, &report);
   if (!wall) return Status(wall.status().code(), "wall: " + wall.status().message());
-  const double unit = scene.length_scale();
+  const double unit = scene->length_scale();
   if (unit != 1)
     for (auto& v : wall->vertices) v = v * unit;
+  if (scene->motion_center_auto) {
+    scene->dynamics.wall_motion.center = sim::mesh_bounds(*wall).center();
+    scene->motion_center_auto = false;
+  }
   return std::move(*wall);
 }
 
@@ -56,8 +60,8 @@ Expected<JobAssessment> assess_job(const JobSpec& spec) {
   if (!resolved) return resolved.status();
   JobAssessment a;
   a.resolved = std::move(*resolved);
+  auto wall = load_scene_wall(&a.resolved.scene);
   const scene::Scene& s = a.resolved.scene;
-  auto wall = load_scene_wall(s);
   if (!wall) return wall.status();
   a.particles = s.particles.count;
   a.r_min = s.particles.r_min;

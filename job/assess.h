@@ -28,8 +28,10 @@ struct ResolvedScene {
 };
 Expected<ResolvedScene> resolve_scene(const JobSpec& spec);
 
-// The scene's wall in metres (a shape or a mesh file, scaled by the scene's unit).
-Expected<sim::TriangleMesh> load_scene_wall(const scene::Scene& scene);
+// The scene's wall in metres (a shape or a mesh file, scaled by the scene's
+// unit). What the wall decides is then set in *scene: a rotation without a
+// centre turns about the wall's box centre.
+Expected<sim::TriangleMesh> load_scene_wall(scene::Scene* scene);
 
 struct JobAssessment {
   ResolvedScene resolved;

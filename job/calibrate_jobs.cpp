@@ -201,7 +201,7 @@ Expected<Planned> size_job(const Draw& d, const Ranges& rg, const JobSweepSpec& 
   probe.scene_dir = d.wall_file ? sw.mesh_dir : "";
   auto resolved = resolve_scene(probe);
   if (!resolved) return resolved.status();
-  auto wall = load_scene_wall(resolved->scene);
+  auto wall = load_scene_wall(&resolved->scene);
   if (!wall) return wall.status();
   const sim::Bounds3d b = sim::mesh_bounds(*wall);
   const double lo[3] = {b.lo.x, b.lo.y, b.lo.z}, hi[3] = {b.hi.x, b.hi.y, b.hi.z};

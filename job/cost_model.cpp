@@ -868,7 +868,23 @@ Expected<JobCostPrediction> JobCostModel::predict(const JobAssessment& a,
                             " job log); it has no figures for the " + backend +
                             " backend: use a model trained on " + backend + " jobs");
   }
-  return predict(job_inputs(a, backend, u->device, threads > 0 ? threads : u->threads));
+  auto p = predict(job_inputs(a, backend, u->device, threads > 0 ? threads : u->threads));
+  if (!p) return p;
+  // What the job log has no column for, because every sweep job had it alike.
+  const sim::DynamicsConfig& d = a.resolved.scene.dynamics;
+  std::vector<std::string> unlike;
+  if (d.wall_motion.moving())
+    unlike.push_back(std::string("the wall moves (") + sim::to_string(d.wall_motion.kind) +
+                     "): every training job's wall stood still");
+  if (d.contact_model != sim::ContactModel::kLinear)
+    unlike.push_back(std::string("contact model ") + sim::to_string(d.contact_model) +
+                     ": every training job used linear");
+  for (std::string& r : unlike) {
+    p->outside_reason += (p->outside_reason.empty() ? "" : "; ") + r;
+    p->outside_reasons.push_back(std::move(r));
+  }
+  p->outside_training = !p->outside_reasons.empty();
+  return p;
 }
 
 // ---- The model file --------------------------------------------------------------------

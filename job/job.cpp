@@ -274,7 +274,7 @@ class JobRunner {
     result_.threads = pool_->size();
     scene_.dynamics.pool = pool_.get();
 
-    auto wall = load_scene_wall(scene_);
+    auto wall = load_scene_wall(&scene_);
     if (!wall) return wall.status();
     wall_ = std::move(*wall);
     if (scene_.length_scale() != 1)

@@ -23,6 +23,9 @@ struct Scene {
   // on the placed particles (sim/auto_choice.h) when the job starts.
   bool method_auto = false;
   bool grid_auto = false;
+  // A rotation given without a "center" turns about the wall's own box centre,
+  // which is known once the wall is loaded (job::load_scene_wall sets it).
+  bool motion_center_auto = false;
   double duration = 2;       // simulated seconds
   double fps = 30;           // output frames per simulated second
   uint64_t seed = 1;

@@ -256,6 +256,7 @@ Status read_wall_motion(const json& m, Scene* s) {
   }
   COLLIDO_TRY(r.vec3("axis", &w.axis, 1e6));
   COLLIDO_TRY(r.vec3("center", &w.center, kMaxCoordinate));
+  s->motion_center_auto = w.kind == K::kRotate && !r.has("center");
   if (r.has("angular_speed") && r.has("rpm"))
     return invalid_argument("wall_motion: give angular_speed (rad/s) or rpm, not both");
   COLLIDO_TRY(r.number("angular_speed", &w.angular_speed, -1e4, 1e4));
@@ -412,10 +413,9 @@ std::string to_json(const Scene& si) {
   const sim::WallMotion& w = s.dynamics.wall_motion;
   switch (w.kind) {
     case sim::WallMotionKind::kRotate:
-      j["wall_motion"] = {{"kind", "rotate"},
-                          {"axis", v3(w.axis)},
-                          {"center", v3(w.center)},
-                          {"angular_speed", w.angular_speed}};
+      j["wall_motion"] = {{"kind", "rotate"}, {"axis", v3(w.axis)}, {"angular_speed", w.angular_speed}};
+      // Left out while it is still the wall's to decide (the wall is not loaded yet).
+      if (!s.motion_center_auto) j["wall_motion"]["center"] = v3(w.center);
       break;
     case sim::WallMotionKind::kTranslate:
       j["wall_motion"] = {{"kind", "translate"}, {"velocity", v3(w.velocity)}};

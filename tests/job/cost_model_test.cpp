@@ -455,6 +455,20 @@ TEST_F(TrainedModel, PricesAnAssessedScene) {
     EXPECT_TRUE(js[k].contains("p10") && js[k].contains("p50") && js[k].contains("p90")) << k;
   }
   EXPECT_TRUE(js.contains("outside_training"));
+
+  // No job of the log had a moving wall or the Hertz-Mindlin law: the figures say so.
+  spec.scene_json = R"({"wall": "wall1", "particles": {"count": 2000, "radius": 1},
+                        "placement": {"kind": "pour", "rate": 1000}, "contact_model": "hertz_mindlin",
+                        "wall_motion": {"kind": "rotate", "axis": [0, 0, 1], "rpm": 5},
+                        "duration": 2, "fps": 10, "backend": "cpu"})";
+  auto turning = assess_job(spec);
+  ASSERT_TRUE(turning) << turning.status().message();
+  auto t = model_->predict(*turning, "cpu", 2);
+  ASSERT_TRUE(t) << t.status().message();
+  EXPECT_TRUE(t->outside_training);
+  EXPECT_NE(t->outside_reason.find("the wall moves (rotate)"), std::string::npos) << t->outside_reason;
+  EXPECT_NE(t->outside_reason.find("hertz_mindlin"), std::string::npos) << t->outside_reason;
+  EXPECT_FALSE(p->outside_reason.find("moves") != std::string::npos) << p->outside_reason;
 }
 
 // A quick sweep through job-exec children writes job-log rows the model can read.

@@ -15,6 +15,7 @@
 #include <thread>
 
 #include "common/atomic_file.h"
+#include "job/assess.h"
 #include "job/checkpoint.h"
 #include "job/child.h"
 #include "job/job.h"
@@ -414,6 +415,32 @@ TEST(Job, AHopperInMillimetresRunsAsInMetres) {
   const json manifest = json::parse(read_file(r[0].out_dir + "/result.json"));
   EXPECT_EQ(manifest["units"]["length"], "m");
   EXPECT_EQ(manifest["scene_length_unit"], "mm");
+}
+
+// A rotation without a centre turns about the wall's box centre, in the
+// document's unit: the job sets it when it loads the wall, and writes it into
+// the run's scene.json, which the renderer reads to turn the wall.
+TEST(Job, ARotationWithoutACentreTurnsAboutTheWall) {
+  JobSpec s;
+  s.scene_json = R"({"wall": "cylinder:r=50,h=40,segments=24,axis=y,dz=100", "length_unit": "mm",
+    "particles": {"count": 20, "radius": 4},
+    "placement": {"kind": "fill", "region": {"min": [-30, 5, 80], "max": [30, 35, 120]}},
+    "wall_motion": {"kind": "rotate", "axis": [0, 1, 0], "rpm": 30},
+    "duration": 0.05, "fps": 20, "backend": "cpu"})";
+  s.out_dir = fresh_dir("own_centre");
+  auto a = assess_job(s);
+  ASSERT_TRUE(a) << a.status().message();
+  const sim::Vec3d c = a->resolved.scene.dynamics.wall_motion.center;
+  EXPECT_NEAR(c.x, 0, 1e-12);
+  EXPECT_NEAR(c.y, 0.02, 1e-12);  // the drum runs from y = 0 to 40 mm
+  EXPECT_NEAR(c.z, 0.1, 1e-12);
+  EXPECT_FALSE(a->resolved.scene.motion_center_auto);
+  const JobResult r = run_job(s, {});
+  ASSERT_TRUE(r.status) << r.status.message();
+  const json scene = json::parse(read_file(r.out_dir + "/scene.json"));
+  ASSERT_TRUE(scene["wall_motion"].contains("center")) << scene.dump();
+  EXPECT_NEAR(scene["wall_motion"]["center"][1].get<double>(), 20, 1e-9);  // millimetres
+  EXPECT_NEAR(scene["wall_motion"]["center"][2].get<double>(), 100, 1e-9);
 }
 
 // method: auto for a pour is timed where its particles go (near the wall),

@@ -187,6 +187,18 @@ TEST(Scene, ContactModelWallMaterialAndWallMotion) {
   ASSERT_TRUE(osc) << osc.status().message();
   EXPECT_EQ(to_json(*osc), to_json(*parse_scene(to_json(*osc))));
 
+  // A rotation without a centre turns about the wall's box centre, which the
+  // job sets when it loads the wall; until then the document leaves it out.
+  auto own = parse_scene(R"({"wall": "box", "wall_motion": {"kind": "rotate", "axis": [1, 0, 0], "rpm": 6}})");
+  ASSERT_TRUE(own) << own.status().message();
+  EXPECT_TRUE(own->motion_center_auto);
+  EXPECT_FALSE(s->motion_center_auto);  // given above
+  EXPECT_EQ(to_json(*own).find("center"), std::string::npos) << to_json(*own);
+  auto own_back = parse_scene(to_json(*own));
+  ASSERT_TRUE(own_back);
+  EXPECT_TRUE(own_back->motion_center_auto);
+  EXPECT_FALSE(osc->motion_center_auto);  // a shake has no centre
+
   expect_error(R"({"wall": "wall1", "contact_model": "jkr"})", "contact_model");
   expect_error(R"({"wall": "wall1", "contact_model": "hertz_mindlin", "material": {"stiffness": 1e6}})",
                "material.stiffness");

@@ -206,6 +206,9 @@ export function draftObject(parts) {
       default:
         continue;
     }
+    // A lathe along y or x: the engine's turn of its z axis there (sim/shapes.cpp).
+    if (p.axis === 'y') for (const g of geometries) g.rotateX(-Math.PI / 2);
+    if (p.axis === 'x') for (const g of geometries) g.rotateY(Math.PI / 2);
     for (const g of geometries) g.translate(v('dx', 0), v('dy', 0), v('dz', 0));
     group.add(meshObject(geometries));
   }

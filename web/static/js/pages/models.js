@@ -19,6 +19,8 @@ const CAPS = [['bottom', 'Open top (a cup)'], ['both', 'Closed at both ends'], [
 // The engine's default (left out of the spec) and the builder's first choice.
 const ENGINE_CAPS = { cylinder: 'both', cone: 'both', funnel: 'none' };
 const FIRST_CAPS = { cylinder: 'bottom', cone: 'bottom', funnel: 'none' };
+// The line a lathe (cylinder, cone, funnel) is turned about; along x or y it lies on its side.
+const AXES = [['z', 'z (standing)'], ['x', 'x (lying)'], ['y', 'y (lying)']];
 const OFFSETS = [['dx', 'Offset x', 0], ['dy', 'Offset y', 0], ['dz', 'Offset z', 0]];
 const INTEGER_KEYS = new Set(['segments', 'subdivisions']);
 
@@ -29,8 +31,10 @@ const EXAMPLES = {
   bowl: [['cone', { r1: 2, r2: 8, h: 6, caps: 'bottom' }]],
   box: [['box', {}]],
   ball: [['sphere', {}]],
+  drum: [['cylinder', { r: 5, h: 4, caps: 'both', axis: 'y' }]],
 };
-const EXAMPLE_NAMES = { cup: 'A cup', funnel: 'A funnel over a cup', bowl: 'A bowl (open cone)', box: 'A closed box', ball: 'A ball' };
+const EXAMPLE_NAMES = { cup: 'A cup', funnel: 'A funnel over a cup', bowl: 'A bowl (open cone)', box: 'A closed box',
+  ball: 'A ball', drum: 'A drum on its side (to turn)' };
 
 // The engine's wall spec for parts: "cylinder:r=5,h=10,caps=bottom+funnel:...".
 // (The API's "parts" takes numbers only, so caps go through the spec.)
@@ -142,6 +146,7 @@ function builder(viewers, created) {
         out[key] = v;
       }
       if (p.caps && p.caps.value !== ENGINE_CAPS[out.shape]) out.caps = p.caps.value;
+      if (p.axis && p.axis.value !== 'z') out.axis = p.axis.value;
       return out;
     });
   }
@@ -158,7 +163,7 @@ function builder(viewers, created) {
   function addPart(shape = 'cylinder', values = {}) {
     const select = h('select', {}, Object.keys(SHAPES).map((s) => h('option', { value: s, selected: s === shape }, SHAPE_NAMES[s])));
     const paramsBox = h('div', { class: 'row' });
-    const p = { shape: select, inputs: {}, caps: null };
+    const p = { shape: select, inputs: {}, caps: null, axis: null };
     const fieldsetEl = h('fieldset', { class: 'part' });
     const legend = h('legend');
     function build() {
@@ -172,10 +177,13 @@ function builder(viewers, created) {
         return field(label, input);
       });
       p.caps = null;
+      p.axis = null;
       if (FIRST_CAPS[select.value]) {
         const want = values.caps || FIRST_CAPS[select.value];
         p.caps = h('select', { onchange: redraw }, CAPS.map(([v, t]) => h('option', { value: v, selected: v === want }, t)));
-        fields.splice(SHAPES[select.value].length, 0, field('Ends', p.caps));
+        const axis = values.axis || 'z';
+        p.axis = h('select', { onchange: redraw }, AXES.map(([v, t]) => h('option', { value: v, selected: v === axis }, t)));
+        fields.splice(SHAPES[select.value].length, 0, field('Ends', p.caps), field('Axis', p.axis));
       }
       paramsBox.replaceChildren(...fields);
     }
@@ -212,7 +220,8 @@ function builder(viewers, created) {
 
   const form = h('form', { class: 'card', novalidate: true },
     h('div', { class: 'row' }, field('Name', name), field('Start from', example)),
-    h('p', { class: 'hint' }, 'Shapes stand on z = 0 around the z axis; the offsets move a part. Several parts make one wall (their union).'),
+    h('p', { class: 'hint' }, 'Shapes stand on z = 0 around the z axis (a lathe along x or y lies on its side, from 0 to its height); '
+      + 'the offsets move a part. Several parts make one wall (their union).'),
     partsBox,
     h('div', { class: 'actions' },
       h('button', { type: 'button', class: 'secondary', onclick: () => { addPart('funnel', { dz: 12 }); redraw(); } }, 'Add a part')),

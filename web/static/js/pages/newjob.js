@@ -4,6 +4,7 @@ import { get, post } from '../api.js';
 import { h, field, errorBox, showError, fmtBytes, fmtSeconds } from '../dom.js';
 
 const SIZES = [[160, 96], [320, 180], [640, 360], [1280, 720], [1920, 1080]];
+const AXES = { x: [1, 0, 0], y: [0, 1, 0], z: [0, 0, 1] };
 const DEBOUNCE_MS = 400;
 
 function num(attrs) { return h('input', { type: 'number', required: true, ...attrs }); }
@@ -74,6 +75,29 @@ export async function render(main, ctx, modelParam) {
   const restitution = num({ min: '0.000001', max: '1', step: 'any', value: '0.4' });
   const friction = num({ min: '0', max: '10', step: 'any', value: '0.3' });
   const contacts = h('input', { type: 'checkbox' });
+  const contactModel = select([['linear', 'Spring–dashpot (linear)'], ['hertz_mindlin', 'Hertz–Mindlin']], 'linear');
+  const rolling = num({ min: '0', max: '1', step: 'any', value: '0' });
+  // How the wall moves: a drum or a mill turns, a sieve shakes. A turn is about
+  // the wall's own centre (the scene leaves "center" out).
+  const motion = select([['none', 'Stands still'], ['rotate', 'Turns about an axis'],
+    ['oscillate', 'Shakes to and fro']], 'none');
+  const motionAxis = select([['x', 'x'], ['y', 'y'], ['z', 'z']], 'y');
+  const motionAxisField = field('Axis', motionAxis, ' ');
+  const motionAxisHint = motionAxisField.querySelector('.hint');
+  const rpm = num({ min: '-1000', max: '1000', step: 'any', value: '6' });
+  const amplitude = num({ min: '0', step: 'any', value: '0.5' });
+  const frequency = num({ min: '0', max: '100', step: 'any', value: '2' });
+  // A drum of diameter D metres holds its bed below the critical speed 42.3 / sqrt(D) rpm.
+  const turnFields = [field('Turns a minute', rpm,
+    'Negative: the other way. Above 42 / √D (D the drum’s width in metres) the bed sticks to the wall.')];
+  const shakeFields = [field('Amplitude', amplitude, 'In the wall’s units.'), field('Frequency (Hz)', frequency)];
+  const motionRow = h('div', { class: 'row' }, motionAxisField, ...turnFields, ...shakeFields);
+  const showMotion = () => {
+    for (const f of turnFields) f.hidden = motion.value !== 'rotate';
+    for (const f of shakeFields) f.hidden = motion.value !== 'oscillate';
+    motionRow.hidden = motion.value === 'none';
+    motionAxisHint.textContent = motion.value === 'rotate' ? 'Through the wall’s centre.' : 'The way it shakes.';
+  };
   const duration = num({ min: '0.001', step: 'any', value: '2' });
   const fps = num({ min: '0.001', step: 'any', value: '24' });
   // "reference" is the engine's test oracle: scenes may not name it.
@@ -98,6 +122,7 @@ export async function render(main, ctx, modelParam) {
     methodHint.textContent = methods.find((m) => m.name === method.value)?.description || '';
   };
   showMethod();
+  showMotion();
 
   // The submission body from the form; throws with a message naming the field.
   function body() {
@@ -108,11 +133,22 @@ export async function render(main, ctx, modelParam) {
     };
     if (!model.value) throw new Error('Model: make or upload one first (Models page).');
     const [width, height] = size.value.split('x').map(Number);
+    const roll = n(rolling, 'Rolling resistance');
+    let wallMotion = null;
+    if (motion.value === 'rotate') {
+      wallMotion = { kind: 'rotate', axis: AXES[motionAxis.value], rpm: n(rpm, 'Turns a minute') };
+    } else if (motion.value === 'oscillate') {
+      wallMotion = { kind: 'oscillate', axis: AXES[motionAxis.value],
+        amplitude: n(amplitude, 'Amplitude'), frequency: n(frequency, 'Frequency') };
+    }
     const scene = {
       wall: { model: Number(model.value) },
       particles: { count: n(count, 'Particle count'), radius: n(radius, 'Particle radius') },
       placement: { kind: placement.find((r) => r.checked).value },
-      material: { restitution: n(restitution, 'Restitution'), friction: n(friction, 'Friction') },
+      material: { restitution: n(restitution, 'Restitution'), friction: n(friction, 'Friction'),
+        ...(roll > 0 ? { rolling_friction: roll } : {}) },
+      contact_model: contactModel.value,
+      ...(wallMotion ? { wall_motion: wallMotion } : {}),
       particle_contacts: contacts.checked,
       duration: n(duration, 'Duration'),
       fps: n(fps, 'Frames per second'),
@@ -212,7 +248,11 @@ export async function render(main, ctx, modelParam) {
       h('label', { class: 'check' }, placement[1], 'Fill: particles start spread through the vessel')),
     h('fieldset', {}, h('legend', {}, 'Material'),
       h('div', { class: 'row' }, field('Restitution', restitution, 'Bounce, 0 to 1.'), field('Friction', friction, '0 to 10.')),
+      h('div', { class: 'row' }, field('Contact law', contactModel, 'Hertz–Mindlin stiffens as particles press in.'),
+        field('Rolling resistance', rolling, '0 to 1; 0: a ball rolls on forever.')),
       h('label', { class: 'check' }, contacts, 'Particles also collide with each other')),
+    h('fieldset', {}, h('legend', {}, 'Wall motion'),
+      field('The wall', motion), motionRow),
     h('fieldset', {}, h('legend', {}, 'Time'),
       h('div', { class: 'row' }, field('Duration (simulated seconds)', duration), field('Frames per second', fps))),
     h('fieldset', {}, h('legend', {}, 'Computation'),
@@ -225,7 +265,11 @@ export async function render(main, ctx, modelParam) {
     h('div', { class: 'actions' }, submitButton), submitStatus);
 
   form.addEventListener('input', schedule);
-  form.addEventListener('change', (e) => { if (e.target === method) showMethod(); schedule(); });
+  form.addEventListener('change', (e) => {
+    if (e.target === method) showMethod();
+    if (e.target === motion) showMotion();
+    schedule();
+  });
   form.addEventListener('submit', async (e) => {
     e.preventDefault();
     showError(error, null);

@@ -43,6 +43,25 @@ export async function render(main, ctx, id) {
     if (isActive(j)) timer = setTimeout(refresh, POLL_MS);
   }
 
+  // How the wall moved, in words (the scene's wall_motion), or null for a still wall.
+  function motionText(m) {
+    if (!m || !m.kind || m.kind === 'none') return null;
+    const axis = (a) => {
+      if (!Array.isArray(a)) return 'z';
+      const names = ['x', 'y', 'z'];
+      const k = a.findIndex((c) => c !== 0);
+      return a.filter((c) => c !== 0).length === 1 ? names[k] : `(${a.join(', ')})`;
+    };
+    const num = (x) => Number(Number(x).toPrecision(3)).toLocaleString();
+    if (m.kind === 'rotate') {
+      const rpm = Number.isFinite(m.rpm) ? m.rpm : (m.angular_speed ?? 0) * 60 / (2 * Math.PI);
+      return `turns ${num(rpm)} a minute about ${axis(m.axis)}`;
+    }
+    if (m.kind === 'oscillate') return `shakes ${num(m.amplitude ?? 0)} at ${num(m.frequency ?? 0)} Hz along ${axis(m.axis)}`;
+    if (m.kind === 'translate') return `moves at (${(m.velocity || []).map(num).join(', ')}) per second`;
+    return m.kind;
+  }
+
   function showHead(j) {
     const s = j.scene || {};
     const fact = (k, v) => h('div', {}, h('dt', {}, k), h('dd', {}, v));
@@ -52,8 +71,10 @@ export async function render(main, ctx, id) {
         fact('State', stateText(j)),
         isActive(j) ? fact('Progress', progressCell(j)) : null,
         fact('Wall', wallLabel(s.wall, modelsById)),
+        motionText(s.wall_motion) ? fact('Wall motion', motionText(s.wall_motion)) : null,
         fact('Particles', `${s.particles?.count?.toLocaleString() ?? '—'}, radius ${radius}`),
         fact('Placement', s.placement?.kind ?? 'pour'),
+        s.contact_model === 'hertz_mindlin' ? fact('Contact law', 'Hertz–Mindlin') : null,
         fact('Simulated', `${s.duration ?? '—'} s at ${s.fps ?? '—'} frames/s`),
         fact('Method', `${s.method ?? 'bin'}${s.backend && s.backend !== 'auto' ? `, ${s.backend}` : ''}`),
         j.scheduler ? fact('Runs on', `the cluster (Slurm job ${j.scheduler.job_id})`) : null,
@@ -94,7 +115,8 @@ export async function render(main, ctx, id) {
       if (video.videoWidth) video.style.maxWidth = `${Math.max(480, Math.min(2 * video.videoWidth, 1280))}px`;
     });
     const desc = h('p', { id: 'video-desc', class: 'hint' },
-      `Animation of ${s.particles?.count ?? 'the'} particles (${s.placement?.kind ?? 'pour'}) colliding with ${wallLabel(s.wall, modelsById)}, `
+      `Animation of ${s.particles?.count ?? 'the'} particles (${s.placement?.kind ?? 'pour'}) colliding with ${wallLabel(s.wall, modelsById)}`
+      + `${motionText(s.wall_motion) ? `, which ${motionText(s.wall_motion)}` : ''}, `
       + `${s.duration ?? '?'} simulated seconds; colour shows each particle's speed; no sound.`);
     const figures = h('dl', { class: 'figures' });
     const chartBox = h('div');
