@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "job/wall_source.h"
+#include "sim/shapes.h"
 
 namespace collido::job {
 
@@ -43,13 +44,27 @@ Expected<ResolvedScene> resolve_scene(const JobSpec& spec) {
 
 Expected<sim::TriangleMesh> load_scene_wall(scene::Scene* scene) {
   sim::MeshReport report;
-  auto wall = load_wall(scene->wall, &report);
+  sim::WallMotion& motion = scene->dynamics.wall_motion;
+  // A moving part: the union's triangles are its parts' in order, so the part is a range.
+  std::vector<size_t> starts;
+  auto wall = motion.part > 0 ? sim::make_shape(scene->wall, &starts) : load_wall(scene->wall, &report);
   if (!wall) return Status(wall.status().code(), "wall: " + wall.status().message());
   const double unit = scene->length_scale();
   if (unit != 1)
     for (auto& v : wall->vertices) v = v * unit;
-  if (scene->motion_center_auto) {
-    scene->dynamics.wall_motion.center = sim::mesh_bounds(*wall).center();
+  sim::Bounds3d moving = sim::mesh_bounds(*wall);
+  if (motion.part > 0) {
+    if (size_t(motion.part) > starts.size() || starts.size() < 2)
+      return invalid_argument("wall_motion.part: the wall has " + std::to_string(starts.size()) +
+                              " part(s), not " + std::to_string(motion.part));
+    motion.part_begin = starts[size_t(motion.part) - 1];
+    motion.part_end = size_t(motion.part) < starts.size() ? starts[size_t(motion.part)]
+                                                          : wall->triangles.size();
+    motion.part_box = moving =
+        sim::mesh_bounds(sim::mesh_range(*wall, motion.part_begin, motion.part_end, true));
+  }
+  if (scene->motion_center_auto) {  // what moves turns about its own centre
+    motion.center = moving.center();
     scene->motion_center_auto = false;
   }
   return std::move(*wall);

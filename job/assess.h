@@ -29,8 +29,9 @@ struct ResolvedScene {
 Expected<ResolvedScene> resolve_scene(const JobSpec& spec);
 
 // The scene's wall in metres (a shape or a mesh file, scaled by the scene's
-// unit). What the wall decides is then set in *scene: a rotation without a
-// centre turns about the wall's box centre.
+// unit). What the wall decides is then set in *scene: a moving part's
+// triangles and box, and a rotation without a centre turns about the box
+// centre of what moves.
 Expected<sim::TriangleMesh> load_scene_wall(scene::Scene* scene);
 
 struct JobAssessment {

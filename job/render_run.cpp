@@ -13,6 +13,7 @@
 #include <mutex>
 #include <thread>
 
+#include "job/assess.h"
 #include "render/render.h"
 #include "scene/scene.h"
 #include "sim/mesh.h"
@@ -71,10 +72,18 @@ render::WallMesh to_render_wall(const sim::TriangleMesh& mesh, sim::Vec3d origin
 
 
 // How the run's wall moves, from the scene it wrote beside its frames (none
-// when the run has no scene file, as with frames from elsewhere).
-sim::WallMotion run_wall_motion(const std::string& run_dir) {
+// when the run has no scene file, as with frames from elsewhere). When one
+// part moves, *parts gets the wall rebuilt from the scene, its parts apart
+// (wall.stl welds them where they meet), and the motion its part's triangles.
+sim::WallMotion run_wall_motion(const std::string& run_dir, sim::TriangleMesh* parts) {
   auto scene = scene::load_scene((fs::path(run_dir) / "scene.json").string());
-  return scene ? scene->dynamics.wall_motion : sim::WallMotion{};
+  if (!scene) return sim::WallMotion{};
+  if (scene->dynamics.wall_motion.part > 0) {
+    auto wall = load_scene_wall(&*scene);
+    if (!wall) return sim::WallMotion{};  // drawn standing still
+    *parts = std::move(*wall);
+  }
+  return scene->dynamics.wall_motion;
 }
 
 // Particles of one engine snapshot into the render snapshot (the wall and the
@@ -256,6 +265,17 @@ Status validate(const RenderSettings& s) {
   return Status::ok();
 }
 
+sim::TriangleMesh posed_wall(const sim::TriangleMesh& wall, const sim::WallMotion& motion,
+                             double t) {
+  sim::TriangleMesh out = wall;
+  const sim::WallPose pose = motion.pose(t);
+  std::vector<bool> moved(wall.vertices.size(), false);
+  for (size_t k = motion.part_begin; k < motion.part_end && k < wall.triangles.size(); ++k)
+    for (uint32_t v : wall.triangles[k])
+      if (!moved[v]) moved[v] = true, out.vertices[v] = pose.to_world(wall.vertices[v]);
+  return out;
+}
+
 void wall_model_matrix(const sim::WallPose& pose, sim::Vec3d origin, float out[16]) {
   const sim::Vec3d t = pose.rotate(origin - pose.c) + pose.c + pose.d - origin;
   const sim::Vec3d rows[3] = {pose.r0, pose.r1, pose.r2};
@@ -300,9 +320,12 @@ Status render_run(const std::string& run_dir, const std::string& out_dir,
   render::Snapshot scene;
   const std::string wall_path = (fs::path(run_dir) / "wall.stl").string();
   // A moving wall is drawn where it is at each frame's time.
-  const sim::WallMotion motion = run_wall_motion(run_dir);
   sim::TriangleMesh wall_mesh;
-  if (fs::exists(wall_path)) {
+  const sim::WallMotion motion = run_wall_motion(run_dir, &wall_mesh);
+  const bool part_moves = motion.moves_part() && !wall_mesh.triangles.empty();
+  if (part_moves) {
+    scene.wall = to_render_wall(wall_mesh, origin);
+  } else if (fs::exists(wall_path)) {
     auto mesh = sim::load_stl(wall_path);
     if (!mesh) return mesh.status();
     wall_mesh = std::move(*mesh);
@@ -379,7 +402,10 @@ Status render_run(const std::string& run_dir, const std::string& out_dir,
       auto snap = i == 0 ? std::move(first) : sim::read_snapshot(frames[i].path);
       if (!snap) return snap.status();
       fill_particles(*snap, origin, &scene);
-      if (motion.moving()) wall_model_matrix(motion.pose(snap->time), origin, scene.wall_model);
+      if (part_moves)
+        scene.wall = to_render_wall(posed_wall(wall_mesh, motion, snap->time), origin);
+      else if (motion.moving())
+        wall_model_matrix(motion.pose(snap->time), origin, scene.wall_model);
       // One full turn over the run.
       if (ro.camera == render::CameraPreset::kOrbit)
         renderer->set_orbit_deg(360.0 * double(i) / double(frames.size()));

@@ -47,6 +47,9 @@ struct RenderOutcome {
 // coordinates (world minus `origin`): the matrix takes v - origin to
 // pose.to_world(v) - origin, so the mesh is uploaded once and only this changes.
 void wall_model_matrix(const sim::WallPose& pose, sim::Vec3d origin, float out[16]);
+// The wall with its moving part (motion.part_begin..part_end) where the
+// motion has it at time t; the other triangles' vertices as they are.
+sim::TriangleMesh posed_wall(const sim::TriangleMesh& wall, const sim::WallMotion& motion, double t);
 
 // Called after each frame is rendered with (frames done, frames in all).
 using FrameProgress = std::function<void(size_t, size_t)>;

@@ -240,13 +240,13 @@ Status read_wall_motion(const json& m, Scene* s) {
   // Each kind takes its own keys; another kind's is an unknown key here.
   if (kind == "rotate") {
     w.kind = K::kRotate;
-    COLLIDO_TRY(r.only({"kind", "axis", "center", "angular_speed", "rpm"}));
+    COLLIDO_TRY(r.only({"kind", "axis", "center", "angular_speed", "rpm", "part"}));
   } else if (kind == "translate") {
     w.kind = K::kTranslate;
     COLLIDO_TRY(r.only({"kind", "velocity"}));
   } else if (kind == "oscillate") {
     w.kind = K::kOscillate;
-    COLLIDO_TRY(r.only({"kind", "axis", "amplitude", "frequency"}));
+    COLLIDO_TRY(r.only({"kind", "axis", "amplitude", "frequency", "part"}));
   } else if (kind == "none") {
     w.kind = K::kNone;
     COLLIDO_TRY(r.only({"kind"}));
@@ -267,6 +267,20 @@ Status read_wall_motion(const json& m, Scene* s) {
   COLLIDO_TRY(r.vec3("velocity", &w.velocity, kMaxSpeed));
   COLLIDO_TRY(r.number("amplitude", &w.amplitude, 0, kMaxCoordinate));
   COLLIDO_TRY(r.number("frequency", &w.frequency, 0, 1e5));
+  // One part of a union of shapes ("cylinder:...+box:..."), counted from 1.
+  uint64_t part = 0;
+  COLLIDO_TRY(r.integer("part", &part, 1, 64));
+  w.part = int(part);
+  if (w.part > 0) {
+    size_t parts = 1;
+    for (char c : s->wall) parts += c == '+';
+    if (s->wall_is_file || parts < 2)
+      return invalid_argument("wall_motion.part: the wall is not a union of shapes (\"a+b\"); "
+                              "leave part out to move the whole wall");
+    if (size_t(w.part) > parts)
+      return invalid_argument("wall_motion.part: the wall has " + std::to_string(parts) +
+                              " parts, not " + std::to_string(w.part));
+  }
   return Status::ok();
 }
 
@@ -416,6 +430,7 @@ std::string to_json(const Scene& si) {
       j["wall_motion"] = {{"kind", "rotate"}, {"axis", v3(w.axis)}, {"angular_speed", w.angular_speed}};
       // Left out while it is still the wall's to decide (the wall is not loaded yet).
       if (!s.motion_center_auto) j["wall_motion"]["center"] = v3(w.center);
+      if (w.part > 0) j["wall_motion"]["part"] = w.part;
       break;
     case sim::WallMotionKind::kTranslate:
       j["wall_motion"] = {{"kind", "translate"}, {"velocity", v3(w.velocity)}};
@@ -425,6 +440,7 @@ std::string to_json(const Scene& si) {
                           {"axis", v3(w.axis)},
                           {"amplitude", w.amplitude},
                           {"frequency", w.frequency}};
+      if (w.part > 0) j["wall_motion"]["part"] = w.part;
       break;
     default: break;
   }

@@ -106,7 +106,8 @@ AxialReach axial_reach(const Bounds3d& b, Vec3d center, Vec3d a) {
 }
 }  // namespace
 
-double WallMotion::surface_speed(const Bounds3d& box) const {
+double WallMotion::surface_speed(const Bounds3d& wall_box) const {
+  const Bounds3d& box = moves_part() ? part_box : wall_box;
   switch (kind) {
     case WallMotionKind::kRotate:
       return std::fabs(angular_speed) * axial_reach(box, center, unit_axis()).rho;
@@ -116,7 +117,21 @@ double WallMotion::surface_speed(const Bounds3d& box) const {
   }
 }
 
-Bounds3d WallMotion::swept_box(const Bounds3d& box) const {
+Bounds3d WallMotion::swept_box(const Bounds3d& wall_box) const {
+  if (moves_part()) {
+    WallMotion whole = *this;
+    whole.part_end = whole.part_begin = 0;
+    Bounds3d out = whole.swept_box(part_box);
+    if (kind == WallMotionKind::kOscillate) {  // the part's whole stroke
+      const Vec3d s = unit_axis() * std::fabs(amplitude);
+      const Vec3d reach{std::fabs(s.x), std::fabs(s.y), std::fabs(s.z)};
+      out.grow(part_box.lo - reach);
+      out.grow(part_box.hi + reach);
+    }
+    out.merge(wall_box);
+    return out;
+  }
+  const Bounds3d& box = wall_box;
   if (kind != WallMotionKind::kRotate) return box;
   // Every point turns on a circle about the axis: the box of the cylinder
   // that holds the corners' circles.
@@ -223,6 +238,10 @@ Status validate_motion(const WallMotion& w) {
     return invalid_argument("wall_motion.angular_speed: must lie within +-1e4 rad/s");
   if (w.amplitude < 0 || w.frequency < 0 || w.frequency > 1e5)
     return invalid_argument("wall_motion: amplitude must be >= 0 m and frequency in [0, 1e5] Hz");
+  if (w.part < 0 || w.part > 64)
+    return invalid_argument("wall_motion.part: a part of the wall's union, 1 to 64 (0: the whole wall)");
+  if (w.part > 0 && w.kind == WallMotionKind::kTranslate)
+    return invalid_argument("wall_motion.part: a part turns or shakes; translate moves the whole wall");
   return Status::ok();
 }
 
@@ -243,6 +262,15 @@ Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const Particl
     return invalid_argument(
         "method: the dynamics prepares the wall as bin, bvh or a division method, not reference");
   if (Status s = check_contact_settings(c); !s) return s;
+  const WallMotion& w = c.wall_motion;
+  if (w.part > 0 && !w.moves_part())
+    return invalid_argument("wall_motion.part: the part's triangles were not set (the job sets them "
+                            "when it builds the wall)");
+  if (w.part_end > 0 &&
+      (w.part_end > wall.triangles.size() || w.part_begin >= w.part_end ||
+       w.part_end - w.part_begin == wall.triangles.size()))
+    return invalid_argument("wall_motion.part: the moving triangles must be some of the wall's, "
+                            "not all (move the whole wall instead)");
   if (!std::isfinite(c.gravity.x) || !std::isfinite(c.gravity.y) || !std::isfinite(c.gravity.z))
     return invalid_argument("gravity must be finite");
   if (!finite_nonneg(c.time_step))
@@ -327,9 +355,14 @@ double critical_step(double k, double m_eff, double zeta) {
 }  // namespace
 
 Expected<std::unique_ptr<Simulation>> Simulation::create(const TriangleMesh& wall,
-                                                         const DynamicsConfig& config,
+                                                         const DynamicsConfig& given,
                                                          const ParticleSet& particles) {
-  if (Status s = validate(wall, config, particles); !s) return s;
+  if (Status s = validate(wall, given, particles); !s) return s;
+  DynamicsConfig config = given;
+  WallMotion& motion = config.wall_motion;
+  // A moving part's box from its triangles, whatever the caller set.
+  if (motion.moves_part())
+    motion.part_box = mesh_bounds(mesh_range(wall, motion.part_begin, motion.part_end, true));
   const Bounds3d wall_box = mesh_bounds(wall);
   const TimeStepInfo ts = time_step_physics(config, particles, wall_box);
   // The domain: the wall's box (every place a rotating wall turns to) and

@@ -48,10 +48,11 @@ struct Material {
   double rolling_friction = 0;
 };
 
-// How the whole wall moves (a rigid motion; the wall's triangles are given at
-// time 0). The wall index is built once in the wall's own frame: each step
-// looks particles up there, so the motion costs a transform per particle,
-// never a rebuild.
+// How the wall moves (a rigid motion; the wall's triangles are given at time
+// 0): the whole wall, or one part of it while the rest stands still (a paddle
+// in a tank). The wall index is built once in the wall's own frame (a moving
+// part's in its own): each step looks particles up there, so the motion costs
+// a transform per particle, never a rebuild.
 enum class WallMotionKind { kNone, kRotate, kTranslate, kOscillate };
 const char* to_string(WallMotionKind k);
 
@@ -79,14 +80,25 @@ struct WallMotion {
   Vec3d velocity{0, 0, 0};   // translate: m/s
   double amplitude = 0;      // oscillate: m, d(t) = axis amplitude sin(2 pi frequency t)
   double frequency = 0;      // oscillate: Hz
+  // One part moves: the wall's triangles [part_begin, part_end), whose box is
+  // part_box; the others stand still. part_end = 0: the whole wall moves. A
+  // scene names the part of its union (part, from 1); the job sets the range
+  // and the box when it builds the wall. A part turns or shakes, never translates
+  // (it would leave the rest behind for good).
+  int part = 0;
+  size_t part_begin = 0, part_end = 0;
+  Bounds3d part_box;
   bool moving() const { return kind != WallMotionKind::kNone; }
+  bool moves_part() const { return moving() && part_end > part_begin; }
   Vec3d unit_axis() const;  // axis normalised (z for a zero axis, which validation refuses)
   // The pose at time t, with `origin` subtracted from the centre (the engine's local frame).
   WallPose pose(double t, Vec3d origin = {0, 0, 0}) const;
-  // The fastest any point of the wall moves (m/s), the wall's box given at time 0.
+  // The fastest any point of the wall moves (m/s), the wall's box given at time
+  // 0 (a moving part's own box is part_box).
   double surface_speed(const Bounds3d& wall_box) const;
   // A box holding every place the wall reaches (rotation sweeps; a translation
-  // or oscillation is followed by the domain check, which moves with the wall).
+  // or oscillation of the whole wall is followed by the domain check, which
+  // moves with the wall; a part's shake is held, as the rest stands still).
   Bounds3d swept_box(const Bounds3d& wall_box) const;
 };
 

@@ -269,11 +269,32 @@ class DynamicsPipeline final : public Simulation {
     n_ = ps.size();
     const double cell = cfg_.grid_length > 0 ? cfg_.grid_length : 2 * ts_.r_max;
     info_.grid_length = cell;
-    if (Status e = wall_.prepare(backend_, mesh, cfg_.method, ts_.r_max, cell, cfg_.max_dense_cells,
-                                 n_, &info_,
+    // A moving part gets an index of its own, in its own frame; the rest stands still.
+    const WallMotion& wm = cfg_.wall_motion;
+    part_ = wm.moves_part();
+    const TriangleMesh still =
+        part_ ? mesh_range(mesh, wm.part_begin, wm.part_end, false) : TriangleMesh{};
+    if (Status e = wall_.prepare(backend_, part_ ? still : mesh, cfg_.method, ts_.r_max, cell,
+                                 cfg_.max_dense_cells, n_, &info_,
                                  /*double_triangles=*/true);
         !e)
       return e;
+    if (part_) {
+      PrepareInfo pi;
+      if (Status e = mover_.prepare(backend_, mesh_range(mesh, wm.part_begin, wm.part_end, true),
+                                    cfg_.method, ts_.r_max, cell, cfg_.max_dense_cells, n_, &pi,
+                                    /*double_triangles=*/true);
+          !e)
+        return e;
+      info_.triangles_original += pi.triangles_original;
+      info_.triangles_used += pi.triangles_used;
+      info_.cells += pi.cells;
+      info_.buckets += pi.buckets;
+      info_.bin_entries += pi.bin_entries;
+      info_.bvh_nodes += pi.bvh_nodes;
+      info_.max_sphere_radius = std::max(info_.max_sphere_radius, pi.max_sphere_radius);
+      shift_ = wall_.origin - mover_.origin;
+    }
     lo_ = domain_lo - wall_.origin, hi_ = domain_hi - wall_.origin;
     pair_law_ = ts_.pair_law;
     wall_law_ = ts_.wall_law;
@@ -688,8 +709,13 @@ class DynamicsPipeline final : public Simulation {
     P.flags[i] = taken ? uint8_t(kWaiting) : uint8_t(kActive);
   }
 
-  // The wall's pose at time t, in the engine's local frame.
-  WallPose wall_pose(double t) const { return cfg_.wall_motion.pose(t, wall_.origin); }
+  // The wall's pose at time t, in the engine's local frame (a still wall's
+  // with a moving part: the identity).
+  WallPose wall_pose(double t) const {
+    return part_ ? WallPose{} : cfg_.wall_motion.pose(t, wall_.origin);
+  }
+  // The moving part's pose at time t, in its own index's frame.
+  WallPose part_pose(double t) const { return cfg_.wall_motion.pose(t, mover_.origin); }
 
   // The domain the checks keep particles in, with the wall's pose (a
   // translating or oscillating wall carries it along).
@@ -1171,7 +1197,7 @@ class DynamicsPipeline final : public Simulation {
       }
       if (!measure) lap(times_.pair_ms);
     }
-    wall_forces(dt, measure, wall_pose(t));
+    wall_forces(dt, measure, wall_pose(t), part_ ? part_pose(t) : WallPose{});
     if (!measure) lap(times_.wall_ms);
   }
 
@@ -1432,11 +1458,20 @@ class DynamicsPipeline final : public Simulation {
   // A moving wall (pose) is searched in its own frame: the particle's centre
   // is taken there, and the contact's normal brought back; the contact moves
   // with the wall's velocity at the contact point.
-  void wall_forces(double dt, bool measure, const WallPose pose) {
+  // part_pose: the moving part's, when one moves (pose is then the identity).
+  void wall_forces(double dt, bool measure, const WallPose pose, const WallPose part_pose) {
     const bool add = cfg_.particle_contacts;
     const ParticleArrays P = arrays();
     const WallView wall = wall_.view();
     const PlanarTriangleD* tris_d = wall_.tris_d.data();
+    // A moving part's triangles are [pb, pe) of the wall as given; the still
+    // ones are numbered around them, so every contact keeps the wall's own index.
+    const bool part = part_;
+    const WallView mwall = part ? mover_.view() : WallView{};
+    const PlanarTriangleD* mtris_d = part ? mover_.tris_d.data() : nullptr;
+    const Vec3d shift = shift_;
+    const uint32_t pb = uint32_t(cfg_.wall_motion.part_begin);
+    const uint32_t pn = part ? uint32_t(cfg_.wall_motion.part_end) - pb : 0;
     // The wall's candidates from the neighbour list when it has them.
     const bool listed = wall_list_;
     const uint32_t* wl_start = wl_start_.data();
@@ -1475,14 +1510,13 @@ class DynamicsPipeline final : public Simulation {
       // Candidates from the prepared wall; most particles have none and stop here.
       WallContactSet<kMaxWallContacts> set;
       const double r2 = r * r, tol = 1e-9 * r;
-      // Candidate k's contact offered to *into when it touches.
-      auto probe = [&](uint32_t k, uint32_t orig, auto* into) {
-        const PlanarTriangleD& t = tris_d[k];
+      // The contact of the centre x with triangle t, when they touch.
+      auto touch = [&](const PlanarTriangleD& t, Vec3d x, uint32_t orig, WallContact* out) {
         Vec3d q;
         double h = 0;
         bool face = false;
-        const double d2 = closest_point_planar(xi, t, &q, &h, &face);
-        if (!(d2 < r2)) return;
+        const double d2 = closest_point_planar(x, t, &q, &h, &face);
+        if (!(d2 < r2)) return false;
         double d = sqrt(d2);
         Vec3d nrm;
         if (face || !(d > 1e-9 * r)) {
@@ -1490,9 +1524,15 @@ class DynamicsPipeline final : public Simulation {
           nrm = h >= 0 ? t.n : t.n * -1.0;
           d = hd_abs(h);
         } else {
-          nrm = (xi - q) * (1.0 / d);
+          nrm = (x - q) * (1.0 / d);
         }
-        into->offer(WallContact{q, nrm, d, orig}, tol);
+        *out = WallContact{q, nrm, d, orig};
+        return true;
+      };
+      // Candidate k's contact offered to *into when it touches.
+      auto probe = [&](uint32_t k, uint32_t orig, auto* into) {
+        WallContact w;
+        if (touch(tris_d[k], xi, part && orig >= pb ? orig + pn : orig, &w)) into->offer(w, tol);
       };
       auto consider = [&](uint32_t k, uint32_t orig) { probe(k, orig, &set); };
       if (g.size > 1) {  // lanes come with the lists
@@ -1519,6 +1559,18 @@ class DynamicsPipeline final : public Simulation {
       } else {
         wall.for_each_candidate(cast3<float>(xi), consider);
       }
+      if (part) {
+        // The moving part's contacts, found in its frame and offered in the
+        // wall's, so each shadows the other's as on one wall.
+        const Vec3d xm = part_pose.to_body(P.x[i] + shift);
+        mwall.for_each_candidate(cast3<float>(xm), [&](uint32_t k, uint32_t orig) {
+          WallContact w;
+          if (!touch(mtris_d[k], xm, pb + orig, &w)) return;
+          w.q = part_pose.to_world(w.q) - shift;
+          w.n = part_pose.rotate(w.n);
+          set.offer(w, tol);
+        });
+      }
       // No springs are kept without friction (the buffers are empty): no pointer into them.
       const FrictionSlot* old_slots = friction ? hin + size_t(i) * kWallSlots : nullptr;
       FrictionSlot* new_slots = friction ? hout + size_t(i) * kWallSlots : nullptr;
@@ -1542,14 +1594,17 @@ class DynamicsPipeline final : public Simulation {
         const double overlap = r - set.c[k].dist;
         Vec3d vrel = friction ? vi + cross(wi, nrm * (-r)) : vi;
         // The wall's own velocity where it touches (the point on it nearest the centre).
+        const bool on_part = part && set.c[k].triangle - pb < pn;
         if (pose.moving) vrel = vrel - pose.velocity_at(P.x[i] - nrm * set.c[k].dist);
+        if (on_part) vrel = vrel - part_pose.velocity_at(P.x[i] + shift - nrm * set.c[k].dist);
+        const Vec3d wall_spin = on_part ? part_pose.w : pose.w;
         const uint32_t key = kWallKeyBit | set.c[k].triangle;
         Vec3d spring = friction ? find_spring(old_slots, kWallSlots, key) : Vec3d{0, 0, 0};
         const ContactForce cf = contact_force(law, nrm, overlap, vrel, m, r, r, &spring, dt);
         f = f + cf.f;
         torque = torque + cf.torque;
         if (rot && law.mu_roll > 0)
-          torque = torque + rolling_torque(law, nrm, cf.fn, wi - pose.w, r, 0.4 * m * r * r, dt);
+          torque = torque + rolling_torque(law, nrm, cf.fn, wi - wall_spin, r, 0.4 * m * r * r, dt);
         elastic += cf.elastic;
         overlap_max = hd_max(overlap_max, overlap / r);
         if (friction && !measure)
@@ -1614,7 +1669,12 @@ class DynamicsPipeline final : public Simulation {
   PrepareInfo info_;
   ContactLaw pair_law_, wall_law_;
   bool rotation_ = false;  // spins are followed (some contact has friction)
-  WallIndex<B> wall_;
+  WallIndex<B> wall_;  // the wall, or the part of it that stands still
+  // The moving part (part_): its index, and its frame's offset from the wall's
+  // (a position there is x + shift_).
+  bool part_ = false;
+  WallIndex<B> mover_;
+  Vec3d shift_{0, 0, 0};
   GridSpec pgrid_;
   int pkey_bits_ = 32;  // radix sort bits of a particle bucket key, set with pgrid_
   size_t grid_keys_ = 0;  // keys sorted into p_key_sorted_ at the last grid build (their buckets set)

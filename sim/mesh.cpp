@@ -143,6 +143,26 @@ void append_mesh(TriangleMesh& a, const TriangleMesh& b) {
   }
 }
 
+TriangleMesh mesh_range(const TriangleMesh& m, size_t begin, size_t end, bool inside) {
+  TriangleMesh out;
+  std::vector<uint32_t> renumbered(m.vertices.size(), UINT32_MAX);
+  for (size_t t = 0; t < m.triangles.size(); ++t) {
+    if ((t >= begin && t < end) != inside) continue;
+    std::array<uint32_t, 3> tri{};
+    for (int k = 0; k < 3; ++k) {
+      uint32_t& v = renumbered[m.triangles[t][k]];
+      if (v == UINT32_MAX) {
+        v = static_cast<uint32_t>(out.vertices.size());
+        out.vertices.push_back(m.vertices[m.triangles[t][k]]);
+      }
+      tri[k] = v;
+    }
+    out.triangles.push_back(tri);
+    out.source_ids.push_back(t < m.source_ids.size() ? m.source_ids[t] : uint32_t(t));
+  }
+  return out;
+}
+
 bool is_closed_manifold(const TriangleMesh& mesh) {
   // Each directed edge must appear once, and its reverse exactly once.
   std::map<std::pair<uint32_t, uint32_t>, int> directed;

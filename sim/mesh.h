@@ -68,6 +68,9 @@ Status save_stl(const TriangleMesh& mesh, const std::string& path);
 
 // Appends b's triangles to a (a union of shapes as one wall; no boolean CSG).
 void append_mesh(TriangleMesh& a, const TriangleMesh& b);
+// The triangles [begin, end) of a mesh (inside), or all the others (!inside),
+// with only the vertices they use, in their order.
+TriangleMesh mesh_range(const TriangleMesh& m, size_t begin, size_t end, bool inside);
 
 // True when every edge is shared by exactly two triangles with opposite orientation.
 bool is_closed_manifold(const TriangleMesh& mesh);

@@ -297,7 +297,8 @@ Expected<TriangleMesh> make_one(const std::string& spec, size_t budget) {
 
 }  // namespace
 
-Expected<TriangleMesh> make_shape(const std::string& spec) {
+Expected<TriangleMesh> make_shape(const std::string& spec, std::vector<size_t>* part_starts) {
+  if (part_starts) part_starts->clear();
   // A union of many finely divided parts would take a worker minutes to build
   // (the fuzzer found one): the parts and the triangles they add up to are bounded.
   constexpr size_t kMaxParts = 64;
@@ -311,6 +312,7 @@ Expected<TriangleMesh> make_shape(const std::string& spec) {
     std::string part = spec.substr(pos, plus == std::string::npos ? std::string::npos : plus - pos);
     auto m = make_one(part, kMaxShapeTriangles - std::min(kMaxShapeTriangles, out.triangles.size()));
     if (!m) return m.status();
+    if (part_starts) part_starts->push_back(out.triangles.size());
     append_mesh(out, *m);
     if (plus == std::string::npos) break;
     pos = plus + 1;

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 #include "sim/mesh.h"
 
@@ -32,6 +33,8 @@ void translate(TriangleMesh& mesh, Vec3d d);
 // every shape accepts dx=,dy=,dz= offsets; cylinder, cone and funnel take axis=x|y|z
 // (default z; "cylinder:r=5,h=2,axis=y" is a drum on its side, from y = 0 to h).
 // Unknown keys and impossible values are errors.
-Expected<TriangleMesh> make_shape(const std::string& spec);
+// part_starts, when given, receives each part's first triangle in the union.
+Expected<TriangleMesh> make_shape(const std::string& spec,
+                                  std::vector<size_t>* part_starts = nullptr);
 
 }  // namespace collido::sim

@@ -443,6 +443,40 @@ TEST(Job, ARotationWithoutACentreTurnsAboutTheWall) {
   EXPECT_NEAR(scene["wall_motion"]["center"][2].get<double>(), 100, 1e-9);
 }
 
+// One part of a union turns: the job finds its triangles and box, turns it
+// about its own centre, and the run keeps every particle in the still cup.
+TEST(Job, APaddleTurnsInAStillCup) {
+  JobSpec s;
+  s.scene_json = R"({"wall": "cylinder:r=0.1,h=0.12,segments=32,caps=bottom+box:x=0.15,y=0.012,z=0.04,dz=0.006",
+    "particles": {"count": 60, "radius": 0.005},
+    "placement": {"kind": "fill", "region": {"min": [-0.06, -0.06, 0.05], "max": [0.06, 0.06, 0.08]}},
+    "material": {"friction": 0.3, "impact_speed": 1},
+    "wall_motion": {"kind": "rotate", "axis": [0, 0, 1], "rpm": 60, "part": 2},
+    "duration": 0.3, "fps": 10, "backend": "cpu"})";
+  s.out_dir = fresh_dir("paddle");
+  auto a = assess_job(s);
+  ASSERT_TRUE(a) << a.status().message();
+  const sim::WallMotion& m = a->resolved.scene.dynamics.wall_motion;
+  EXPECT_EQ(m.part_begin, 94u);  // the cup: 32 sides of two triangles, a floor of 30
+  EXPECT_EQ(m.part_end, 106u);   // the box's 12
+  EXPECT_NEAR(m.part_box.center().z, 0.026, 1e-12);
+  EXPECT_NEAR(m.center.z, 0.026, 1e-12);  // no centre given: the paddle's own
+  const JobResult r = run_job(s, {});
+  ASSERT_TRUE(r.status) << r.status.message();
+  const json manifest = json::parse(read_file(r.out_dir + "/result.json"));
+  EXPECT_EQ(manifest["particles"], 60);
+  EXPECT_EQ(manifest["escaped"], 0);
+  EXPECT_EQ(manifest["invalid"], 0);
+  auto scene = json::parse(read_file(r.out_dir + "/scene.json"));
+  EXPECT_EQ(scene["wall_motion"]["part"], 2);
+  // A part of a wall that is one shape, or a file, is refused before the run.
+  s.scene_json = R"({"wall": "cylinder:r=0.1,h=0.12", "particles": {"count": 10, "radius": 0.005},
+    "wall_motion": {"kind": "rotate", "part": 1}, "duration": 0.1, "backend": "cpu"})";
+  auto bad = assess_job(s);
+  ASSERT_FALSE(bad);
+  EXPECT_NE(bad.status().message().find("not a union"), std::string::npos) << bad.status().message();
+}
+
 // method: auto for a pour is timed where its particles go (near the wall),
 // not at its inlet, and says so; a fill is timed as placed.
 TEST(Job, AutomaticChoiceForAPourIsTimedNearTheWall) {
@@ -491,6 +525,29 @@ TEST(Job, SpecsRoundTripThroughJson) {
 #ifdef COLLIDO_HAVE_RENDER
 // The renderer draws a moving wall through one model matrix: it must put every
 // vertex where the engine's pose does (a turn about an off-centre axis, an oscillation).
+// A turning paddle in a still cup is drawn turned, the cup where it stands.
+TEST(RenderRun, AMovingPartIsDrawnWhereTheMotionHasIt) {
+  scene::Scene sc;
+  sc.wall = "cylinder:r=0.1,h=0.12,segments=32,caps=bottom+box:x=0.15,y=0.012,z=0.04,dz=0.006";
+  sc.dynamics.wall_motion.kind = sim::WallMotionKind::kRotate;
+  sc.dynamics.wall_motion.angular_speed = 2 * M_PI;  // a turn a second
+  sc.dynamics.wall_motion.part = 2;
+  sc.motion_center_auto = true;
+  auto wall = load_scene_wall(&sc);
+  ASSERT_TRUE(wall) << wall.status().message();
+  const sim::WallMotion& m = sc.dynamics.wall_motion;
+  const sim::TriangleMesh posed = posed_wall(*wall, m, 0.25);  // a quarter turn
+  const sim::Bounds3d paddle = sim::mesh_bounds(sim::mesh_range(posed, m.part_begin, m.part_end, true));
+  EXPECT_NEAR(paddle.extent().x, 0.012, 1e-12);  // it lay along x, now along y
+  EXPECT_NEAR(paddle.extent().y, 0.15, 1e-12);
+  EXPECT_NEAR(paddle.lo.z, 0.006, 1e-12);
+  const sim::TriangleMesh cup = sim::mesh_range(posed, m.part_begin, m.part_end, false);
+  const sim::TriangleMesh cup0 = sim::mesh_range(*wall, m.part_begin, m.part_end, false);
+  ASSERT_EQ(cup.vertices.size(), cup0.vertices.size());
+  for (size_t v = 0; v < cup.vertices.size(); ++v)
+    EXPECT_EQ(length(cup.vertices[v] - cup0.vertices[v]), 0.0) << v;
+}
+
 TEST(RenderRun, WallModelMatrixPlacesTheWallWhereTheEngineDoes) {
   sim::WallMotion turn;
   turn.kind = sim::WallMotionKind::kRotate;

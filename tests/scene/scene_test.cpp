@@ -199,6 +199,23 @@ TEST(Scene, ContactModelWallMaterialAndWallMotion) {
   EXPECT_TRUE(own_back->motion_center_auto);
   EXPECT_FALSE(osc->motion_center_auto);  // a shake has no centre
 
+  // One part of a union moves (counted from 1); it turns or shakes, never translates.
+  auto paddle = parse_scene(R"({"wall": "cylinder:r=1,h=1,caps=bottom+box:x=1.5,y=0.1,z=0.4",
+    "wall_motion": {"kind": "rotate", "axis": [0, 0, 1], "rpm": 30, "part": 2}})");
+  ASSERT_TRUE(paddle) << paddle.status().message();
+  EXPECT_EQ(paddle->dynamics.wall_motion.part, 2);
+  auto paddle_back = parse_scene(to_json(*paddle));
+  ASSERT_TRUE(paddle_back) << to_json(*paddle);
+  EXPECT_EQ(paddle_back->dynamics.wall_motion.part, 2);
+  expect_error(R"({"wall": "box", "wall_motion": {"kind": "rotate", "part": 1}})",
+               "wall_motion.part: the wall is not a union");
+  expect_error(R"({"wall": "box+box:dz=2", "wall_motion": {"kind": "rotate", "part": 3}})",
+               "wall_motion.part: the wall has 2 parts, not 3");
+  expect_error(R"({"wall": "box+box:dz=2", "wall_motion": {"kind": "translate", "velocity": [1, 0, 0],
+    "part": 1}})", "wall_motion.part");  // not a key of translate
+  expect_error(R"({"wall": "box+box:dz=2", "wall_motion": {"kind": "rotate", "part": 0}})",
+               "wall_motion.part");
+
   expect_error(R"({"wall": "wall1", "contact_model": "jkr"})", "contact_model");
   expect_error(R"({"wall": "wall1", "contact_model": "hertz_mindlin", "material": {"stiffness": 1e6}})",
                "material.stiffness");

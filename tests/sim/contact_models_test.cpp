@@ -210,9 +210,8 @@ void plates_carry_or_throw() {
 // A ball on a turntable turning at W: once it rolls without slipping, its
 // centre circles at 2/7 W in the lab (the classic result for a solid sphere),
 // which needs the table's velocity at the contact point and the ball's spin.
-void turntable_ball_circles_at_two_sevenths() {
-  const TriangleMesh table = floor_mesh(1, 4);
-  const double w = 3, r = 0.02;
+// A table turning at w rad/s about the z axis, and a grippy ball on it.
+DynamicsConfig turntable(double w) {
   DynamicsConfig cfg;
   cfg.material.restitution = 0.3;
   cfg.material.friction = 0.8;
@@ -220,7 +219,13 @@ void turntable_ball_circles_at_two_sevenths() {
   cfg.wall_motion.kind = WallMotionKind::kRotate;
   cfg.wall_motion.axis = {0, 0, 1};
   cfg.wall_motion.angular_speed = w;
-  auto s = make_sim(table, cfg, particles_at({{0.3, 0, r * 0.9999}}, {}, r));
+  return cfg;
+}
+
+void turntable_ball_circles_at_two_sevenths() {
+  const TriangleMesh table = floor_mesh(1, 4);
+  const double w = 3, r = 0.02;
+  auto s = make_sim(table, turntable(w), particles_at({{0.3, 0, r * 0.9999}}, {}, r));
   ASSERT_TRUE(s);
   FrameStats st;
   double heading0 = 0, heading = 0, last = 0;
@@ -317,6 +322,125 @@ void drum_bed_keeps_its_angle_and_its_wall() {
   }
 }
 
+// A moving part is the whole wall moving where the rest is never touched: a
+// ball on a turntable, the table alone turning against the table turning as
+// one part of a union whose other part (a box) lies far away. The engine
+// prepares the two in frames of their own, so the paths agree to rounding.
+void a_part_moves_as_the_whole_wall_would() {
+  const double r = 0.02;
+  const DynamicsConfig cfg = turntable(3);
+  const TriangleMesh table = floor_mesh(1, 4);
+  TriangleMesh both = make_box(0.5, 0.5, 0.5);
+  translate(both, {5, 0, 0});
+  const size_t box_triangles = both.triangles.size();
+  append_mesh(both, table);
+  DynamicsConfig part = cfg;
+  part.wall_motion.part_begin = box_triangles;
+  part.wall_motion.part_end = both.triangles.size();
+  const ParticleSet ball = particles_at({{0.3, 0, r * 0.9999}}, {}, r);
+  auto whole = make_sim(table, cfg, ball);
+  auto one_part = make_sim(both, part, ball);
+  ASSERT_TRUE(whole && one_part);
+  FrameStats a, b;
+  for (int k = 0; k < 25; ++k) {
+    ASSERT_TRUE(whole->advance(0.04, &a));
+    ASSERT_TRUE(one_part->advance(0.04, &b));
+  }
+  ParticleSet pa, pb;
+  ASSERT_TRUE(whole->download(&pa, nullptr));
+  ASSERT_TRUE(one_part->download(&pb, nullptr));
+  EXPECT_EQ(a.escaped + b.escaped, 0u);
+  EXPECT_EQ(b.wall_contacts, a.wall_contacts);
+  const double moved = std::hypot(pa.x[0] - 0.3, pa.y[0]);
+  EXPECT_GT(moved, 0.05);  // the table carried it round
+  EXPECT_NEAR(pb.x[0], pa.x[0], 1e-9);
+  EXPECT_NEAR(pb.y[0], pa.y[0], 1e-9);
+  EXPECT_NEAR(pb.z[0], pa.z[0], 1e-9);
+  EXPECT_NEAR(pb.vx[0], pa.vx[0], 1e-7);
+  EXPECT_NEAR(pb.vy[0], pa.vy[0], 1e-7);
+}
+
+// A paddle turning in a still cup: the balls in its sweep are pushed round
+// the way it turns and thrown to the cup's wall, never through the paddle,
+// the wall or the floor; a ball on the floor beyond the paddle's reach stays
+// where it is (the floor does not turn).
+struct Stirred {
+  double spin = 0;       // the swept balls' mean angular velocity about the axis at the end, rad/s
+  double outside = 0;    // farthest any centre got beyond the cup's wall (R - r; <= 0 inside)
+  double lowest = 1;     // lowest centre over the run, m (r when resting on the floor)
+  double lone_moved = 0;  // how far the ball beyond the paddle moved, m
+  uint64_t escaped = 0;
+  uint64_t hit_paddle = 0;  // frames in which some ball touched the paddle
+};
+Stirred stirred_cup() {
+  const double R = 0.1, r = 0.005, w = 2 * M_PI;  // one turn a second
+  TriangleMesh cup = make_cylinder(R, 0.08, 64, Caps::kBottom);
+  const size_t cup_triangles = cup.triangles.size();
+  TriangleMesh paddle = make_box(0.15, 0.012, 0.04);
+  translate(paddle, {0, 0, 0.006});
+  append_mesh(cup, paddle);
+  DynamicsConfig cfg = turntable(w);  // the paddle turns as the table did
+  cfg.material.restitution = 0.4;
+  cfg.material.friction = 0.3;
+  cfg.wall_motion.center = {0, 0, 0.026};
+  cfg.wall_motion.part_begin = cup_triangles;
+  cfg.wall_motion.part_end = cup.triangles.size();
+  std::vector<Vec3d> pos;
+  for (int k = 0; k < 8; ++k) {  // between the paddle's arms at t = 0
+    const double a = M_PI / 4 + k * M_PI / 2 + (k >= 4 ? 0.3 : 0.0);
+    const double rho = k >= 4 ? 0.06 : 0.035;
+    pos.push_back({rho * std::cos(a), rho * std::sin(a), r});
+  }
+  const Vec3d lone{0.09 * std::cos(0.2), 0.09 * std::sin(0.2), r};  // beyond the paddle's tip (0.075 + r)
+  pos.push_back(lone);
+  ThreadPool pool(1);
+  cfg.pool = &pool;
+  Stirred out;
+  auto s = make_sim(cup, cfg, particles_at(pos, {}, r));
+  if (!s) return out;
+  out.outside = -R;
+  FrameStats st;
+  ParticleSet p;
+  for (int k = 0; k < 40; ++k) {
+    EXPECT_TRUE(s->advance(0.025, &st));
+    EXPECT_TRUE(s->download(&p, nullptr));
+    for (size_t i = 0; i < p.size(); ++i) {
+      out.outside = std::max(out.outside, std::hypot(p.x[i], p.y[i]) - (R - r));
+      out.lowest = std::min(out.lowest, p.z[i]);
+    }
+    out.escaped = st.escaped + st.invalid;
+    // The paddle's arm at this time: a ball within r of its box, in its frame.
+    const double a = -w * (k + 1) * 0.025;
+    for (size_t i = 0; i + 1 < p.size(); ++i) {
+      const double bx = std::cos(a) * p.x[i] - std::sin(a) * p.y[i];
+      const double by = std::sin(a) * p.x[i] + std::cos(a) * p.y[i];
+      if (std::fabs(bx) < 0.075 + r && std::fabs(by) < 0.006 + r * 1.01) {
+        ++out.hit_paddle;
+        break;
+      }
+    }
+  }
+  for (size_t i = 0; i + 1 < p.size(); ++i)
+    out.spin += (p.x[i] * p.vy[i] - p.y[i] * p.vx[i]) / (p.x[i] * p.x[i] + p.y[i] * p.y[i]);
+  out.spin /= double(p.size() - 1);
+  out.lone_moved = std::hypot(p.x.back() - lone.x, p.y.back() - lone.y);
+  return out;
+}
+
+void a_paddle_stirs_a_still_cup() {
+  const Stirred s = stirred_cup();
+  std::printf("paddle at 1 turn/s: the balls turn at %.2f rad/s, the one beyond it moved %.2g m, "
+              "%llu frames touching the paddle\n",
+              s.spin, s.lone_moved, (unsigned long long)s.hit_paddle);
+  EXPECT_GT(s.spin, 0.5);  // pushed round the way the paddle turns (2 pi rad/s)
+  EXPECT_LT(s.spin, 2 * M_PI * 1.2);
+  EXPECT_GT(s.hit_paddle, 3u);
+  EXPECT_LT(s.lone_moved, 1e-6);
+  EXPECT_EQ(s.escaped, 0u);
+  EXPECT_LT(s.outside, 0.1 * 0.005);  // nothing passes the cup's wall ...
+  EXPECT_GT(s.lowest, 0.9 * 0.005);   // ... or its floor
+}
+
 TEST(ContactModels, HertzImpactsLastTheAnalyticTimeAndKeepTheRestitution) {
   hertz_impacts_follow_the_theory();
 }
@@ -333,6 +457,8 @@ TEST(MovingWalls, ARotatingDrumBedKeepsOneAngleAndStaysInside) {
   drum_bed_keeps_its_angle_and_its_wall();
 }
 
+TEST(MovingWalls, APartMovesAsTheWholeWallWould) { a_part_moves_as_the_whole_wall_would(); }
+TEST(MovingWalls, APaddleStirsAStillCup) { a_paddle_stirs_a_still_cup(); }
 TEST(ContactModels, BadSettingsNameTheKey) {
   const TriangleMesh box = make_box(10, 10, 10);
   const ParticleSet p = particles_at({{0, 0, 2}}, {}, 0.5);
@@ -362,6 +488,16 @@ TEST(ContactModels, BadSettingsNameTheKey) {
   c.wall_motion.axis = {0, 0, 1};
   c.wall_motion.angular_speed = NAN;
   expect_error(c, "wall_motion");
+  c.wall_motion.angular_speed = 1;
+  c.wall_motion.part = 2;  // named, but its triangles never set
+  expect_error(c, "wall_motion.part");
+  c.wall_motion.part = 0;
+  c.wall_motion.part_end = 1u << 20;  // beyond the wall
+  expect_error(c, "wall_motion.part");
+  c.wall_motion.part_end = 0;
+  c.wall_motion.kind = WallMotionKind::kTranslate;
+  c.wall_motion.part = 1;
+  expect_error(c, "translate moves the whole wall");
 }
 
 // The GPU suite: the same scenes, and a drum bed at the CPU's angle.
@@ -375,6 +511,19 @@ TEST_F(ContactModelsCuda, RollingResistanceStopsABallWhereTheModelSays) {
 TEST_F(ContactModelsCuda, AVibratingPlateCarriesOrThrowsABall) { plates_carry_or_throw(); }
 TEST_F(ContactModelsCuda, ABallOnATurntableCirclesAtTwoSevenths) {
   turntable_ball_circles_at_two_sevenths();
+}
+TEST_F(ContactModelsCuda, APartMovesAsTheWholeWallWould) { a_part_moves_as_the_whole_wall_would(); }
+TEST_F(ContactModelsCuda, APaddleStirsAStillCupAsOnTheCpu) {
+  const Stirred gpu = stirred_cup();
+  backend_under_test() = Backend::kCpu;
+  const Stirred cpu = stirred_cup();
+  backend_under_test() = Backend::kCuda;
+  std::printf("paddle: the balls turn at %.4f rad/s on the GPU, %.4f on the CPU\n", gpu.spin, cpu.spin);
+  EXPECT_NEAR(gpu.spin, cpu.spin, 0.02 * std::fabs(cpu.spin));
+  EXPECT_EQ(gpu.hit_paddle, cpu.hit_paddle);
+  EXPECT_LT(gpu.lone_moved, 1e-6);
+  EXPECT_EQ(gpu.escaped, 0u);
+  EXPECT_LT(gpu.outside, 0.1 * 0.005);
 }
 TEST_F(ContactModelsCuda, ARotatingDrumBedLiesAtTheCpusAngle) {
   const DrumResult gpu = rotating_drum(0.1);

@@ -392,7 +392,18 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     await page.getByLabel('Contact law').selectOption('hertz_mindlin');
     await pred.getByText(/the wall moves \(rotate\): every training job's wall stood still/).waitFor();
     await pred.getByText(/contact model hertz_mindlin/).waitFor();
-    await shot(page, '04-new-job-turning-wall');
+    // A wall of several parts: one of them may move (the hopper's cup turning under its funnel).
+    const whatMoves = page.getByLabel('What moves');
+    assert.equal(await whatMoves.isVisible(), false, 'the test cup is one part');
+    const hopper = await page.locator('option', { hasText: 'hopper' }).getAttribute('value');
+    await page.getByLabel('Wall (a model)').selectOption(hopper);
+    await whatMoves.selectOption({ label: 'Part 2: cylinder' });
+    await pred.getByText('Up to date.').waitFor();
+    await pred.getByText(/the wall moves \(rotate\)/).waitFor();
+    await shot(page, '04-new-job-turning-part');
+    await page.getByLabel('Wall (a model)').selectOption(cupId);
+    await pred.getByText('Up to date.').waitFor();
+    assert.equal(await whatMoves.isVisible(), false);
     await page.getByLabel('The wall', { exact: true }).selectOption('oscillate');
     assert.equal(await turns.isVisible(), false);
     await page.getByLabel('Amplitude').fill('0.2');

@@ -32,9 +32,10 @@ const EXAMPLES = {
   box: [['box', {}]],
   ball: [['sphere', {}]],
   drum: [['cylinder', { r: 5, h: 4, caps: 'both', axis: 'y' }]],
+  tank: [['cylinder', { r: 5, h: 6, caps: 'bottom' }], ['box', { x: 7.5, y: 0.6, z: 2, dz: 0.3 }]],
 };
 const EXAMPLE_NAMES = { cup: 'A cup', funnel: 'A funnel over a cup', bowl: 'A bowl (open cone)', box: 'A closed box',
-  ball: 'A ball', drum: 'A drum on its side (to turn)' };
+  ball: 'A ball', drum: 'A drum on its side (to turn)', tank: 'A tank with a paddle (to stir)' };
 
 // The engine's wall spec for parts: "cylinder:r=5,h=10,caps=bottom+funnel:...".
 // (The API's "parts" takes numbers only, so caps go through the spec.)

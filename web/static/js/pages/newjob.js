@@ -81,22 +81,37 @@ export async function render(main, ctx, modelParam) {
   // the wall's own centre (the scene leaves "center" out).
   const motion = select([['none', 'Stands still'], ['rotate', 'Turns about an axis'],
     ['oscillate', 'Shakes to and fro']], 'none');
+  // Which part moves, when the model is a union of shapes (a paddle in a tank).
+  const motionPart = h('select');
+  const motionPartField = field('What moves', motionPart, 'The others stand still.');
+  const showParts = () => {
+    const spec = usable.find((m) => String(m.id) === model.value)?.spec || '';
+    const parts = spec ? spec.split('+') : [];
+    const keep = motionPart.value;
+    motionPart.replaceChildren(h('option', { value: '0' }, 'The whole wall'),
+      ...(parts.length > 1 ? parts : []).map((p, i) => h('option', { value: String(i + 1), selected: String(i + 1) === keep },
+        `Part ${i + 1}: ${p.split(':')[0]}`)));
+    motionPartField.hidden = parts.length < 2;
+  };
   const motionAxis = select([['x', 'x'], ['y', 'y'], ['z', 'z']], 'y');
   const motionAxisField = field('Axis', motionAxis, ' ');
   const motionAxisHint = motionAxisField.querySelector('.hint');
   const rpm = num({ min: '-1000', max: '1000', step: 'any', value: '6' });
   const amplitude = num({ min: '0', step: 'any', value: '0.5' });
   const frequency = num({ min: '0', max: '100', step: 'any', value: '2' });
+  const turnFields = [field('Turns a minute', rpm, 'Negative: the other way.')];
   // A drum of diameter D metres holds its bed below the critical speed 42.3 / sqrt(D) rpm.
-  const turnFields = [field('Turns a minute', rpm,
-    'Negative: the other way. Above 42 / √D (D the drum’s width in metres) the bed sticks to the wall.')];
+  const turnNote = h('p', { class: 'hint' },
+    'A drum D metres wide keeps its bed below about 42 / √D turns a minute; faster, the bed sticks to its wall.');
   const shakeFields = [field('Amplitude', amplitude, 'In the wall’s units.'), field('Frequency (Hz)', frequency)];
   const motionRow = h('div', { class: 'row' }, motionAxisField, ...turnFields, ...shakeFields);
   const showMotion = () => {
-    for (const f of turnFields) f.hidden = motion.value !== 'rotate';
+    for (const f of [...turnFields, turnNote]) f.hidden = motion.value !== 'rotate';
     for (const f of shakeFields) f.hidden = motion.value !== 'oscillate';
     motionRow.hidden = motion.value === 'none';
-    motionAxisHint.textContent = motion.value === 'rotate' ? 'Through the wall’s centre.' : 'The way it shakes.';
+    if (motion.value === 'none') motionPartField.hidden = true;
+    else showParts();
+    motionAxisHint.textContent = motion.value === 'rotate' ? 'Through the centre of what turns.' : 'The way it shakes.';
   };
   const duration = num({ min: '0.001', step: 'any', value: '2' });
   const fps = num({ min: '0.001', step: 'any', value: '24' });
@@ -141,6 +156,7 @@ export async function render(main, ctx, modelParam) {
       wallMotion = { kind: 'oscillate', axis: AXES[motionAxis.value],
         amplitude: n(amplitude, 'Amplitude'), frequency: n(frequency, 'Frequency') };
     }
+    if (wallMotion && !motionPartField.hidden && Number(motionPart.value) > 0) wallMotion.part = Number(motionPart.value);
     const scene = {
       wall: { model: Number(model.value) },
       particles: { count: n(count, 'Particle count'), radius: n(radius, 'Particle radius') },
@@ -252,7 +268,7 @@ export async function render(main, ctx, modelParam) {
         field('Rolling resistance', rolling, '0 to 1; 0: a ball rolls on forever.')),
       h('label', { class: 'check' }, contacts, 'Particles also collide with each other')),
     h('fieldset', {}, h('legend', {}, 'Wall motion'),
-      field('The wall', motion), motionRow),
+      h('div', { class: 'row' }, field('The wall', motion), motionPartField), motionRow, turnNote),
     h('fieldset', {}, h('legend', {}, 'Time'),
       h('div', { class: 'row' }, field('Duration (simulated seconds)', duration), field('Frames per second', fps))),
     h('fieldset', {}, h('legend', {}, 'Computation'),
@@ -267,7 +283,7 @@ export async function render(main, ctx, modelParam) {
   form.addEventListener('input', schedule);
   form.addEventListener('change', (e) => {
     if (e.target === method) showMethod();
-    if (e.target === motion) showMotion();
+    if (e.target === motion || e.target === model) showMotion();
     schedule();
   });
   form.addEventListener('submit', async (e) => {

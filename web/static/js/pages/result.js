@@ -53,11 +53,12 @@ export async function render(main, ctx, id) {
       return a.filter((c) => c !== 0).length === 1 ? names[k] : `(${a.join(', ')})`;
     };
     const num = (x) => Number(Number(x).toPrecision(3)).toLocaleString();
+    const what = Number.isInteger(m.part) && m.part > 0 ? `part ${m.part} ` : '';
     if (m.kind === 'rotate') {
       const rpm = Number.isFinite(m.rpm) ? m.rpm : (m.angular_speed ?? 0) * 60 / (2 * Math.PI);
-      return `turns ${num(rpm)} a minute about ${axis(m.axis)}`;
+      return `${what}turns ${num(rpm)} a minute about ${axis(m.axis)}`;
     }
-    if (m.kind === 'oscillate') return `shakes ${num(m.amplitude ?? 0)} at ${num(m.frequency ?? 0)} Hz along ${axis(m.axis)}`;
+    if (m.kind === 'oscillate') return `${what}shakes ${num(m.amplitude ?? 0)} at ${num(m.frequency ?? 0)} Hz along ${axis(m.axis)}`;
     if (m.kind === 'translate') return `moves at (${(m.velocity || []).map(num).join(', ')}) per second`;
     return m.kind;
   }
@@ -116,7 +117,7 @@ export async function render(main, ctx, id) {
     });
     const desc = h('p', { id: 'video-desc', class: 'hint' },
       `Animation of ${s.particles?.count ?? 'the'} particles (${s.placement?.kind ?? 'pour'}) colliding with ${wallLabel(s.wall, modelsById)}`
-      + `${motionText(s.wall_motion) ? `, which ${motionText(s.wall_motion)}` : ''}, `
+      + `${motionText(s.wall_motion) ? `, ${s.wall_motion.part > 0 ? 'whose' : 'which'} ${motionText(s.wall_motion)}` : ''}, `
       + `${s.duration ?? '?'} simulated seconds; colour shows each particle's speed; no sound.`);
     const figures = h('dl', { class: 'figures' });
     const chartBox = h('div');
