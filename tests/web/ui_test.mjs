@@ -327,6 +327,11 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     await build.getByLabel('Name').fill('drum');
     await page.getByRole('button', { name: 'Create model' }).click();
     await page.getByText(/Created “drum”: \d+ triangles/).waitFor();
+    // A tank with a paddle: two parts, the second of which a job may turn.
+    await build.getByLabel('Start from').selectOption({ label: 'A tank with a paddle (to stir)' });
+    await build.getByText(/^cylinder:r=5,h=6,segments=48,caps=bottom\+box:x=7\.5,y=0\.6,z=2,dz=0\.3$/).waitFor();
+    await waitDrawn(draft, 'the draft tank');
+    await shot(page, '03-models-tank');
 
     // A file that is not STL: the server's loader says why.
     const upload = page.getByRole('region', { name: 'Upload an STL' });
