@@ -359,7 +359,7 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     await page.getByRole('heading', { name: 'New job', level: 1 }).waitFor();
     assert.equal(await page.getByLabel('Wall (a model)').inputValue(), cupId);
     await page.getByLabel('Count').fill('40');
-    await page.getByLabel('Radius').fill('0.5');
+    await page.getByLabel('Radius', { exact: true }).fill('0.5');
     await page.getByLabel('Duration (simulated seconds)').fill('0.3');
     await page.getByLabel('Frames per second').fill('10');
     await page.getByLabel('Backend').selectOption('cpu');
@@ -381,6 +381,16 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     await pred.getByText(/This job would be refused: the run needs about [\d.]+ GiB of memory/).waitFor();
     await page.getByLabel('Count').fill('40');
     await pred.locator('dt:text-is("Particles") + dd', { hasText: /^40$/ }).waitFor();
+    // A mix of sizes: the largest radius must not be below the radius; the job below has one.
+    await page.getByLabel('Largest radius').fill('0.3');
+    await pred.getByText(/Largest radius: at least the radius/).waitFor();
+    await page.getByLabel('Largest radius').fill('0.6');
+    await pred.getByText('Up to date.').waitFor();
+    // A pour rate beyond what the inlet can deliver is refused with the reason.
+    await page.getByLabel('Pour rate (particles a second)').fill('1e9');
+    await pred.getByText(/Check the form: .*rate/).waitFor();
+    await page.getByLabel('Pour rate (particles a second)').fill('');
+    await pred.getByText('Up to date.').waitFor();
     // A value out of range is named before anything is sent.
     await page.getByLabel('Restitution').fill('7');
     await pred.getByText(/Restitution:/).waitFor();
@@ -434,6 +444,7 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     assert.equal(await page.locator('.state-done').count(), 1, `the job did not finish: ${failure.join(' ')}`);
     await page.getByRole('heading', { name: 'test cup: 40 particles', level: 1 }).waitFor();
     await page.locator('dt:text-is("Wall motion") + dd', { hasText: 'turns 6 a minute about y' }).waitFor();
+    await page.locator('dt:text-is("Particles") + dd', { hasText: '40, radius 0.5 to 0.6' }).waitFor();
     const video = page.locator('video');
     await video.waitFor();
     assert.equal(await video.locator('source[type="video/webm"]').count(), 1);

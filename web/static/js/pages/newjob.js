@@ -71,6 +71,11 @@ export async function render(main, ctx, modelParam) {
     mine.length ? h('optgroup', { label: 'Your models' }, mine.map(option)) : null);
   const count = num({ min: '1', step: '1', value: '500' });
   const radius = num({ min: '0.000001', step: 'any', value: '0.5' });
+  // Optional: a mix of sizes, spread evenly from the radius up to this one (a drum sorts them).
+  const radiusMax = num({ min: '0.000001', step: 'any', value: '', required: false });
+  // Optional: how fast the pour releases; empty, as fast as its inlet allows.
+  const rate = num({ min: '0', step: 'any', value: '', required: false });
+  const rateField = field('Pour rate (particles a second)', rate, 'Empty: as fast as the inlet allows.');
   const placement = ['pour', 'fill'].map((k) => h('input', { type: 'radio', name: 'placement', value: k, checked: k === 'pour' }));
   const restitution = num({ min: '0.000001', max: '1', step: 'any', value: '0.4' });
   const friction = num({ min: '0', max: '10', step: 'any', value: '0.3' });
@@ -105,6 +110,7 @@ export async function render(main, ctx, modelParam) {
     'A drum D metres wide keeps its bed below about 42 / √D turns a minute; faster, the bed sticks to its wall.');
   const shakeFields = [field('Amplitude', amplitude, 'In the wall’s units.'), field('Frequency (Hz)', frequency)];
   const motionRow = h('div', { class: 'row' }, motionAxisField, ...turnFields, ...shakeFields);
+  const showPlacement = () => { rateField.hidden = !placement[0].checked; };
   const showMotion = () => {
     for (const f of [...turnFields, turnNote]) f.hidden = motion.value !== 'rotate';
     for (const f of shakeFields) f.hidden = motion.value !== 'oscillate';
@@ -138,6 +144,7 @@ export async function render(main, ctx, modelParam) {
   };
   showMethod();
   showMotion();
+  showPlacement();
 
   // The submission body from the form; throws with a message naming the field.
   function body() {
@@ -149,6 +156,11 @@ export async function render(main, ctx, modelParam) {
     if (!model.value) throw new Error('Model: make or upload one first (Models page).');
     const [width, height] = size.value.split('x').map(Number);
     const roll = n(rolling, 'Rolling resistance');
+    const optional = (input, label) => (input.value === '' ? null : n(input, label));
+    const r0 = n(radius, 'Particle radius');
+    const r1 = optional(radiusMax, 'Largest radius');
+    if (r1 !== null && r1 < r0) throw new Error('Largest radius: at least the radius.');
+    const pourRate = placement[0].checked ? optional(rate, 'Pour rate') : null;
     let wallMotion = null;
     if (motion.value === 'rotate') {
       wallMotion = { kind: 'rotate', axis: AXES[motionAxis.value], rpm: n(rpm, 'Turns a minute') };
@@ -159,8 +171,8 @@ export async function render(main, ctx, modelParam) {
     if (wallMotion && !motionPartField.hidden && Number(motionPart.value) > 0) wallMotion.part = Number(motionPart.value);
     const scene = {
       wall: { model: Number(model.value) },
-      particles: { count: n(count, 'Particle count'), radius: n(radius, 'Particle radius') },
-      placement: { kind: placement.find((r) => r.checked).value },
+      particles: { count: n(count, 'Particle count'), radius: r1 !== null && r1 > r0 ? [r0, r1] : r0 },
+      placement: { kind: placement.find((r) => r.checked).value, ...(pourRate ? { rate: pourRate } : {}) },
       material: { restitution: n(restitution, 'Restitution'), friction: n(friction, 'Friction'),
         ...(roll > 0 ? { rolling_friction: roll } : {}) },
       contact_model: contactModel.value,
@@ -258,10 +270,12 @@ export async function render(main, ctx, modelParam) {
   const form = h('form', { class: 'card', novalidate: true, 'aria-labelledby': 'scene-h' },
     field('Wall (a model)', model, 'Build or upload one on the Models page.'),
     h('fieldset', {}, h('legend', {}, 'Particles'),
-      h('div', { class: 'row' }, field('Count', count), field('Radius', radius, 'In the wall’s units.'))),
+      h('div', { class: 'row' }, field('Count', count), field('Radius', radius, 'In the wall’s units.'),
+        field('Largest radius', radiusMax, 'Optional: sizes spread evenly up to it.'))),
     h('fieldset', {}, h('legend', {}, 'Placement'),
       h('label', { class: 'check' }, placement[0], 'Pour: particles fall in from above the vessel'),
-      h('label', { class: 'check' }, placement[1], 'Fill: particles start spread through the vessel')),
+      h('label', { class: 'check' }, placement[1], 'Fill: particles start spread through the vessel'),
+      rateField),
     h('fieldset', {}, h('legend', {}, 'Material'),
       h('div', { class: 'row' }, field('Restitution', restitution, 'Bounce, 0 to 1.'), field('Friction', friction, '0 to 10.')),
       h('div', { class: 'row' }, field('Contact law', contactModel, 'Hertz–Mindlin stiffens as particles press in.'),
@@ -284,6 +298,7 @@ export async function render(main, ctx, modelParam) {
   form.addEventListener('change', (e) => {
     if (e.target === method) showMethod();
     if (e.target === motion || e.target === model) showMotion();
+    if (placement.includes(e.target)) showPlacement();
     schedule();
   });
   form.addEventListener('submit', async (e) => {
