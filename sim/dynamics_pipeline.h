@@ -1519,8 +1519,12 @@ class DynamicsPipeline final : public Simulation {
         if (!(d2 < r2)) return false;
         double d = sqrt(d2);
         Vec3d nrm;
-        if (face || !(d > 1e-9 * r)) {
-          // Face contact (or the centre on an edge): the plane's own normal, towards the centre.
+        // Face contact, or the centre over the face's very edge (within 1e-9 r
+        // of it, the centre on it included): the plane's own normal, towards
+        // the centre. An edge's own normal there would carry the vertices'
+        // rounding (a floor's edge 6e-19 m off its line) into a sideways push
+        // that walks a resting ball off the edge, as off a ridge.
+        if (face || !(d2 - h * h > 1e-18 * r2)) {
           nrm = h >= 0 ? t.n : t.n * -1.0;
           d = hd_abs(h);
         } else {

@@ -213,6 +213,23 @@ void floor_settles_once() {
     EXPECT_NEAR(z[0], expected, 1e-4 * r);
     EXPECT_NEAR(z[1], z[0], 1e-5 * r) << "at (" << at.x << ", " << at.y << ")";
   }
+  // Over an edge whose vertices carry rounding: a cup's bottom is a fan whose
+  // diameter runs from (10, 0) to (-10, 1.2e-15), so a ball at (9, 0) lies
+  // 6e-17 m outside one of its two triangles. It stays put, with friction or
+  // without (the edge's own normal there walked it off, as off a ridge).
+  const TriangleMesh cup = make_cylinder(10, 2, 64, Caps::kBottom);
+  for (double mu : {0.0, 0.3}) {
+    cfg.material.friction = mu;
+    auto s = make_sim(cup, cfg, particles_at({{9, 0, 0.6}}, {}, r));
+    ASSERT_TRUE(s);
+    FrameStats st;
+    for (int f = 0; f < 30; ++f) ASSERT_TRUE(s->advance(0.1, &st));
+    ParticleSet out;
+    ASSERT_TRUE(s->download(&out, nullptr));
+    EXPECT_EQ(st.wall_contacts, 1u);
+    EXPECT_NEAR(out.x[0], 9, 1e-12) << "friction " << mu;
+    EXPECT_NEAR(out.y[0], 0, 1e-12) << "friction " << mu;
+  }
 }
 
 // The paper's division methods and the tree as the wall's preparation: the
