@@ -83,7 +83,7 @@ export async function render(main, ctx, modelParam) {
   const contactModel = select([['linear', 'Spring–dashpot (linear)'], ['hertz_mindlin', 'Hertz–Mindlin']], 'linear');
   const rolling = num({ min: '0', max: '1', step: 'any', value: '0' });
   // How the wall moves: a drum or a mill turns, a sieve shakes. A turn is about
-  // the wall's own centre (the scene leaves "center" out).
+  // the centre of what turns (the scene leaves "center" out).
   const motion = select([['none', 'Stands still'], ['rotate', 'Turns about an axis'],
     ['oscillate', 'Shakes to and fro']], 'none');
   // Which part moves, when the model is a union of shapes (a paddle in a tank).
