@@ -55,6 +55,40 @@ TEST(Placement, FillIsInsideClearAndWithoutOverlaps) {
   EXPECT_EQ(p->r, q->r);
 }
 
+// An open vessel: a cup (no lid) and a funnel over it, filled from their box,
+// take particles inside only (their generalized winding number 1/2 or more),
+// none in the box's corners beside the cup; a floor, which holds nothing,
+// takes every clear site above it.
+TEST(Placement, OpenVesselsFillInsideAndAFloorAbove) {
+  ParticleSpec ps;
+  ps.count = 300;
+  ps.r_min = ps.r_max = 0.5;
+  for (const char* spec : {"cylinder:r=5,h=10,segments=48,caps=bottom",
+                           "funnel:r1=2,r2=8,h=8,segments=48,dz=12+cylinder:r=5,h=10,segments=48,caps=bottom"}) {
+    auto wall = make_shape(spec);
+    ASSERT_TRUE(wall);
+    auto p = place_particles(*wall, ps, PlacementSpec{}, {0, 0, -9.81}, 3);
+    ASSERT_TRUE(p) << p.status().message();
+    ASSERT_EQ(p->size(), 300u);
+    for (size_t i = 0; i < p->size(); ++i) {
+      EXPECT_LT(std::hypot(p->x[i], p->y[i]) + 0.5, 5 * std::cos(M_PI / 48)) << spec;
+      EXPECT_GT(p->z[i] - 0.5, 0) << spec;
+    }
+  }
+  TriangleMesh plate;
+  plate.vertices = {{-5, -5, 0}, {5, -5, 0}, {5, 5, 0}, {-5, 5, 0}};
+  plate.triangles = {{0, 1, 2}, {0, 2, 3}};
+  plate.source_ids = {0, 1};
+  PlacementSpec above;
+  above.has_region = true;
+  above.region_lo = {-4, -4, 0};
+  above.region_hi = {4, 4, 5};
+  ps.count = 100;
+  auto q = place_particles(plate, ps, above, {0, 0, -9.81}, 3);
+  ASSERT_TRUE(q) << q.status().message();
+  EXPECT_EQ(q->size(), 100u);
+}
+
 // Inside is decided once per connected group of sites (sim/placement.cpp,
 // SideOfWall): two closed boxes apart, and a solid block inside one of them,
 // take particles in both cavities and none between them, in the block or
