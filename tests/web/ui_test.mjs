@@ -292,6 +292,11 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     await waitDrawn(page.locator('#model-preview canvas'), 'wall1');
 
     const build = page.getByRole('region', { name: 'Build a vessel' });
+    // The name follows the example until one is typed.
+    assert.equal(await build.getByLabel('Name').inputValue(), 'my cup');
+    await build.getByLabel('Start from').selectOption({ label: 'A ball' });
+    assert.equal(await build.getByLabel('Name').inputValue(), 'my ball');
+    await build.getByLabel('Start from').selectOption({ label: 'A cup' });
     await build.getByLabel('Name').fill('test cup');
     await build.getByRole('group', { name: 'Part 1' }).getByLabel('Segments').fill('24');
     const draft = build.locator('canvas');

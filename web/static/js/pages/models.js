@@ -125,6 +125,9 @@ export async function render(main) {
 // The parametric builder: a name and a list of parts, a live draft preview.
 function builder(viewers, created) {
   const name = h('input', { required: true, maxlength: '128', value: 'my cup', autocomplete: 'off' });
+  // The name follows the example until the user types one.
+  let nameTyped = false;
+  name.addEventListener('input', () => { nameTyped = true; });
   const example = h('select', {}, Object.entries(EXAMPLE_NAMES).map(([k, t]) => h('option', { value: k }, t)));
   const partsBox = h('div');
   const error = errorBox();
@@ -212,6 +215,7 @@ function builder(viewers, created) {
     });
   }
   function useExample() {
+    if (!nameTyped) name.value = `my ${example.value}`;
     parts.splice(0).forEach(() => {});
     partsBox.replaceChildren();
     for (const [shape, values] of EXAMPLES[example.value]) addPart(shape, values);
