@@ -265,15 +265,21 @@ Status validate(const RenderSettings& s) {
   return Status::ok();
 }
 
-sim::TriangleMesh posed_wall(const sim::TriangleMesh& wall, const sim::WallMotion& motion,
-                             double t) {
-  sim::TriangleMesh out = wall;
-  const sim::WallPose pose = motion.pose(t);
-  std::vector<bool> moved(wall.vertices.size(), false);
-  for (size_t k = motion.part_begin; k < motion.part_end && k < wall.triangles.size(); ++k)
-    for (uint32_t v : wall.triangles[k])
-      if (!moved[v]) moved[v] = true, out.vertices[v] = pose.to_world(wall.vertices[v]);
-  return out;
+void set_render_wall(const sim::TriangleMesh& wall, const sim::WallMotion& motion,
+                     sim::Vec3d origin, render::Snapshot* out) {
+  if (!motion.moves_part()) {
+    out->wall = to_render_wall(wall, origin);
+    out->part = {};
+    return;
+  }
+  out->wall = to_render_wall(sim::mesh_range(wall, motion.part_begin, motion.part_end, false), origin);
+  out->part = to_render_wall(sim::mesh_range(wall, motion.part_begin, motion.part_end, true), origin);
+}
+
+void pose_render_wall(const sim::WallMotion& motion, double t, sim::Vec3d origin,
+                      render::Snapshot* out) {
+  if (motion.moving())
+    wall_model_matrix(motion.pose(t), origin, motion.moves_part() ? out->part_model : out->wall_model);
 }
 
 void wall_model_matrix(const sim::WallPose& pose, sim::Vec3d origin, float out[16]) {
@@ -322,15 +328,13 @@ Status render_run(const std::string& run_dir, const std::string& out_dir,
   // A moving wall is drawn where it is at each frame's time.
   sim::TriangleMesh wall_mesh;
   const sim::WallMotion motion = run_wall_motion(run_dir, &wall_mesh);
-  const bool part_moves = motion.moves_part() && !wall_mesh.triangles.empty();
-  if (part_moves) {
-    scene.wall = to_render_wall(wall_mesh, origin);
-  } else if (fs::exists(wall_path)) {
+  // (With a moving part the wall is the scene's, rebuilt with its parts apart.)
+  if (!motion.moves_part() && fs::exists(wall_path)) {
     auto mesh = sim::load_stl(wall_path);
     if (!mesh) return mesh.status();
     wall_mesh = std::move(*mesh);
-    scene.wall = to_render_wall(wall_mesh, origin);
   }
+  if (!wall_mesh.triangles.empty()) set_render_wall(wall_mesh, motion, origin, &scene);
   // A fixed frame for the whole run: the wall's box (all it sweeps when it
   // turns), or the first frame's particles.
   fill_particles(*first, origin, &scene);
@@ -402,10 +406,7 @@ Status render_run(const std::string& run_dir, const std::string& out_dir,
       auto snap = i == 0 ? std::move(first) : sim::read_snapshot(frames[i].path);
       if (!snap) return snap.status();
       fill_particles(*snap, origin, &scene);
-      if (part_moves)
-        scene.wall = to_render_wall(posed_wall(wall_mesh, motion, snap->time), origin);
-      else if (motion.moving())
-        wall_model_matrix(motion.pose(snap->time), origin, scene.wall_model);
+      pose_render_wall(motion, snap->time, origin, &scene);
       // One full turn over the run.
       if (ro.camera == render::CameraPreset::kOrbit)
         renderer->set_orbit_deg(360.0 * double(i) / double(frames.size()));

@@ -13,6 +13,10 @@
 #include "common/status.h"
 #include "sim/dynamics.h"
 
+namespace collido::render {
+struct Snapshot;
+}
+
 namespace collido::job {
 
 struct RenderSettings {
@@ -47,9 +51,14 @@ struct RenderOutcome {
 // coordinates (world minus `origin`): the matrix takes v - origin to
 // pose.to_world(v) - origin, so the mesh is uploaded once and only this changes.
 void wall_model_matrix(const sim::WallPose& pose, sim::Vec3d origin, float out[16]);
-// The wall with its moving part (motion.part_begin..part_end) where the
-// motion has it at time t; the other triangles' vertices as they are.
-sim::TriangleMesh posed_wall(const sim::TriangleMesh& wall, const sim::WallMotion& motion, double t);
+// The run's wall into a render snapshot, in render coordinates: the whole
+// wall, or, when one part moves, the rest as `wall` and the part as `part`;
+// each is uploaded once. pose_render_wall then sets, each frame, the model
+// matrix of what moves at time t.
+void set_render_wall(const sim::TriangleMesh& wall, const sim::WallMotion& motion,
+                     sim::Vec3d origin, render::Snapshot* out);
+void pose_render_wall(const sim::WallMotion& motion, double t, sim::Vec3d origin,
+                      render::Snapshot* out);
 
 // Called after each frame is rendered with (frames done, frames in all).
 using FrameProgress = std::function<void(size_t, size_t)>;

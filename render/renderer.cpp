@@ -258,18 +258,23 @@ struct Renderer::Impl {
   float max_point_size = 64;
 
   GLuint background_prog = 0, particle_prog = 0, wall_prog = 0, edge_prog = 0;
-  GLuint empty_vao = 0, particle_vao = 0, wall_vao = 0, edge_vao = 0;
+  GLuint empty_vao = 0, particle_vao = 0;
   GLuint particle_vbo[2] = {0, 0};
-  GLuint wall_vbo = 0, edge_vbo = 0;
   std::vector<float> cmap;  // 256 x rgb in 0..1, the particle shader's colour map
   GLuint fbo = 0, color_rb = 0, depth_rb = 0;  // what we draw into
   GLuint resolve_fbo = 0, resolve_rb = 0;      // single-sample copy when multisampling
   int samples = 0;
 
-  // The wall last uploaded, to skip re-uploading an unchanged mesh.
-  std::vector<float> wall_vertices;
-  std::vector<uint32_t> wall_indices;
-  GLsizei wall_corners = 0, edge_points = 0;
+  // A wall mesh on the GPU: its faces and its edges, and what was last
+  // uploaded, to skip re-uploading an unchanged mesh. Two: the wall, and a
+  // part of it that moves with a model matrix of its own.
+  struct WallGl {
+    GLuint vao = 0, edge_vao = 0, vbo = 0, edge_vbo = 0;
+    std::vector<float> vertices;
+    std::vector<uint32_t> indices;
+    GLsizei corners = 0, edge_points = 0;
+  };
+  WallGl walls[2];
 
   std::vector<uint8_t> rgba;              // readback staging
   std::vector<float> pos_radius, values;  // particle upload staging
@@ -282,12 +287,13 @@ struct Renderer::Impl {
     context->make_current();
     for (GLuint p : {background_prog, particle_prog, wall_prog, edge_prog})
       if (p) gl.DeleteProgram(p);
-    GLuint vaos[] = {empty_vao, particle_vao, wall_vao, edge_vao};
-    if (gl.DeleteVertexArrays) gl.DeleteVertexArrays(4, vaos);
-    if (gl.DeleteBuffers) {
-      gl.DeleteBuffers(2, particle_vbo);
-      GLuint b[] = {wall_vbo, edge_vbo};
-      gl.DeleteBuffers(2, b);
+    GLuint vaos[] = {empty_vao, particle_vao};
+    if (gl.DeleteVertexArrays) gl.DeleteVertexArrays(2, vaos);
+    if (gl.DeleteBuffers) gl.DeleteBuffers(2, particle_vbo);
+    for (WallGl& w : walls) {
+      GLuint v[] = {w.vao, w.edge_vao}, b[] = {w.vbo, w.edge_vbo};
+      if (gl.DeleteVertexArrays) gl.DeleteVertexArrays(2, v);
+      if (gl.DeleteBuffers) gl.DeleteBuffers(2, b);
     }
     if (gl.DeleteFramebuffers) {
       GLuint f[] = {fbo, resolve_fbo};
@@ -390,22 +396,23 @@ struct Renderer::Impl {
 
     gl.GenVertexArrays(1, &empty_vao);
     gl.GenVertexArrays(1, &particle_vao);
-    gl.GenVertexArrays(1, &wall_vao);
-    gl.GenVertexArrays(1, &edge_vao);
     gl.GenBuffers(2, particle_vbo);
-    gl.GenBuffers(1, &wall_vbo);
-    gl.GenBuffers(1, &edge_vbo);
-
-    gl.BindVertexArray(wall_vao);
-    gl.BindBuffer(GL_ARRAY_BUFFER, wall_vbo);
-    gl.EnableVertexAttribArray(0);
-    gl.VertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, 24, reinterpret_cast<void*>(0));
-    gl.EnableVertexAttribArray(1);
-    gl.VertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, 24, reinterpret_cast<void*>(12));
-    gl.BindVertexArray(edge_vao);
-    gl.BindBuffer(GL_ARRAY_BUFFER, edge_vbo);
-    gl.EnableVertexAttribArray(0);
-    gl.VertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, 12, nullptr);
+    for (WallGl& w : walls) {
+      gl.GenVertexArrays(1, &w.vao);
+      gl.GenVertexArrays(1, &w.edge_vao);
+      gl.GenBuffers(1, &w.vbo);
+      gl.GenBuffers(1, &w.edge_vbo);
+      gl.BindVertexArray(w.vao);
+      gl.BindBuffer(GL_ARRAY_BUFFER, w.vbo);
+      gl.EnableVertexAttribArray(0);
+      gl.VertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, 24, reinterpret_cast<void*>(0));
+      gl.EnableVertexAttribArray(1);
+      gl.VertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, 24, reinterpret_cast<void*>(12));
+      gl.BindVertexArray(w.edge_vao);
+      gl.BindBuffer(GL_ARRAY_BUFFER, w.edge_vbo);
+      gl.EnableVertexAttribArray(0);
+      gl.VertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, 12, nullptr);
+    }
     gl.BindVertexArray(0);
 
     gl.BindVertexArray(particle_vao);
@@ -436,17 +443,17 @@ struct Renderer::Impl {
     return {};
   }
 
-  void upload_wall(const WallMesh& wall) {
-    if (wall.vertices == wall_vertices && wall.indices == wall_indices) return;
-    wall_vertices = wall.vertices;
-    wall_indices = wall.indices;
-    WallGeometry g = build_wall_geometry(wall);
-    gl.BindBuffer(GL_ARRAY_BUFFER, wall_vbo);
+  void upload_wall(const WallMesh& mesh, WallGl* w) {
+    if (mesh.vertices == w->vertices && mesh.indices == w->indices) return;
+    w->vertices = mesh.vertices;
+    w->indices = mesh.indices;
+    WallGeometry g = build_wall_geometry(mesh);
+    gl.BindBuffer(GL_ARRAY_BUFFER, w->vbo);
     gl.BufferData(GL_ARRAY_BUFFER, g.soup.size() * sizeof(float), g.soup.data(), GL_STATIC_DRAW);
-    wall_corners = GLsizei(g.soup.size() / 6);
-    gl.BindBuffer(GL_ARRAY_BUFFER, edge_vbo);
+    w->corners = GLsizei(g.soup.size() / 6);
+    gl.BindBuffer(GL_ARRAY_BUFFER, w->edge_vbo);
     gl.BufferData(GL_ARRAY_BUFFER, g.edges.size() * sizeof(float), g.edges.data(), GL_STATIC_DRAW);
-    edge_points = GLsizei(g.edges.size() / 3);
+    w->edge_points = GLsizei(g.edges.size() / 3);
   }
 
   // Packs the particles to draw (all, or the culler's list, nearest first)
@@ -544,7 +551,10 @@ Status Renderer::Impl::render(const Snapshot& s, Image* image) {
   t0 = Clock::now();
   const size_t n = upload_particles(s, subset);
   timing.particles_drawn = n;
-  if (options.wall != WallStyle::kHidden) upload_wall(s.wall);
+  if (options.wall != WallStyle::kHidden) {
+    upload_wall(s.wall, &walls[0]);
+    upload_wall(s.part, &walls[1]);
+  }
   timing.upload_ms = ms_since(t0);
   t0 = Clock::now();
 
@@ -580,14 +590,27 @@ Status Renderer::Impl::render(const Snapshot& s, Image* image) {
   gl.Enable(GL_DEPTH_TEST);
   gl.DepthFunc(GL_LESS);
   gl.DepthMask(GL_TRUE);
-  const bool draw_wall = options.wall != WallStyle::kHidden && wall_corners > 0;
-  // The wall's own motion folded into its view matrix (rigid: normals turn with it).
-  Mat4 wall_model;
-  std::memcpy(wall_model.m, s.wall_model, sizeof wall_model.m);
-  const Mat4 wall_view = cam.view * wall_model;
+  const bool draw_wall = options.wall != WallStyle::kHidden;
+  // Each mesh's own motion folded into its view matrix (rigid: normals turn with it).
+  Mat4 wall_view[2];
+  for (int k = 0; k < 2; ++k) {
+    Mat4 model;
+    std::memcpy(model.m, k == 0 ? s.wall_model : s.part_model, sizeof model.m);
+    wall_view[k] = cam.view * model;
+  }
+  // Draws every wall mesh that has faces: mode GL_TRIANGLES its faces, GL_LINES its edges.
+  auto draw_walls = [&](GLenum mode, GLuint prog) {
+    for (int k = 0; k < 2; ++k) {
+      const WallGl& w = walls[k];
+      const GLsizei count = mode == GL_LINES ? w.edge_points : w.corners;
+      if (count == 0) continue;
+      gl.UniformMatrix4fv(loc(prog, "u_view"), 1, GL_FALSE, wall_view[k].m);
+      gl.BindVertexArray(mode == GL_LINES ? w.edge_vao : w.vao);
+      gl.DrawArrays(mode, 0, count);
+    }
+  };
   auto set_wall_uniforms = [&](const float* color, float opacity, float fresnel) {
     gl.UseProgram(wall_prog);
-    gl.UniformMatrix4fv(loc(wall_prog, "u_view"), 1, GL_FALSE, wall_view.m);
     gl.UniformMatrix4fv(loc(wall_prog, "u_proj"), 1, GL_FALSE, cam.proj.m);
     gl.Uniform3f(loc(wall_prog, "u_color"), color[0], color[1], color[2]);
     gl.Uniform3f(loc(wall_prog, "u_light"), light[0], light[1], light[2]);
@@ -602,8 +625,7 @@ Status Renderer::Impl::render(const Snapshot& s, Image* image) {
     set_wall_uniforms(kWallInnerColor, 1.f, 0.f);
     gl.Enable(GL_CULL_FACE);
     gl.CullFace(GL_FRONT);
-    gl.BindVertexArray(wall_vao);
-    gl.DrawArrays(GL_TRIANGLES, 0, wall_corners);
+    draw_walls(GL_TRIANGLES, wall_prog);
     gl.Disable(GL_CULL_FACE);
   }
 
@@ -643,26 +665,23 @@ Status Renderer::Impl::render(const Snapshot& s, Image* image) {
     set_wall_uniforms(kWallColor, options.wall_opacity, 0.55f);
     gl.Enable(GL_CULL_FACE);
     gl.CullFace(GL_BACK);
-    gl.BindVertexArray(wall_vao);
-    gl.DrawArrays(GL_TRIANGLES, 0, wall_corners);
+    draw_walls(GL_TRIANGLES, wall_prog);
     gl.Disable(GL_CULL_FACE);
   }
 
   // 5. Rims and creases as thin lines, so the vessel's outline reads even
   //    where the glass is faint.
-  if (draw_wall && edge_points > 0) {
+  if (draw_wall) {
     gl.Enable(GL_BLEND);
     gl.BlendFuncSeparate(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA, GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
     gl.DepthMask(GL_FALSE);
     gl.DepthFunc(GL_LEQUAL);
     gl.UseProgram(edge_prog);
-    gl.UniformMatrix4fv(loc(edge_prog, "u_view"), 1, GL_FALSE, wall_view.m);
     gl.UniformMatrix4fv(loc(edge_prog, "u_proj"), 1, GL_FALSE, cam.proj.m);
     gl.Uniform4f(loc(edge_prog, "u_color"), 0.85f, 0.90f, 1.0f, options.shading ? 0.55f : 1.f);
     // Anti-aliased lines: the rims are the sharpest edges in the frame.
     if (options.shading) gl.Enable(GL_LINE_SMOOTH);
-    gl.BindVertexArray(edge_vao);
-    gl.DrawArrays(GL_LINES, 0, edge_points);
+    draw_walls(GL_LINES, edge_prog);
     gl.Disable(GL_LINE_SMOOTH);
   }
   gl.DepthMask(GL_TRUE);

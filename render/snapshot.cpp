@@ -16,24 +16,28 @@ std::string validate_snapshot(const Snapshot& snap) {
   if (!snap.contact.empty() && snap.contact.size() != n)
     return "snapshot: contact has " + std::to_string(snap.contact.size()) + " values for " +
            std::to_string(n) + " particles";
-  if (snap.wall.vertices.size() % 3 != 0) return "snapshot: wall vertex array is not x,y,z triples";
-  if (snap.wall.indices.size() % 3 != 0) return "snapshot: wall index array is not triangles";
-  const size_t nv = snap.wall.vertices.size() / 3;
-  for (size_t i = 0; i < snap.wall.indices.size(); ++i)
-    if (snap.wall.indices[i] >= nv)
-      return "snapshot: wall triangle " + std::to_string(i / 3) + " refers to vertex " +
-             std::to_string(snap.wall.indices[i]) + " of " + std::to_string(nv);
+  for (const WallMesh* m : {&snap.wall, &snap.part}) {
+    const std::string what = m == &snap.wall ? "wall" : "moving part";
+    if (m->vertices.size() % 3 != 0) return "snapshot: " + what + " vertex array is not x,y,z triples";
+    if (m->indices.size() % 3 != 0) return "snapshot: " + what + " index array is not triangles";
+    const size_t nv = m->vertices.size() / 3;
+    for (size_t i = 0; i < m->indices.size(); ++i)
+      if (m->indices[i] >= nv)
+        return "snapshot: " + what + " triangle " + std::to_string(i / 3) + " refers to vertex " +
+               std::to_string(m->indices[i]) + " of " + std::to_string(nv);
+  }
   return {};
 }
 
 Bounds compute_bounds(const Snapshot& snap) {
   Bounds b;
   float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-  for (size_t i = 0; i + 2 < snap.wall.vertices.size(); i += 3)
-    for (int k = 0; k < 3; ++k) {
-      lo[k] = std::min(lo[k], snap.wall.vertices[i + k]);
-      hi[k] = std::max(hi[k], snap.wall.vertices[i + k]);
-    }
+  for (const WallMesh* m : {&snap.wall, &snap.part})
+    for (size_t i = 0; i + 2 < m->vertices.size(); i += 3)
+      for (int k = 0; k < 3; ++k) {
+        lo[k] = std::min(lo[k], m->vertices[i + k]);
+        hi[k] = std::max(hi[k], m->vertices[i + k]);
+      }
   for (size_t i = 0; i < snap.radius.size() && 3 * i + 2 < snap.positions.size(); ++i)
     for (int k = 0; k < 3; ++k) {
       const float p = snap.positions[3 * i + k], r = snap.radius[i];

@@ -38,6 +38,10 @@ struct Snapshot {
   // (as GL takes it), the identity for a still wall. A moving wall changes only
   // this from frame to frame, so its mesh is uploaded and smoothed once.
   float wall_model[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+  // A part of the wall that moves while `wall` stands still (empty: none), with
+  // its own model matrix: both meshes upload once, only the matrix changes.
+  WallMesh part;
+  float part_model[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
 
   // The region the camera frames. Keep it constant over a run (the wall's box)
   // so the camera does not jump from frame to frame.

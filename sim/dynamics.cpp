@@ -117,24 +117,9 @@ double WallMotion::surface_speed(const Bounds3d& wall_box) const {
   }
 }
 
-Bounds3d WallMotion::swept_box(const Bounds3d& wall_box) const {
-  if (moves_part()) {
-    WallMotion whole = *this;
-    whole.part_end = whole.part_begin = 0;
-    Bounds3d out = whole.swept_box(part_box);
-    if (kind == WallMotionKind::kOscillate) {  // the part's whole stroke
-      const Vec3d s = unit_axis() * std::fabs(amplitude);
-      const Vec3d reach{std::fabs(s.x), std::fabs(s.y), std::fabs(s.z)};
-      out.grow(part_box.lo - reach);
-      out.grow(part_box.hi + reach);
-    }
-    out.merge(wall_box);
-    return out;
-  }
-  const Bounds3d& box = wall_box;
-  if (kind != WallMotionKind::kRotate) return box;
-  // Every point turns on a circle about the axis: the box of the cylinder
-  // that holds the corners' circles.
+// Where a turn about the axis takes the box: the box of the cylinder that
+// holds its corners' circles.
+Bounds3d WallMotion::turned_box(const Bounds3d& box) const {
   const Vec3d a = unit_axis();
   const AxialReach reach = axial_reach(box, center, a);
   const double rho = reach.rho;
@@ -147,6 +132,22 @@ Bounds3d WallMotion::swept_box(const Bounds3d& wall_box) const {
     out.grow(p - ext);
     out.grow(p + ext);
   }
+  return out;
+}
+
+Bounds3d WallMotion::swept_box(const Bounds3d& wall_box) const {
+  if (!moves_part()) return kind == WallMotionKind::kRotate ? turned_box(wall_box) : wall_box;
+  // A part's sweep (its whole stroke for a shake), with the still rest.
+  Bounds3d out = part_box;
+  if (kind == WallMotionKind::kRotate) {
+    out = turned_box(part_box);
+  } else if (kind == WallMotionKind::kOscillate) {
+    const Vec3d s = unit_axis() * std::fabs(amplitude);
+    const Vec3d reach{std::fabs(s.x), std::fabs(s.y), std::fabs(s.z)};
+    out.grow(part_box.lo - reach);
+    out.grow(part_box.hi + reach);
+  }
+  out.merge(wall_box);
   return out;
 }
 

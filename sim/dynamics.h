@@ -100,6 +100,9 @@ struct WallMotion {
   // or oscillation of the whole wall is followed by the domain check, which
   // moves with the wall; a part's shake is held, as the rest stands still).
   Bounds3d swept_box(const Bounds3d& wall_box) const;
+
+ private:
+  Bounds3d turned_box(const Bounds3d& box) const;
 };
 
 struct DynamicsConfig {
