@@ -12,6 +12,7 @@
 
 #include "app/cli.h"
 #include "app/commands.h"
+#include "common/atomic_file.h"
 #include "gvm/rng.h"
 #include "job/assess.h"
 #include "job/cost_model.h"
@@ -78,6 +79,32 @@ void print_errors(const job::JobModelScore& s, bool validation) {
   std::printf(" %8s%% %9s\n", pct(100 * e.host_under5).c_str(), seconds_text(s.fit_seconds).c_str());
 }
 
+// The first split's validation jobs as job-log rows, then the GVM's p10, p50 and p90
+// of each cost: to look at the misses job by job (or chart them).
+Status write_job_predictions(const std::string& path, const job::JobComparison& cmp) {
+  std::istringstream log(job::format_job_log(cmp.validation));
+  std::string text, line;
+  for (size_t i = 0; std::getline(log, line); ++i) {
+    text += line;
+    if (i == 0) {
+      for (const char* k : kShort) text += std::string(",gvm_") + k + "_p10,gvm_" + k + "_p50,gvm_" + k + "_p90";
+    } else {
+      auto pr = cmp.model.predict(cmp.validation[i - 1].inputs);
+      if (!pr) return pr.status();
+      const job::CostInterval* c[job::kJobOutputs] = {&pr->total_s,          &pr->per_frame_s,
+                                                      &pr->peak_host_bytes,  &pr->peak_device_bytes,
+                                                      &pr->gpu_load,         &pr->output_bytes};
+      char cell[96];
+      for (const auto* iv : c) {
+        std::snprintf(cell, sizeof cell, ",%.9g,%.9g,%.9g", iv->p10, iv->p50, iv->p90);
+        text += cell;
+      }
+    }
+    text += '\n';
+  }
+  return write_file_atomic(path, text);
+}
+
 }  // namespace
 
 int gvm_train_jobs(const ParsedArgs& p, const std::string& log_path) {
@@ -109,9 +136,9 @@ int gvm_train_jobs(const ParsedArgs& p, const std::string& log_path) {
   if (!(opt.coverage > 0 && opt.coverage < 1)) return usage_error(cmd, "--coverage must be in (0, 1)");
   if (splits < 0 || splits > 100) return usage_error(cmd, "--splits must be in 0..100");
   if (mlp_epochs < 0) return usage_error(cmd, "--mlp-epochs must be >= 0");
-  if (p.has("ensemble") || p.has("predictions"))
-    return usage_error(cmd, "--ensemble and --predictions are for detection logs (a job model's "
-                            "members are its folds: --folds)");
+  if (p.has("ensemble"))
+    return usage_error(cmd, "--ensemble is for detection logs (a job model's members are its "
+                            "folds: --folds)");
 
   auto rows = job::read_job_log(log_path);
   if (!rows) {
@@ -156,6 +183,14 @@ int gvm_train_jobs(const ParsedArgs& p, const std::string& log_path) {
         std::fprintf(stderr, "collidoscope %s: cannot write %s\n", cmd, p.get("curve").c_str());
         return kExitFailure;
       }
+    }
+    if (s == 0 && p.has("predictions")) {
+      if (auto st = write_job_predictions(p.get("predictions"), *cmp); !st) {
+        std::fprintf(stderr, "collidoscope %s: %s\n", cmd, st.message().c_str());
+        return kExitFailure;
+      }
+      std::printf("validation predictions: %s (%zu rows)\n", p.get("predictions").c_str(),
+                  cmp->validation.size());
     }
     std::printf("validation MAPE %%:\n");
     print_errors_header();

@@ -2,7 +2,9 @@
 // argument errors. No wall-clock assertions: the machine running the tests is shared.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdlib>
+#include <fstream>
 #include <map>
 #include <set>
 #include <string>
@@ -142,7 +144,8 @@ TEST(CmdCalibrate, SameSeedSameConfigurations) {
 // job log; gvm train makes a job cost model of the committed CPU log; predict prices a
 // scene file with it, as text and JSON, and says when the scene lies outside.
 TEST(CmdCalibrate, JobSweepTrainAndPredictAScene) {
-  const std::string log = tmp("jobs.csv"), model = tmp("job_model.json"), scene = tmp("scene.json");
+  const std::string log = tmp("jobs.csv"), model = tmp("job_model.json"), scene = tmp("scene.json"),
+                    held_out = tmp("held_out.csv");
   ASSERT_EQ(cmd_calibrate({"--jobs", "--quick", "--configs", "2", "--repeats", "1", "--no-render",
                            "--out", log}),
             kExitOk);
@@ -153,12 +156,32 @@ TEST(CmdCalibrate, JobSweepTrainAndPredictAScene) {
   testing::internal::CaptureStdout();
   const int trained = cmd_gvm({"train", "--logs", std::string(COLLIDO_SOURCE_DIR) +
                                "/bench/data/jobs_cpu.csv", "--out", model, "--epochs", "30",
-                               "--hidden", "6", "--folds", "3", "--mlp-epochs", "50"});
+                               "--hidden", "6", "--folds", "3", "--mlp-epochs", "50",
+                               "--predictions", held_out});
   const std::string train_out = testing::internal::GetCapturedStdout();
   ASSERT_EQ(trained, kExitOk) << train_out;
   for (const char* s : {"job log", "validation MAPE", "paper-linear", "least-squares",
                         "mlp-backprop", "interval", "prediction time"})
     EXPECT_NE(train_out.find(s), std::string::npos) << s << "\n" << train_out;
+  // The held-out jobs, each with the GVM's interval around its point: the job log's
+  // rows (30 % of the log) then three columns a cost.
+  auto held = job::read_job_log(held_out);
+  ASSERT_TRUE(held) << held.status().message();
+  auto all = job::read_job_log(std::string(COLLIDO_SOURCE_DIR) + "/bench/data/jobs_cpu.csv");
+  ASSERT_TRUE(all);
+  EXPECT_NEAR(double(held->size()), 0.3 * double(all->size()), 2.0);
+  std::ifstream in(held_out);
+  std::string header, row;
+  std::getline(in, header);
+  std::getline(in, row);
+  EXPECT_NE(header.find(",gvm_total_p10,gvm_total_p50,gvm_total_p90,"), std::string::npos) << header;
+  EXPECT_NE(header.find("gvm_output_p90"), std::string::npos) << header;
+  auto cells = [](const std::string& line) { return std::count(line.begin(), line.end(), ','); };
+  EXPECT_EQ(cells(row), cells(header));
+  const auto last = row.rfind(','), before = row.rfind(',', last - 1), p10_at = row.rfind(',', before - 1);
+  const double p90 = std::stod(row.substr(last + 1)), p50 = std::stod(row.substr(before + 1)),
+               p10 = std::stod(row.substr(p10_at + 1));
+  EXPECT_TRUE(p10 <= p50 && p50 <= p90 && p10 > 0) << row;
   // Options of the other kind of log are refused.
   EXPECT_EQ(cmd_gvm({"train", "--logs", std::string(COLLIDO_SOURCE_DIR) + "/bench/data/jobs_cpu.csv",
                      "--out", model, "--ensemble", "3"}),
