@@ -162,6 +162,20 @@ function drawnShare(canvas) {
     return drawn / (c.width * c.height);
   });
 }
+// A digest of a canvas's pixels, to tell two pictures apart.
+function canvasDigest(canvas) {
+  return canvas.evaluate((c) => {
+    const copy = document.createElement('canvas');
+    copy.width = c.width;
+    copy.height = c.height;
+    const g = copy.getContext('2d');
+    g.drawImage(c, 0, 0);
+    const d = g.getImageData(0, 0, c.width, c.height).data;
+    let h = 0;
+    for (let i = 0; i < d.length; i++) h = (Math.imul(h, 31) + d[i]) >>> 0;
+    return h;
+  });
+}
 // Waits (bounded) until the canvas shows a model: more than `least` of it drawn.
 async function waitDrawn(canvas, what, least = 0.06) {
   const until = Date.now() + STEP_MS;
@@ -326,6 +340,7 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     await build.getByLabel('Start from').selectOption({ label: 'A drum on its side (to turn)' });
     await build.getByText(/^cylinder:r=5,h=4,segments=48,axis=y$/).waitFor();
     await waitDrawn(draft, 'the draft drum');
+    assert.equal(await build.getByLabel('See through').isChecked(), false, 'a drum of one part is drawn opaque');
     await build.getByRole('group', { name: 'Part 1' }).getByLabel('Axis').selectOption('x');
     await build.getByText(/^cylinder:r=5,h=4,segments=48,axis=x$/).waitFor();
     await build.getByRole('group', { name: 'Part 1' }).getByLabel('Axis').selectOption('y');
@@ -336,7 +351,15 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     await build.getByLabel('Start from').selectOption({ label: 'A tank with a paddle (to stir)' });
     await build.getByText(/^cylinder:r=5,h=6,segments=48,caps=bottom\+box:x=7\.5,y=0\.6,z=2,dz=0\.3$/).waitFor();
     await waitDrawn(draft, 'the draft tank');
+    // Two parts, the paddle inside the tank: drawn see-through so it shows; the box
+    // turns it off and on.
+    assert.equal(await build.getByLabel('See through').isChecked(), true, 'a tank and its paddle are seen through');
     await shot(page, '03-models-tank');
+    const through = await canvasDigest(draft);
+    await build.getByLabel('See through').uncheck();
+    assert.notEqual(await canvasDigest(draft), through, 'opaque draws another picture');
+    await build.getByLabel('See through').check();
+    assert.equal(await canvasDigest(draft), through, 'and see-through the same one again');
 
     // A file that is not STL: the server's loader says why.
     const upload = page.getByRole('region', { name: 'Upload an STL' });

@@ -15,10 +15,14 @@ export function createViewer(box, label) {
   // screenshot, the browser test's check that it is not blank).
   const canvas = h('canvas', { class: 'preview', tabindex: '0', role: 'img', 'aria-label': label });
   const wire = h('input', { type: 'checkbox' });
+  // See through: a part inside another (a paddle in a tank) hides behind its
+  // walls otherwise.
+  const xray = h('input', { type: 'checkbox' });
   const reset = h('button', { type: 'button', class: 'secondary small' }, 'Reset view');
   const size = h('span', { class: 'hint preview-size' });
   const tools = h('div', { class: 'preview-tools' },
-    h('label', { class: 'check' }, wire, 'Wireframe'), reset, size);
+    h('label', { class: 'check' }, wire, 'Wireframe'),
+    h('label', { class: 'check' }, xray, 'See through'), reset, size);
   const hint = h('p', { class: 'hint' },
     'Drag to turn, scroll or pinch to zoom, right-drag to pan; with the picture focused, arrow keys pan.');
   box.replaceChildren(canvas, tools, hint);
@@ -70,6 +74,13 @@ export function createViewer(box, label) {
     shown?.traverse((o) => {
       if (o.userData.role === 'solid') o.visible = !wire.checked;
       if (o.userData.role === 'edges') o.material.opacity = wire.checked ? 1 : 0.35;
+      if (o.userData.role === 'solid') {
+        // Without depth writes every surface behind shows through, in any order.
+        o.material.transparent = xray.checked;
+        o.material.opacity = xray.checked ? 0.35 : 1;
+        o.material.depthWrite = !xray.checked;
+        o.material.needsUpdate = true;
+      }
     });
     draw();
   }
@@ -81,12 +92,17 @@ export function createViewer(box, label) {
     draw();
   }
   wire.addEventListener('change', applyWire);
+  xray.addEventListener('change', applyWire);
   reset.addEventListener('click', goHome);
 
   return {
     canvas,
     // Shows a group (from stlObject or draftObject) and frames the camera on it.
+    // A draft is seen through when it gets several parts, so a part inside
+    // shows, and opaque when it gets one; the box is the user's in between.
     show(object) {
+      const parts = object.userData.parts;
+      if (parts && parts !== shown?.userData.parts) xray.checked = parts > 1;
       clear();
       shown = object;
       scene.add(object);
@@ -124,17 +140,20 @@ export function createViewer(box, label) {
   };
 }
 
+// A draft's parts in turn: the builder's Part 1, Part 2, ... (and New job's "What moves").
+const PART_COLORS = [0x7fb3e6, 0xe8b060, 0x8fd19e, 0xd98fc4];
+
 function fmt(x) {
   return Number(x.toPrecision(3)).toLocaleString();
 }
 
 // A mesh with its triangle edges drawn faintly (or alone, as a wireframe), so
 // the division shows. Both sides are drawn: vessels are open.
-function meshObject(geometries) {
+function meshObject(geometries, color = PART_COLORS[0]) {
   const group = new THREE.Group();
   for (const geometry of [].concat(geometries)) {
     const solid = new THREE.Mesh(geometry, new THREE.MeshPhongMaterial({
-      color: 0x7fb3e6, flatShading: true, side: THREE.DoubleSide }));
+      color, flatShading: true, side: THREE.DoubleSide }));
     solid.userData.role = 'solid';
     const edges = new THREE.LineSegments(new THREE.WireframeGeometry(geometry),
       new THREE.LineBasicMaterial({ color: 0xcfe3f7, transparent: true, opacity: 0.35 }));
@@ -210,7 +229,8 @@ export function draftObject(parts) {
     if (p.axis === 'y') for (const g of geometries) g.rotateX(-Math.PI / 2);
     if (p.axis === 'x') for (const g of geometries) g.rotateY(Math.PI / 2);
     for (const g of geometries) g.translate(v('dx', 0), v('dy', 0), v('dz', 0));
-    group.add(meshObject(geometries));
+    group.add(meshObject(geometries, PART_COLORS[group.children.length % PART_COLORS.length]));
   }
+  group.userData.parts = group.children.length;
   return group;
 }
