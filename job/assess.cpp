@@ -86,7 +86,7 @@ Expected<JobAssessment> assess_job(const JobSpec& spec) {
   const sim::Vec3d extent = sim::mesh_bounds(*wall).extent();
   a.box[0] = extent.x, a.box[1] = extent.y, a.box[2] = extent.z;
   a.frames = s.frames();
-  auto release = sim::plan_release(sim::mesh_bounds(*wall), s.particles, s.placement,
+  auto release = sim::plan_release(*wall, s.particles, s.placement,
                                    s.dynamics.gravity);
   if (!release) return release.status();
   a.release = *release;

@@ -56,9 +56,9 @@ struct ReleasePlan {
   // Mean share of the particles released over a run of `duration` seconds (1 for a fill).
   double mean_active(double duration) const;
 };
-// The plan of a placement against a wall whose bounding box is wall_box (m);
+// The plan of a placement against a wall (its slots are place_particles');
 // the same errors as place_particles gives for the inlet.
-Expected<ReleasePlan> plan_release(const Bounds3d& wall_box, const ParticleSpec& particles,
+Expected<ReleasePlan> plan_release(const TriangleMesh& wall, const ParticleSpec& particles,
                                    const PlacementSpec& placement, Vec3d gravity);
 
 }  // namespace collido::sim
