@@ -402,16 +402,19 @@ Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSp
   out->resize(ps.count);
   // Phases spread evenly over [0, 1) and dealt to the slots at random: the
   // stream leaves one particle at a time at the steady rate from the start
-  // (independent phases would let the count wander by sqrt(slots)).
-  std::vector<double> phase(disc.size());
+  // (independent phases would let the count wander by sqrt(slots)). Within a
+  // layer the particles take the slots in the order of their phases, so a last
+  // layer that fills only some slots leaves at the rate too (taken in slot
+  // order, 500 particles over 1,500 slots left at a third of it).
+  std::vector<size_t> by_phase(disc.size());  // the slot of the k-th phase
   const double shift = rng.uniform(0.0, 1.0);
-  for (size_t k = 0; k < phase.size(); ++k) phase[k] = (double(k) + shift) / double(phase.size());
-  for (size_t k = phase.size(); k > 1; --k)
-    std::swap(phase[k - 1], phase[std::min(k - 1, size_t(rng.uniform() * double(k)))]);
+  for (size_t k = 0; k < by_phase.size(); ++k) by_phase[k] = k;
+  for (size_t k = by_phase.size(); k > 1; --k)
+    std::swap(by_phase[k - 1], by_phase[std::min(k - 1, size_t(rng.uniform() * double(k)))]);
   const double jitter = 0.02 * r;
   const double speed = length(v);
   for (uint64_t i = 0; i < ps.count; ++i) {
-    const size_t slot = i % disc.size();
+    const size_t k = i % disc.size(), slot = by_phase[k];
     const Vec3d p = lay.centre + disc[slot];
     out->x[i] = p.x + rng.uniform(-jitter, jitter);
     out->y[i] = p.y + rng.uniform(-jitter, jitter);
@@ -424,7 +427,7 @@ Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSp
                     lay.w * (reach * std::sin(turn));
     const Vec3d vi = d * (speed / length(d));
     out->vx[i] = vi.x, out->vy[i] = vi.y, out->vz[i] = vi.z;
-    out->release[i] = (double(i / disc.size()) + phase[slot]) * lay.tau;
+    out->release[i] = (double(i / disc.size()) + (double(k) + shift) / double(disc.size())) * lay.tau;
   }
   return Status::ok();
 }
@@ -467,9 +470,8 @@ Expected<ReleasePlan> plan_release(const TriangleMesh& wall, const ParticleSpec&
   plan.slots = lay.disc.size();
   plan.period = lay.tau;
   plan.speed = length(lay.v);
-  // Particle i leaves at (i / slots + phase) tau, the phase uniform in [0, 1).
-  const uint64_t layers = ps.count ? (ps.count - 1) / plan.slots : 0;
-  plan.last_release = (double(layers) + 1.0) * lay.tau;
+  // Particle i leaves at (i + shift) tau / slots, shift uniform in [0, 1).
+  plan.last_release = double(ps.count) * lay.tau / double(plan.slots);
   return plan;
 }
 

@@ -291,7 +291,7 @@ TEST(Placement, APourIntoABallStartsInsideAndClearOfIt) {
 }
 
 // A pour's and a jet's released particles counted against rate x time from the
-// first quarter second: within 2 % (the inlet's phases are spread evenly, so the
+// first quarter second to the last particle: within 2 % (the inlet's phases are spread evenly, so the
 // count is exact to a particle or two); a rate the inlet cannot carry is refused
 // with the radius that would, and that radius carries it.
 std::string refusal(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl,
@@ -310,6 +310,10 @@ TEST(Placement, PourAndJetDeliverTheirRateFromTheStart) {
        800, 1, 1, 3000},
       {"funnel jet", make_cone(5, 30, 40, 64, Caps::kNone), PlacementKind::kJet, {-20, 0, 45},
        {8, 0, 0}, 8, 600, 0.4, 0.6, 3000},
+      // About 1,140 slots: a last layer of a third of them, which used to leave
+      // over a whole period, at a third of the rate.
+      {"wide pour", make_cylinder(50, 100, 40), PlacementKind::kPour, {0, 0, 60}, {0, 0, -2}, 40,
+       1500, 1, 1, 1500},
   };
   for (const Case& c : cases) {
     ParticleSpec ps;
@@ -324,7 +328,8 @@ TEST(Placement, PourAndJetDeliverTheirRateFromTheStart) {
     pl.rate = c.rate;
     auto p = place_particles(c.wall, ps, pl, {0, 0, -9.81}, 3);
     ASSERT_TRUE(p) << c.what << ": " << p.status().message();
-    for (double t : {0.25, 0.5, 1.0, 2.0, 2.5}) {
+    const double all_out = double(c.count) / c.rate;  // when the last should leave
+    for (double t : {0.25, 0.5, 1.0, 2.0, 2.5, 0.8 * all_out, 0.9 * all_out, 0.97 * all_out}) {
       const size_t released = size_t(std::count_if(p->release.begin(), p->release.end(),
                                                    [&](double r) { return r <= t; }));
       const double expected = std::min(double(c.count), c.rate * t);
