@@ -360,7 +360,9 @@ Status inlet_layout(const TriangleMesh& wall, const ParticleSpec& ps, const Plac
         "placement: no place in the inlet's disc (centre " + number_text(centre.x) + ", " +
         number_text(centre.y) + ", " + number_text(centre.z) + ", radius " + number_text(radius) +
         " m) is " + (pl.has_inlet ? "clear of the wall" : "inside the wall and clear of it") +
-        " for a particle of radius " + number_text(r) + " m; give placement.inlet and inlet_radius");
+        " for a particle of radius " + number_text(r) + " m; " +
+        (pl.has_inlet ? "move placement.inlet or change its inlet_radius"
+                      : "give placement.inlet and inlet_radius"));
   // Time for a layer to move D = s along dir with speed v0 and acceleration a = g . dir.
   const double D = s, a = dot(gravity, dir);
   double tau = D / v0;
