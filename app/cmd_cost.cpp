@@ -87,7 +87,8 @@ Status write_job_predictions(const std::string& path, const job::JobComparison& 
   for (size_t i = 0; std::getline(log, line); ++i) {
     text += line;
     if (i == 0) {
-      for (const char* k : kShort) text += std::string(",gvm_") + k + "_p10,gvm_" + k + "_p50,gvm_" + k + "_p90";
+      for (const char* k : kShort)
+        text += std::string(",gvm_") + k + "_p10,gvm_" + k + "_p50,gvm_" + k + "_p90";
     } else {
       auto pr = cmp.model.predict(cmp.validation[i - 1].inputs);
       if (!pr) return pr.status();

@@ -97,7 +97,8 @@ const std::vector<FlagSpec>& train_flags() {
       {"resample", true, "job log: train the written model on this many rows drawn with "
                          "replacement (timing runs)"},
       {"curve", true, "write every epoch's train/validation loss to this CSV"},
-      {"predictions", true, "write the validation rows with every model's predictions to this CSV (a job log: the first split's, with the GVM's p10, p50, p90)"},
+      {"predictions", true, "write the validation rows with every model's predictions to this "
+                            "CSV (a job log: the first split's, with the GVM's p10, p50, p90)"},
       {"mlp-epochs", true, "epochs of the back-propagation baseline (default 10000)"},
       {"help", false, "show this help"},
   };

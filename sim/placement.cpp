@@ -272,8 +272,10 @@ Status drop_blocked_slots(const TriangleMesh& wall, const ParticleSpec& ps, cons
     // Clear neighbours joined: along a row, and to the two nearest of the next row
     // (rows alternate by half a spacing; an odd row is shifted to +x).
     int lo_i = 0, hi_i = 0, lo_j = 0, hi_j = 0;
-    for (const auto& [i, j] : lattice)
-      lo_i = std::min(lo_i, i), hi_i = std::max(hi_i, i), lo_j = std::min(lo_j, j), hi_j = std::max(hi_j, j);
+    for (const auto& [i, j] : lattice) {
+      lo_i = std::min(lo_i, i), hi_i = std::max(hi_i, i);
+      lo_j = std::min(lo_j, j), hi_j = std::max(hi_j, j);
+    }
     const size_t width = size_t(hi_i - lo_i + 1);
     std::vector<int32_t> at(width * size_t(hi_j - lo_j + 1), -1);
     auto cell = [&](int i, int j) -> int32_t {

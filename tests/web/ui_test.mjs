@@ -145,9 +145,10 @@ async function shot(page, name) {
   await page.setViewportSize(size);
 }
 
-// The share of a canvas's pixels that are not the preview's background
-// (#20262e): the floor grid alone is a few per cent, a model far more.
-function drawnShare(canvas) {
+// What a canvas shows: `drawn`, the share of its pixels that are not the
+// preview's background (#20262e: the floor grid alone is a few per cent, a
+// model far more), and `digest`, a hash of every pixel to tell two pictures apart.
+function canvasLook(canvas) {
   return canvas.evaluate((c) => {
     const copy = document.createElement('canvas');
     copy.width = c.width;
@@ -155,27 +156,16 @@ function drawnShare(canvas) {
     const g = copy.getContext('2d');
     g.drawImage(c, 0, 0);
     const d = g.getImageData(0, 0, c.width, c.height).data;
-    let drawn = 0;
+    let drawn = 0, digest = 0;
     for (let i = 0; i < d.length; i += 4) {
       if (Math.abs(d[i] - 0x20) + Math.abs(d[i + 1] - 0x26) + Math.abs(d[i + 2] - 0x2e) > 40) drawn++;
+      for (let k = i; k < i + 4; k++) digest = (Math.imul(digest, 31) + d[k]) >>> 0;
     }
-    return drawn / (c.width * c.height);
+    return { drawn: drawn / (c.width * c.height), digest };
   });
 }
-// A digest of a canvas's pixels, to tell two pictures apart.
-function canvasDigest(canvas) {
-  return canvas.evaluate((c) => {
-    const copy = document.createElement('canvas');
-    copy.width = c.width;
-    copy.height = c.height;
-    const g = copy.getContext('2d');
-    g.drawImage(c, 0, 0);
-    const d = g.getImageData(0, 0, c.width, c.height).data;
-    let h = 0;
-    for (let i = 0; i < d.length; i++) h = (Math.imul(h, 31) + d[i]) >>> 0;
-    return h;
-  });
-}
+const drawnShare = async (canvas) => (await canvasLook(canvas)).drawn;
+const canvasDigest = async (canvas) => (await canvasLook(canvas)).digest;
 // Waits (bounded) until the canvas shows a model: more than `least` of it drawn.
 async function waitDrawn(canvas, what, least = 0.06) {
   const until = Date.now() + STEP_MS;
