@@ -134,10 +134,11 @@ TEST(Placement, FillFindsEveryCavityOfAClosedWall) {
     const Vec3d c{p->x[i], p->y[i], p->z[i]};
     EXPECT_GT(std::fabs(winding_number(wall, c)), 0.5) << "particle " << i;
     EXPECT_FALSE(c.x > 4.5 && c.x < 9.5) << "between the boxes: " << c.x;
-    // The block spans [12, 16] x [-2, 2] x [3, 7].
-    EXPECT_FALSE(std::fabs(c.x - 14) < 2 + 0.45 && std::fabs(c.y) < 2 + 0.45 && c.z > 3 - 0.45 &&
-                 c.z < 7 + 0.45)
-        << "in or on the block";
+    // The block spans [12, 16] x [-2, 2] x [3, 7]: no centre within a radius of it.
+    const double dx = std::max(std::fabs(c.x - 14) - 2, 0.0), dy = std::max(std::fabs(c.y) - 2, 0.0),
+                 dz = std::max({3 - c.z, c.z - 7, 0.0});
+    EXPECT_GE(std::sqrt(dx * dx + dy * dy + dz * dz), 0.45)
+        << "in or on the block: " << c.x << ", " << c.y << ", " << c.z;
     (c.x < 7 ? in_left : in_right) += 1;
   }
   EXPECT_GT(in_left, 100u);
