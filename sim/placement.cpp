@@ -60,6 +60,11 @@ struct DisjointSets {
   }
 };
 
+// Whether p lies inside the wall as a vessel holds it: a generalized winding
+// number of 1/2 or more in magnitude (a vessel wound inward, as other DEM codes
+// export them, has w = -1 inside).
+bool holds(const TriangleMesh& wall, Vec3d p) { return std::fabs(winding_number(wall, p)) >= 0.5; }
+
 class SideOfWall {
  public:
   explicit SideOfWall(const TriangleMesh& wall) : wall_(wall) {}
@@ -72,11 +77,9 @@ class SideOfWall {
     const uint32_t root = groups_.join(uint32_t(a), uint32_t(b));
     if (side_[root] == kUnknown) side_[root] = side;
   }
-  // |w|: a vessel wound inward (as other DEM codes export them) has w = -1 inside.
   bool inside(int g, Vec3d p) {
     const uint32_t root = groups_.find(uint32_t(g));
-    if (side_[root] == kUnknown)
-      side_[root] = std::fabs(winding_number(wall_, p)) >= 0.5 ? kIn : kOut;
+    if (side_[root] == kUnknown) side_[root] = holds(wall_, p) ? kIn : kOut;
     return side_[root] == kIn;
   }
 
@@ -87,14 +90,15 @@ class SideOfWall {
   std::vector<uint8_t> side_;
 };
 
-// Solid angles an open wall's fill may sum (triangles x particles), about 10 s.
+// Solid angles an open wall's sites may sum (triangles x (sites + probes)), about 10 s.
 constexpr double kOpenSideWork = 4e8;
+constexpr int kEnclosureProbes = 4;  // a side: 4^3 probes of the box
 
 // Whether an open wall holds some of the box [lo, hi] as a vessel does: its
-// winding number reaches 0.6 at one of 8^3 points spread through it (a flat
+// winding number reaches 0.6 at one of the probes spread through it (a flat
 // wall never passes 1/2; a funnel's middle has about 2/3).
 bool encloses_some(const TriangleMesh& wall, Vec3d lo, Vec3d hi) {
-  constexpr int kSamples = 8;
+  constexpr int kSamples = kEnclosureProbes;
   const Vec3d step = (hi - lo) * (1.0 / kSamples);
   for (int k = 0; k < kSamples; ++k)
     for (int j = 0; j < kSamples; ++j)
@@ -103,6 +107,19 @@ bool encloses_some(const TriangleMesh& wall, Vec3d lo, Vec3d hi) {
         if (std::fabs(winding_number(wall, p)) >= 0.6) return true;
       }
   return false;
+}
+
+// Whether the sites of an open (not closed) wall, a cup or a funnel, are told inside from
+// outside one by one, by their winding numbers: its winding number is not
+// constant between sites the wall does not part (it falls through the
+// opening). Only where the wall encloses some of [lo, hi] (an open wall that
+// holds nothing, a floor or a plate, keeps every clear site), and only where
+// the probes and one pass over every triangle a site stay within
+// kOpenSideWork (past it, every clear site is kept).
+bool sites_by_winding(const TriangleMesh& wall, Vec3d lo, Vec3d hi, double sites) {
+  const double probes = double(kEnclosureProbes) * kEnclosureProbes * kEnclosureProbes;
+  return double(wall.triangles.size()) * (sites + probes) <= kOpenSideWork &&
+         encloses_some(wall, lo, hi);
 }
 
 // Lattice sites in the region, a layer (fixed z) at a time from the bottom, that
@@ -125,18 +142,11 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
     return invalid_argument("placement.region: a layer of " + std::to_string(nx * ny) +
                             " sites is too large");
   const bool closed = is_closed_manifold(wall);
-  // An open vessel (a cup, a funnel) has no inside by parity: its generalized
-  // winding number (the solid angle the wall fills, over 4 pi) is near 1 in
-  // the cup and near 0 beside it, and a site counts as inside at 1/2 or more.
-  // It is not constant between sites the wall does not part (it falls
-  // through the opening), so each site gets its own: a pass over every
-  // triangle. A fill's box region holds a cup's corners, outside the cup: 30
-  // of 300 particles were placed there and fell away. An open wall that holds
-  // nothing (a floor, a plate: 1/2 at most anywhere) keeps every clear site,
-  // as does one where the passes would take minutes.
-  const bool open_sides = !closed &&
-                          double(wall.triangles.size()) * double(ps.count) <= kOpenSideWork &&
-                          encloses_some(wall, lo, hi);
+  // An open vessel (a cup, a funnel) has no inside by parity: a site is
+  // inside where its own winding number says so (sites_by_winding). A fill's
+  // box region holds a cup's corners, outside the cup: 30 of 300 particles
+  // were placed there and fell away.
+  const bool open_sides = !closed && sites_by_winding(wall, lo, hi, double(ps.count));
   // The wall's own detector finds sites that would start touching it; on a
   // closed wall a second look at a larger radius finds the sites clear enough
   // to join their neighbours (SideOfWall).
@@ -204,8 +214,7 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
     for (size_t s = 0; s < layer.size() && out->size() < ps.count; ++s) {
       if (touching[s]) continue;
       if (closed && !side.inside(group[s], {layer.x[s], layer.y[s], layer.z[s]})) continue;
-      if (open_sides && !(std::fabs(winding_number(wall, {layer.x[s], layer.y[s], layer.z[s]})) >= 0.5))
-        continue;
+      if (open_sides && !holds(wall, {layer.x[s], layer.y[s], layer.z[s]})) continue;
       const size_t n = out->size();
       out->resize(n + 1);
       out->x[n] = layer.x[s], out->y[n] = layer.y[s], out->z[n] = layer.z[s];
@@ -240,13 +249,13 @@ struct InletLayout {
 // leave cleanly (the wall's own detector at 1.1 r: the jitter, and room for
 // the first step), and, for the default inlet (3 r under the top of the
 // wall's box, meant to pour into the vessel), those outside a wall that holds
-// particles: a closed wall, or an open one that encloses (a generalized
-// winding number of 1/2 or more, as for a fill's sites). A disc wider than a
+// particles: a closed wall, or an open one that encloses (sites_by_winding),
+// as for a fill's sites. A disc wider than a
 // ball's top reached past its side, and a disc under a plate's top lay across
 // its holes: particles were released into the wall and thrown off at hundreds
-// of metres a second (40 of 300 escaped a pour into a ball). Two clear
-// neighbours (2.2 r apart, each clear for 1.1 r) lie on one side of the wall,
-// so each group of them needs one winding number. lattice: each slot's (i, j).
+// of metres a second (40 of 300 escaped a pour into a ball). On a closed wall
+// two clear neighbours (2.2 r apart, each clear for 1.1 r) lie on one side of
+// it, so each group of them needs one winding number. lattice: each slot's (i, j).
 Status drop_blocked_slots(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl,
                           const Bounds3d& box, Vec3d centre, std::vector<Vec3d>* disc,
                           const std::vector<std::pair<int, int>>& lattice) {
@@ -268,38 +277,40 @@ Status drop_blocked_slots(const TriangleMesh& wall, const ParticleSpec& ps, cons
   if (Status st = (*detector)->detect(&found); !st) return st;
   const size_t n = disc->size();
   std::vector<bool> inside(n, true);
-  if (!pl.has_inlet && (is_closed_manifold(wall) || encloses_some(wall, box.lo, box.hi))) {
-    // Clear neighbours joined: along a row, and to the two nearest of the next row
-    // (rows alternate by half a spacing; an odd row is shifted to +x).
+  const bool closed = is_closed_manifold(wall);
+  if (!pl.has_inlet && closed) {
+    // Clear neighbours joined, as a fill's sites (SideOfWall): along a row, and to
+    // the two nearest of the next row (rows alternate by half a spacing; an odd
+    // row is shifted to +x).
     int lo_i = 0, hi_i = 0, lo_j = 0, hi_j = 0;
     for (const auto& [i, j] : lattice) {
       lo_i = std::min(lo_i, i), hi_i = std::max(hi_i, i);
       lo_j = std::min(lo_j, j), hi_j = std::max(hi_j, j);
     }
     const size_t width = size_t(hi_i - lo_i + 1);
-    std::vector<int32_t> at(width * size_t(hi_j - lo_j + 1), -1);
-    auto cell = [&](int i, int j) -> int32_t {
+    std::vector<int> group_at(width * size_t(hi_j - lo_j + 1), -1);
+    auto group = [&](int i, int j) -> int {
       if (i < lo_i || i > hi_i || j < lo_j || j > hi_j) return -1;
-      return at[size_t(j - lo_j) * width + size_t(i - lo_i)];
+      return group_at[size_t(j - lo_j) * width + size_t(i - lo_i)];
     };
+    SideOfWall side(wall);
     for (size_t k = 0; k < n; ++k)
       if (found.counts[k] == 0)
-        at[size_t(lattice[k].second - lo_j) * width + size_t(lattice[k].first - lo_i)] = int32_t(k);
-    DisjointSets sets(n);
+        group_at[size_t(lattice[k].second - lo_j) * width + size_t(lattice[k].first - lo_i)] =
+            side.new_group();
     for (size_t k = 0; k < n; ++k) {
-      if (found.counts[k] != 0) continue;
       const auto [i, j] = lattice[k];
-      const int up = (j & 1) ? i + 1 : i - 1;  // the next row's other nearest slot
-      for (const int32_t m : {cell(i + 1, j), cell(i, j + 1), cell(up, j + 1)})
-        if (m >= 0) sets.join(uint32_t(k), uint32_t(m));
+      const int g = group(i, j), up = (j & 1) ? i + 1 : i - 1;  // the next row's other nearest
+      if (g < 0) continue;
+      for (const int m : {group(i + 1, j), group(i, j + 1), group(up, j + 1)})
+        if (m >= 0) side.join(m, g);
     }
-    std::vector<int8_t> side(n, -1);  // per root: 1 inside, 0 outside, -1 not yet known
-    for (size_t k = 0; k < n; ++k) {
-      if (found.counts[k] != 0) continue;
-      int8_t& known = side[sets.find(uint32_t(k))];
-      if (known < 0) known = std::fabs(winding_number(wall, centre + (*disc)[k])) >= 0.5 ? 1 : 0;
-      inside[k] = known == 1;
-    }
+    for (size_t k = 0; k < n; ++k)
+      if (found.counts[k] == 0) inside[k] = side.inside(group(lattice[k].first, lattice[k].second),
+                                                        centre + (*disc)[k]);
+  } else if (!pl.has_inlet && !closed && sites_by_winding(wall, box.lo, box.hi, double(n))) {
+    for (size_t k = 0; k < n; ++k)
+      if (found.counts[k] == 0) inside[k] = holds(wall, centre + (*disc)[k]);
   }
   std::vector<Vec3d> kept;
   for (size_t k = 0; k < n; ++k)

@@ -261,6 +261,19 @@ TEST(Placement, APourIntoABallStartsInsideAndClearOfIt) {
   ASSERT_TRUE(plan) << plan.status().message();
   EXPECT_EQ(plan->slots, places.size());  // the plan counts the places the pour uses
 
+  // An open vessel narrowing to its top (no lid): the disc reaches past its side
+  // there too, and each place is judged by its own winding number.
+  auto narrowing = make_shape("cone:r1=8,r2=2,h=10,segments=48,caps=bottom");
+  ASSERT_TRUE(narrowing);
+  ASSERT_FALSE(is_closed_manifold(*narrowing));
+  auto o = place_particles(*narrowing, ps, pl, {0, 0, -9.81}, 1);
+  ASSERT_TRUE(o) << o.status().message();
+  for (size_t i = 0; i < o->size(); ++i) {
+    const Vec3d at{o->x[i], o->y[i], o->z[i]};
+    EXPECT_GE(std::fabs(winding_number(*narrowing, at)), 0.5) << i;
+    EXPECT_GE(wall_distance(*narrowing, at), 1.1 * 0.3 - 0.02 * 0.3) << i;
+  }
+
   // A given inlet across a closed cylinder's side: no start within 1.1 r of it,
   // some outside.
   const TriangleMesh can = make_cylinder(20, 60, 40);
