@@ -9,9 +9,12 @@
 namespace collido::job {
 namespace {
 
-// The last two characters are the format: 02 holds the engine's particle
-// numbering among the arrays (01, before particles were renumbered by cell, did not).
-constexpr char kMagic[8] = {'C', 'L', 'C', 'K', 'P', 'T', '0', '2'};
+// The last two characters are the format: 03 holds the neighbour lists after
+// the arrays; 02 (read still: its lists are built afresh) did not; 02 holds the
+// engine's particle numbering among the arrays (01, before particles were
+// renumbered by cell, did not).
+constexpr char kMagic[8] = {'C', 'L', 'C', 'K', 'P', 'T', '0', '3'};
+constexpr char kMagicWithoutLists[8] = {'C', 'L', 'C', 'K', 'P', 'T', '0', '2'};
 // More than any run holds; a larger count or size means a damaged file.
 constexpr uint32_t kMaxArrays = 64;
 
@@ -58,10 +61,12 @@ Status write_checkpoint(const std::string& path, const Checkpoint& c) {
   put(&b, c.state.time);
   put(&b, c.state.steps);
   put(&b, uint8_t(c.state.all_released));
-  put(&b, uint32_t(c.state.arrays.size()));
-  for (const auto& a : c.state.arrays) {
-    put(&b, uint64_t(a.size()));
-    b.append(reinterpret_cast<const char*>(a.data()), a.size());
+  for (const auto* arrays : {&c.state.arrays, &c.state.lists}) {
+    put(&b, uint32_t(arrays->size()));
+    for (const auto& a : *arrays) {
+      put(&b, uint64_t(a.size()));
+      b.append(reinterpret_cast<const char*>(a.data()), a.size());
+    }
   }
   put(&b, fnv1a(b));
   return write_file_atomic(path, b);
@@ -74,12 +79,15 @@ Expected<Checkpoint> read_checkpoint(const std::string& path) {
   ss << in.rdbuf();
   const std::string b = ss.str();
   auto damaged = [&](const char* why) { return parse_error(path + ": damaged checkpoint (" + why + ")"); };
+  const bool without_lists =
+      b.size() >= sizeof kMagic && std::memcmp(b.data(), kMagicWithoutLists, sizeof kMagic) == 0;
   if (b.size() >= sizeof kMagic && std::memcmp(b.data(), kMagic, 6) == 0 &&
-      std::memcmp(b.data(), kMagic, sizeof kMagic) != 0)
+      std::memcmp(b.data(), kMagic, sizeof kMagic) != 0 && !without_lists)
     return parse_error(path + ": a checkpoint of another format (" + b.substr(6, 2) +
                        ", this version reads " + std::string(kMagic + 6, 2) +
                        "): run the scene again from its start");
-  if (b.size() < sizeof kMagic + 8 || std::memcmp(b.data(), kMagic, sizeof kMagic) != 0)
+  if (b.size() < sizeof kMagic + 8 ||
+      (std::memcmp(b.data(), kMagic, sizeof kMagic) != 0 && !without_lists))
     return damaged("not a checkpoint");
   uint64_t stored = 0;
   std::memcpy(&stored, b.data() + b.size() - 8, 8);
@@ -89,15 +97,19 @@ Expected<Checkpoint> read_checkpoint(const std::string& path) {
   r.get(&magic);
   Checkpoint c;
   uint8_t released = 0;
-  uint32_t arrays = 0;
   if (!r.get(&c.frame) || !r.get(&c.state.particles) || !r.get(&c.state.time) ||
-      !r.get(&c.state.steps) || !r.get(&released) || !r.get(&arrays) || arrays > kMaxArrays)
+      !r.get(&c.state.steps) || !r.get(&released))
     return damaged("header");
   c.state.all_released = released != 0;
-  c.state.arrays.resize(arrays);
-  for (auto& a : c.state.arrays) {
-    uint64_t n = 0;
-    if (!r.get(&n) || n > b.size() || !r.bytes(size_t(n), &a)) return damaged("arrays");
+  for (auto* arrays : {&c.state.arrays, &c.state.lists}) {
+    if (arrays == &c.state.lists && without_lists) break;
+    uint32_t count = 0;
+    if (!r.get(&count) || count > kMaxArrays) return damaged("header");
+    arrays->resize(count);
+    for (auto& a : *arrays) {
+      uint64_t n = 0;
+      if (!r.get(&n) || n > b.size() || !r.bytes(size_t(n), &a)) return damaged("arrays");
+    }
   }
   if (r.at() + 8 != b.size()) return damaged("length");
   return c;

@@ -1,8 +1,9 @@
 // A run's changing state at a frame boundary, saved so a killed or preempted
 // job resumes where it stopped. Little-endian binary:
-//   char[8] "CLCKPT01", uint64 frame, uint64 particles, double time,
+//   char[8] "CLCKPT03", uint64 frame, uint64 particles, double time,
 //   uint64 steps, uint8 all_released, uint32 array count,
-//   then per array: uint64 bytes, the bytes;
+//   then per array: uint64 bytes, the bytes; the same for the neighbour
+//   lists (a count, then each array; "CLCKPT02" files end before them);
 //   last, uint64 FNV-1a hash of everything before it.
 // Written through a temporary name, so the file is always a whole checkpoint.
 #pragma once

@@ -149,7 +149,7 @@ struct DynamicsConfig {
   // When the particles are renumbered in the order of their cells (for
   // locality; results keep the caller's numbering): -1 at a list build where
   // the numbering has scattered (kScatteredCells); 0 never; N at the first
-  // list build and every N-th after (counted from the start, or from a resume).
+  // list build and every N-th after (counted from the start, a resume included).
   int renumber_every = -1;
   double domain_margin = -1;  // escape distance outside the wall's box, m; < 0 = automatic
   uint64_t max_dense_cells = 1ull << 24;
@@ -245,6 +245,11 @@ struct SimState {
   uint64_t steps = 0;
   bool all_released = false;
   std::vector<std::vector<uint8_t>> arrays;  // the backend's buffers, in the pipeline's order
+  // The neighbour lists as they were built (their skin, when and where, the
+  // build count): a run restored with them builds its next lists at the step
+  // the saved run would have, so it renumbers and sums its forces alike.
+  // Empty: none, or a state saved without them (the lists are built afresh).
+  std::vector<std::vector<uint8_t>> lists;
 };
 
 class Simulation {

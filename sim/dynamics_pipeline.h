@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <type_traits>
 #include <vector>
@@ -192,6 +193,7 @@ class DynamicsPipeline final : public Simulation {
       out->arrays.push_back(std::move(bytes));
       return true;
     });
+    save_lists(&out->lists);
     return backend_.status();
   }
 
@@ -226,7 +228,7 @@ class DynamicsPipeline final : public Simulation {
     released_to_ = -std::numeric_limits<double>::infinity();
     close_pending_ = false;  // the restored state is a whole step's
     disp_fresh_ = false;
-    nl_valid_ = false;  // built afresh for the restored positions
+    if (Status s = restore_lists(in.lists); !s) return s;
     backend_.sync();
     return backend_.status();
   }
@@ -434,6 +436,98 @@ class DynamicsPipeline final : public Simulation {
       if (ok && cfg_.particle_contacts) ok = f(pair_hist_[hist_in_], n_ * kPairSlots);
     }
     return ok;
+  }
+
+  // What a list build leaves besides the lists, saved with them.
+  struct ListScalars {
+    uint64_t valid, cover, built_step, pair_builds;
+    double skin, per_particle, wall_per_particle, built_at, life;
+  };
+
+  // Calls f(buffer, element count) for each buffer of the lists as built, in
+  // one fixed order (see state_arrays); counts from the saved scalars.
+  template <class F>
+  bool list_arrays(const ListScalars& s, uint64_t up, uint64_t lo, uint64_t wall, F&& f) {
+    const size_t c = size_t(s.cover);
+    bool ok = f(nl_start_, c + 1) && f(nl_list_, up) && f(lo_start_, c + 1) && f(lo_j_, lo) &&
+              (!once_ || f(lo_rec_, lo)) && f(x_ref_, c);
+    if (ok && wall_list_) ok = f(wl_start_, c + 1) && f(wl_count_, c) && f(wl_list_, wall);
+    return ok;
+  }
+
+  // The lists into *out: their scalars, then list_arrays' buffers (none when
+  // they are not built), the entry counts first.
+  void save_lists(std::vector<std::vector<uint8_t>>* out) {
+    out->clear();
+    if (!nlist_) return;
+    const ListScalars s{nl_valid_,        nl_cover_,        nl_built_step_,
+                        pair_builds_,     skin_,            nl_per_particle_,
+                        wl_per_particle_, nl_built_at_,     nl_life_};
+    auto bytes_of = [](const void* p, size_t n) {
+      const auto* b = static_cast<const uint8_t*>(p);
+      return std::vector<uint8_t>(b, b + n);
+    };
+    out->push_back(bytes_of(&s, sizeof s));
+    if (!nl_valid_) return;
+    // The upper, lower and wall entries: each scan's total, after its last particle.
+    auto total = [&](const Buf<uint32_t>& start) {
+      uint32_t t = 0;
+      backend_.to_host(&t, start.data() + nl_cover_, sizeof t);
+      return uint64_t(t);
+    };
+    const uint64_t counts[3] = {total(nl_start_), total(lo_start_),
+                                wall_list_ ? total(wl_start_) : 0};
+    out->push_back(bytes_of(counts, sizeof counts));
+    list_arrays(s, counts[0], counts[1], counts[2], [&](auto& buf, size_t count) {
+      std::vector<uint8_t> b(count * sizeof(*buf.data()));
+      if (count) backend_.to_host(b.data(), buf.data(), b.size());
+      out->push_back(std::move(b));
+      return true;
+    });
+  }
+
+  // The lists save_lists gave, in place of a build: or, given none, a build at the next step.
+  Status restore_lists(const std::vector<std::vector<uint8_t>>& in) {
+    nl_valid_ = false;
+    if (in.empty() || !nlist_) return Status::ok();
+    auto refused = [] {
+      return invalid_argument("checkpoint's neighbour lists do not match this run's particles");
+    };
+    ListScalars s{};
+    if (in[0].size() != sizeof s) return refused();
+    std::memcpy(&s, in[0].data(), sizeof s);
+    if (s.cover > n_ || !(s.skin > 0) || !std::isfinite(s.skin)) return refused();
+    if (s.skin != skin_) {  // it grew in the saved run: the grid's cells with it
+      skin_ = s.skin;
+      ts_.neighbour_skin = skin_;
+      make_particle_grid();
+    }
+    nl_built_step_ = s.built_step, pair_builds_ = s.pair_builds;
+    nl_per_particle_ = s.per_particle, wl_per_particle_ = s.wall_per_particle;
+    nl_built_at_ = s.built_at, nl_life_ = s.life;
+    if (!s.valid) return Status::ok();
+    uint64_t counts[3];
+    if (in.size() < 2 || in[1].size() != sizeof counts) return refused();
+    std::memcpy(counts, in[1].data(), sizeof counts);
+    size_t k = 2;
+    const bool fits = list_arrays(s, counts[0], counts[1], counts[2], [&](auto& buf, size_t count) {
+      using T = std::remove_reference_t<decltype(*buf.data())>;
+      if (k >= in.size() || in[k].size() != count * sizeof(T)) return false;
+      if (count > buf.size()) backend_.resize(buf, count);
+      if (count) backend_.to_device(buf.data(), in[k].data(), in[k].size());
+      ++k;
+      return true;
+    });
+    if (!fits || k != in.size()) return refused();
+    if (once_ && counts[0] > rec_f_.size()) {  // the records of every listed pair
+      backend_.resize(rec_f_, size_t(counts[0]));
+      backend_.resize(rec_touched_, size_t(counts[0]));
+      if (rotation_) backend_.resize(rec_torque_, size_t(counts[0]));
+      if (rotation_ && pair_law_.mu_roll > 0) backend_.resize(rec_roll_, size_t(counts[0]));
+    }
+    nl_cover_ = size_t(s.cover);
+    nl_valid_ = true;
+    return Status::ok();
   }
 
   // The per-particle arrays as plain pointers, for the loop bodies to capture by value.
@@ -723,6 +817,18 @@ class DynamicsPipeline final : public Simulation {
     Vec3d lo, hi;
   };
   Domain domain_at(const WallPose& pose) const { return {lo_ + pose.d, hi_ + pose.d}; }
+  COLLIDO_HD static COLLIDO_FORCEINLINE bool outside(Vec3d x, const Domain& dom) {
+    return x.x < dom.lo.x || x.y < dom.lo.y || x.z < dom.lo.z || x.x > dom.hi.x ||
+           x.y > dom.hi.y || x.z > dom.hi.z;
+  }
+  // A particle that leaves the domain escapes: frozen where it left, counted.
+  COLLIDO_HD static COLLIDO_FORCEINLINE uint8_t escape(const ParticleArrays& P, uint32_t i,
+                                                        double* speed) {
+    P.state[i] = kEscaped;
+    P.flags[i] = kEscaped;
+    speed[i] = 0;
+    return kEscaped;
+  }
 
   // The end of a step for active particle i: the closing kick (Verlet's second
   // half, or symplectic Euler's whole kick and drift), then the checks.
@@ -752,14 +858,7 @@ class DynamicsPipeline final : public Simulation {
     P.v[i] = vi;
     if (!verlet) P.x[i] = xi;  // Verlet moved it in the drift
     speed[i] = sqrt(s2);
-    const Vec3d lo = dom.lo, hi = dom.hi;
-    if (xi.x < lo.x || xi.y < lo.y || xi.z < lo.z || xi.x > hi.x || xi.y > hi.y || xi.z > hi.z) {
-      P.state[i] = kEscaped;
-      P.flags[i] = kEscaped;
-      speed[i] = 0;
-      return kEscaped;
-    }
-    return kActive;
+    return outside(xi, dom) ? escape(P, i, speed) : uint8_t(kActive);
   }
 
   // What open_step does to one particle; returns its squared move since the
@@ -770,6 +869,7 @@ class DynamicsPipeline final : public Simulation {
     double h, dt;  // the pending step's length, this step's
     double* speed;
     Domain dom;  // where the pending step ended
+    Domain next;  // where this step ends
     const Vec3d* ref;
     const double* rel;
     double free_t;  // see release_marked
@@ -791,6 +891,14 @@ class DynamicsPipeline final : public Simulation {
       P.v[i] = v;
       P.x[i] = x;
       if (rot) P.w[i] = P.w[i] + P.alpha[i] * (0.5 * dt);
+      // Out of the domain, it escapes here, before this step's forces: the
+      // particle grid ends at the domain, so a pair list built before it left
+      // would give its partners forces that one built after would not (the
+      // forces would hang on when the lists were built).
+      if (outside(x, next)) {
+        escape(P, i, speed);
+        return 0.0;
+      }
       if (!disp) return 0.0;
       const Vec3d d = x - ref[i];
       return dot(d, d);
@@ -807,7 +915,7 @@ class DynamicsPipeline final : public Simulation {
                       close_pending_, disp,
                       pending_dt_,   dt,
                       speed_.data(), domain_at(wall_pose(time_)),
-                      x_ref_.data(), release_.data(),
+                      domain_at(wall_pose(time_ + dt)), x_ref_.data(), release_.data(),
                       free_release_time()};
     if (disp) {
       disp_max_ = backend_.parallel_max(live_, [=] COLLIDO_HD(uint32_t i) { return op(i); });

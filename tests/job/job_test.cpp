@@ -187,6 +187,7 @@ TEST(Job, CheckpointsRoundTripAndDamageIsDetected) {
   EXPECT_EQ(ck->frame, 12u);
   EXPECT_EQ(ck->state.particles, 64u);
   EXPECT_GT(ck->state.arrays.size(), 6u);  // friction and pairs: springs saved too
+  EXPECT_GT(ck->state.lists.size(), 2u);   // and the neighbour lists as built
   std::string bytes = read_file(dir + "/checkpoint.bin");
   bytes[bytes.size() / 2] ^= 1;
   ASSERT_TRUE(write_file_atomic(dir + "/damaged.bin", bytes));
@@ -200,6 +201,23 @@ TEST(Job, CheckpointsRoundTripAndDamageIsDetected) {
   ASSERT_FALSE(older);
   EXPECT_NE(older.status().message().find("another format (01"), std::string::npos)
       << older.status().message();
+  // One of the format before the lists were saved (02) is read, without lists.
+  std::string v2("CLCKPT02", 8);
+  auto put = [&](const auto& v) { v2.append(reinterpret_cast<const char*>(&v), sizeof v); };
+  put(ck->frame), put(ck->state.particles), put(ck->state.time), put(ck->state.steps);
+  put(uint8_t(ck->state.all_released)), put(uint32_t(ck->state.arrays.size()));
+  for (const auto& a : ck->state.arrays) {
+    put(uint64_t(a.size()));
+    v2.append(reinterpret_cast<const char*>(a.data()), a.size());
+  }
+  uint64_t hash = 1469598103934665603ull;  // FNV-1a, as the header says
+  for (unsigned char c : v2) hash = (hash ^ c) * 1099511628211ull;
+  put(hash);
+  ASSERT_TRUE(write_file_atomic(dir + "/v2.bin", v2));
+  const auto without_lists = read_checkpoint(dir + "/v2.bin");
+  ASSERT_TRUE(without_lists) << without_lists.status().message();
+  EXPECT_EQ(without_lists->state.arrays, ck->state.arrays);
+  EXPECT_TRUE(without_lists->state.lists.empty());
 }
 
 // Runs the spec in a job-exec child and kills it with SIGKILL once it has
