@@ -132,9 +132,12 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
               hi = pl.has_region ? pl.region_hi : box.hi;
   if (!(lo.x < hi.x && lo.y < hi.y && lo.z < hi.z))
     return invalid_argument("placement.region: min must lie below max on every axis");
-  const double r = ps.r_max, spacing = 2 * r * 1.05, jitter = 0.02 * r;
+  // The lattice starts 1.1 r from the region's faces, so that on a floor at
+  // the region's bottom the first layer is clear of it and kept (a radius
+  // from the faces, it touched the floor and fills began a layer up).
+  const double r = ps.r_max, spacing = 2 * r * 1.05, jitter = 0.02 * r, margin = 1.1 * r;
   auto sites = [&](double a, double b) {
-    const double n = std::floor((b - a - 2 * r) / spacing) + 1;
+    const double n = std::floor((b - a - 2 * margin) / spacing) + 1;
     return n < 1 ? uint64_t(0) : uint64_t(std::min(n, 1e7));
   };
   const uint64_t nx = sites(lo.x, hi.x), ny = sites(lo.y, hi.y), nz = sites(lo.z, hi.z);
@@ -176,9 +179,9 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
     Particles layer;
     for (uint64_t j = 0; j < ny; ++j)
       for (uint64_t i = 0; i < nx; ++i) {
-        layer.x.push_back(lo.x + r + i * spacing + rng.uniform(-jitter, jitter));
-        layer.y.push_back(lo.y + r + j * spacing + rng.uniform(-jitter, jitter));
-        layer.z.push_back(lo.z + r + k * spacing + rng.uniform(-jitter, jitter));
+        layer.x.push_back(lo.x + margin + i * spacing + rng.uniform(-jitter, jitter));
+        layer.y.push_back(lo.y + margin + j * spacing + rng.uniform(-jitter, jitter));
+        layer.z.push_back(lo.z + margin + k * spacing + rng.uniform(-jitter, jitter));
         layer.r.push_back(clear);
       }
     std::vector<uint32_t> touching, touching_wide;

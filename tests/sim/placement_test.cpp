@@ -47,8 +47,10 @@ TEST(Placement, FillIsInsideClearAndWithoutOverlaps) {
     EXPECT_GT(p->z[i] - p->r[i], 0);
   }
   EXPECT_GT(closest_pair(*p, all), 0);
-  // Filled from the bottom up.
+  // Filled from the bottom up, the first layer on the floor (a lattice a
+  // radius from the box's faces left that layer out, as touching the floor).
   EXPECT_LT(p->z.front(), p->z.back());
+  EXPECT_LT(*std::min_element(p->z.begin(), p->z.end()), 1.2 * ps.r_max);
   // The same seed gives the same set.
   auto q = place_particles(wall, ps, PlacementSpec{}, {0, 0, -9.81}, 3);
   ASSERT_TRUE(q);
