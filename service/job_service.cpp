@@ -1227,10 +1227,24 @@ void JobService::job_finished(const Job& j, const std::string& state, const std:
   // The job's own peak (VmHWM) as it reported it; wait4()'s figure, which
   // carries the server's own peak into the child, only when it did not.
   if (!cost.contains("peak_host_bytes") && peak_host_bytes > 0) cost["peak_host_bytes"] = peak_host_bytes;
-  auto ended = store_->finish_job(j.id, state, cost.dump(), error, unix_now());
+  const std::optional<LogRow> row = log_row_of(j, state, error, manifest, cost, partial);
+  // The job ends and its log row is written in one transaction: whoever sees
+  // it ended sees its row.
+  auto ended = store_->finish_job(j.id, state, cost.dump(), error, unix_now(),
+                                  row ? &*row : nullptr);
   forget_cancel_flag(j.id);
   if (!ended || !*ended) return;  // ended already (another replica): logged there
-  if (state != "done" && !partial.is_object()) return;
+  if (!row || state != "done") return;
+  finished_since_start_.fetch_add(1);
+#ifdef COLLIDO_HAVE_JOB_COST
+  if (!row->job_record.empty()) cost_->trainer->job_logged(manifest.value("backend", ""));
+#endif
+}
+
+std::optional<LogRow> JobService::log_row_of(const Job& j, const std::string& state,
+                                             const std::string& error, const json& manifest,
+                                             const json& cost, const json& partial) {
+  if (state != "done" && !partial.is_object()) return std::nullopt;
   // The run log row: the inputs the cost model prices by, what it cost (or, for
   // a run the scheduler or a failure ended, what was measured of it), and what
   // was predicted at submission.
@@ -1250,8 +1264,7 @@ void JobService::job_finished(const Job& j, const std::string& state, const std:
     row.inputs_json = inputs.dump();
     row.measured_json = measured.dump();
     row.peak_host_bytes = partial.value("peak_host_bytes", uint64_t(0));
-    store_->insert_log(row);
-    return;
+    return row;
   }
   inputs["backend"] = manifest.value("backend", "");
   inputs["threads"] = manifest.value("threads", 0);
@@ -1269,11 +1282,7 @@ void JobService::job_finished(const Job& j, const std::string& state, const std:
 #ifdef COLLIDO_HAVE_JOB_COST
   row.job_record = job_record_of(j, pred, manifest);
 #endif
-  store_->insert_log(row);
-  finished_since_start_.fetch_add(1);
-#ifdef COLLIDO_HAVE_JOB_COST
-  if (!row.job_record.empty()) cost_->trainer->job_logged(manifest.value("backend", ""));
-#endif
+  return row;
 }
 
 #ifdef COLLIDO_HAVE_JOB_COST

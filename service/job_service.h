@@ -199,6 +199,9 @@ class JobService {
   json job_json(const Job& j);
   // A finished job as a one-row job log (cost_trainer.h); "" when it cannot be made.
   std::string job_record_of(const Job& j, const json& prediction, const json& manifest);
+  // An ended job's run-log row: none for one that did not finish and left no `partial`.
+  std::optional<LogRow> log_row_of(const Job& j, const std::string& state, const std::string& error,
+                                   const json& manifest, const json& cost, const json& partial);
   // job_json's text, rebuilt only when the job's row has changed since.
   std::shared_ptr<const std::string> job_view(const Job& j);
   // The view made for a job in this state, if one is kept; null otherwise.

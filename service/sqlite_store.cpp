@@ -416,17 +416,32 @@ class SqliteStore final : public Store {
   }
 
   Expected<bool> finish_job(const std::string& id, const std::string& state,
-                            const std::string& cost, const std::string& err, double now) override {
+                            const std::string& cost, const std::string& err, double now,
+                            const LogRow* log) override {
     std::lock_guard lock(mu_);
-    Stmt s = stmt(
-        "UPDATE jobs SET state = ?, cost_json = ?, error = ?, finished_at = ?, "
-        "progress = CASE WHEN ? = 'done' THEN 1.0 ELSE progress END, "
-        "stage = CASE WHEN ? = 'done' THEN 'done' ELSE stage END "
-        "WHERE id = ? AND state IN ('queued', 'running')");
-    s.bind(1, state).bind(2, cost).bind(3, err).bind(4, now).bind(5, state).bind(6, state);
-    s.bind(7, id);
-    if (s.step() != SQLITE_DONE) return error("finish_job");
-    return sqlite3_changes(db_) > 0;
+    if (Status b = exec("BEGIN IMMEDIATE"); !b) return b;
+    bool updated = false, ended = false;
+    {
+      Stmt s = stmt(
+          "UPDATE jobs SET state = ?, cost_json = ?, error = ?, finished_at = ?, "
+          "progress = CASE WHEN ? = 'done' THEN 1.0 ELSE progress END, "
+          "stage = CASE WHEN ? = 'done' THEN 'done' ELSE stage END "
+          "WHERE id = ? AND state IN ('queued', 'running')");
+      s.bind(1, state).bind(2, cost).bind(3, err).bind(4, now).bind(5, state).bind(6, state);
+      s.bind(7, id);
+      updated = s.step() == SQLITE_DONE;
+      ended = updated && sqlite3_changes(db_) > 0;
+    }
+    if (!updated || (ended && log && !insert_log_locked(*log))) {
+      Status e = error("finish_job");
+      exec("ROLLBACK");
+      return e;
+    }
+    if (Status c = exec("COMMIT"); !c) {
+      exec("ROLLBACK");
+      return c;
+    }
+    return ended;
   }
 
   Status set_job_executor_ref(const std::string& id, const std::string& ref) override {
@@ -534,13 +549,17 @@ class SqliteStore final : public Store {
 
   Status insert_log(const LogRow& r) override {
     std::lock_guard lock(mu_);
+    return insert_log_locked(r) ? Status::ok() : error("insert_log");
+  }
+  // With mu_ held.
+  bool insert_log_locked(const LogRow& r) {
     Stmt s = stmt(std::string("INSERT INTO logs(") + kLogColumns +
                   ") VALUES (NULL,?,?,?,?,?,?,?,?,?,?,?,?,?)");
     s.bind(1, r.job_id).bind(2, r.inputs_json).bind(3, r.measured_json).bind(4, r.predicted_json);
     s.bind(5, r.total_s).bind(6, r.per_frame_s).bind(7, r.peak_host_bytes);
     s.bind(8, r.peak_device_bytes).bind(9, r.gpu_load).bind(10, r.predicted_total_s);
     s.bind(11, r.predicted_host_bytes).bind(12, r.created_at).bind(13, r.job_record);
-    return s.step() == SQLITE_DONE ? Status::ok() : error("insert_log");
+    return s.step() == SQLITE_DONE;
   }
 
   Expected<std::vector<LogRow>> logs(size_t limit, int64_t before_id) override {

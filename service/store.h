@@ -147,10 +147,12 @@ class Store {
   virtual Status set_job_progress(const std::string& id, const std::string& stage,
                                   double progress) = 0;
   // Ends a running (or queued) job: state done | failed | cancelled. False when
-  // it had ended already (another service replica ended it first).
+  // it had ended already (another service replica ended it first). With `log`,
+  // the job's run-log row goes in with it, in one transaction: whoever sees
+  // the job ended sees its row.
   virtual Expected<bool> finish_job(const std::string& id, const std::string& state,
                                     const std::string& cost_json, const std::string& error,
-                                    double now) = 0;
+                                    double now, const LogRow* log) = 0;
   // Records where a job runs outside the service (its Slurm job id).
   virtual Status set_job_executor_ref(const std::string& id, const std::string& ref) = 0;
   // The jobs running now (the Slurm executor follows them), oldest first.

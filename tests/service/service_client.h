@@ -85,17 +85,4 @@ class Client {
   std::string base_;
 };
 
-// The service writes a finished job's log row just after it marks the job
-// ended, so a test that has seen the job end waits (bounded) for its rows.
-template <class Store>
-auto logs_written(Store& store, size_t at_least, double bound_s = 10) {
-  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(bound_s);
-  auto logs = store.logs(100, 0);
-  while (logs && logs->size() < at_least && std::chrono::steady_clock::now() < end) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    logs = store.logs(100, 0);
-  }
-  return logs;
-}
-
 }  // namespace collido::test

@@ -35,7 +35,6 @@ namespace {
 namespace fs = std::filesystem;
 using collido::test::Client;
 using collido::test::http;
-using collido::test::logs_written;
 using collido::test::HttpResponse;
 using collido::test::read_file;
 using collido::test::temp_dir;
@@ -152,7 +151,7 @@ TEST_F(ServiceTest, PricesJobsWithTheJobCostModel) {
   EXPECT_EQ(job["state"], "done") << job.dump();
 
   // The finished job's log row holds it as a job-log row, what retraining learns from.
-  auto logs = logs_written(svc_->store(), 1);
+  auto logs = svc_->store().logs(100, 0);
   ASSERT_TRUE(logs && logs->size() == 1u);
   auto record = job::parse_job_log(logs->front().job_record);
   ASSERT_TRUE(record) << record.status().message() << "\n" << logs->front().job_record;
@@ -272,7 +271,7 @@ TEST_F(ServiceTest, SubmitWatchDownloadShareRevoke) {
   EXPECT_EQ(c.call_json("POST", "/api/v1/jobs", fresh, 202)["state"], "queued");
 
   // The finished job wrote its log row.
-  auto rows = logs_written(svc_->store(), 1);
+  auto rows = svc_->store().logs(100, 0);
   ASSERT_TRUE(rows);
   ASSERT_GE(rows->size(), 1u);
   EXPECT_EQ(rows->back().job_id, id);

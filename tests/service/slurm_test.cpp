@@ -27,7 +27,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using collido::test::Client;
-using collido::test::logs_written;
 using collido::test::read_file;
 using collido::test::temp_dir;
 using collido::test::tiny_job;
@@ -224,7 +223,7 @@ TEST_F(SlurmServiceTest, TwoReplicasSubmitEachJobOnceAndEndItOnce) {
   wait_for(b, long_id, [](const json& v) { return v.contains("scheduler") || ended(v); }, 30);
   b.call_json("POST", "/api/v1/jobs/" + long_id + "/cancel", nullptr, 202);
   EXPECT_EQ(a.wait_job(long_id, 60)["state"], "cancelled");
-  auto logs = logs_written(svc_->store(), ids.size());
+  auto logs = svc_->store().logs(100, 0);
   ASSERT_TRUE(logs);
   EXPECT_EQ(logs->size(), ids.size());  // the done jobs, each once; a cancelled job is not logged
 }
@@ -240,7 +239,7 @@ TEST_F(SlurmServiceTest, AJobOverItsTimeLimitFailsWithTheSchedulersReason) {
   EXPECT_NE(error.find("time limit of 1 min"), std::string::npos) << error;
   EXPECT_NE(error.find("TIMEOUT"), std::string::npos) << error;
   // Its log row keeps what was measured before the scheduler ended it.
-  auto logs = logs_written(svc_->store(), 1);
+  auto logs = svc_->store().logs(100, 0);
   ASSERT_TRUE(logs);
   ASSERT_EQ(logs->size(), 1u);
   const json m = json::parse(logs->front().measured_json);

@@ -121,11 +121,21 @@ TEST(Store, RestartsRequeueLocalJobsOnlyAndJobsEndOnce) {
   ASSERT_TRUE(requeued);
   EXPECT_EQ(*requeued, std::vector<std::string>{"local"});
   EXPECT_EQ(st.job_by_id("cluster")->state, "running");
-  auto first = st.finish_job("cluster", "done", "{}", "", 1.0);
-  auto second = st.finish_job("cluster", "failed", "{}", "late", 2.0);
+  LogRow row;
+  row.job_id = "cluster";
+  row.total_s = 3;
+  auto first = st.finish_job("cluster", "done", "{}", "", 1.0, &row);
+  row.total_s = 4;
+  auto second = st.finish_job("cluster", "failed", "{}", "late", 2.0, &row);
   ASSERT_TRUE(first && second);
   EXPECT_TRUE(*first);
   EXPECT_FALSE(*second);  // another replica's end comes too late and changes nothing
+  // The end's log row went in with it; the late one's did not.
+  auto logs = st.logs(10, 0);
+  ASSERT_TRUE(logs);
+  ASSERT_EQ(logs->size(), 1u);
+  EXPECT_EQ((*logs)[0].job_id, "cluster");
+  EXPECT_EQ((*logs)[0].total_s, 3);
   EXPECT_EQ(st.job_by_id("cluster")->state, "done");
   EXPECT_EQ(st.job_by_id("cluster")->error, "");
   store->reset();
