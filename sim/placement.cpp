@@ -65,9 +65,124 @@ struct DisjointSets {
 // export them, has w = -1 inside).
 bool holds(const TriangleMesh& wall, Vec3d p) { return std::fabs(winding_number(wall, p)) >= 0.5; }
 
+// Solid angles an open wall's sites may sum (triangles x (sites + probes)),
+// about 10 s; a closed wall's rays (Hollows) are held to it too.
+constexpr double kOpenSideWork = 4e8;
+constexpr int kEnclosureProbes = 4;  // a side: 4^3 probes of the box
+
+// Whether the ray from p along dir crosses triangle t of the wall (Moller and
+// Trumbore, in double).
+bool ray_crosses(const TriangleMesh& wall, size_t t, Vec3d p, Vec3d dir) {
+  const Vec3d a = wall.corner(t, 0), e1 = wall.corner(t, 1) - a, e2 = wall.corner(t, 2) - a;
+  const Vec3d q = cross(dir, e2);
+  const double det = dot(e1, q);
+  if (std::fabs(det) < 1e-300) return false;
+  const double inv = 1.0 / det;
+  const Vec3d o = p - a;
+  const double u = dot(o, q) * inv;
+  if (u < 0 || u > 1) return false;
+  const Vec3d w = cross(o, e1);
+  const double v = dot(dir, w) * inv;
+  if (v < 0 || u + v > 1) return false;
+  return dot(e2, w) * inv > 0;
+}
+
+// Where a closed wall holds particles. Inside it, for a shell (a box, a ball, a
+// drum, the paper's wall1, and a solid standing in one: an obstacle), or in its
+// hollows, for a solid modelled with its wall's thickness as CAD and 3D
+// printing export a cup: its inside is the cup's material, its hollow lies
+// outside it, enclosed from below and all around. A hollow lies outside every
+// connected piece of the wall (inside a block that stands in a box, the
+// block's winding cancels the box's, but the box holds it: an obstacle, not a
+// hollow), and rays from it down (along gravity) and four ways across all meet
+// the wall. A closed wall with a hollow among kHollowProbes^3 probes of the
+// region is a solid; one without is a shell (a plate's holes are open below,
+// so a plate stays a shell, its inside the only room in its box), unless no
+// probe lies inside the wall either: a region over a solid takes the room
+// outside it (a fill dropped onto a plate).
+constexpr int kHollowProbes = 4;
+enum class ClosedWallHolds { kInside, kHollows, kOutside };
+class Hollows {
+ public:
+  Hollows(const TriangleMesh& wall, Vec3d down) : wall_(wall) {
+    // The rays lean a little off the axes, so that none runs along a face or
+    // through an edge of an axis-aligned wall.
+    const Vec3d d = down * (1.0 / length(down));
+    Vec3d u = cross(d, std::fabs(d.x) < 0.9 ? Vec3d{1, 0, 0} : Vec3d{0, 1, 0});
+    u = u * (1.0 / length(u));
+    const Vec3d w = cross(d, u);
+    rays_ = {d + u * 0.0123 + w * 0.0217, u + w * 0.0131 + d * 0.0079,
+             u * -1.0 + w * 0.0173 + d * 0.0061, w + u * 0.0157 + d * 0.0089,
+             w * -1.0 + u * 0.0113 + d * 0.0071};
+    // Connected pieces: triangles that share corners.
+    DisjointSets corners(wall.vertices.size());
+    for (const auto& t : wall.triangles) corners.join(t[0], t[1]), corners.join(t[0], t[2]);
+    std::vector<int> piece_of_corner(wall.vertices.size(), -1);
+    piece_.reserve(wall.triangles.size());
+    for (const auto& t : wall.triangles) {
+      int& k = piece_of_corner[corners.find(t[0])];
+      if (k < 0) k = int(pieces_++);
+      piece_.push_back(uint32_t(k));
+    }
+  }
+  // Work of one look: five rays over every triangle.
+  double work() const { return 5.0 * double(wall_.triangles.size()); }
+  enum class Place { kInPiece, kHollow, kOpen };
+  Place place(Vec3d p) const {
+    // Inside a piece: an odd count of its crossings along the ray down (the
+    // wall is closed). Outside all, a hollow where every ray meets the wall.
+    std::vector<uint8_t> odd(pieces_, 0);
+    bool met = false;
+    for (size_t t = 0; t < wall_.triangles.size(); ++t)
+      if (ray_crosses(wall_, t, p, rays_[0])) odd[piece_[t]] ^= 1, met = true;
+    for (uint8_t o : odd)
+      if (o) return Place::kInPiece;
+    if (!met) return Place::kOpen;
+    for (size_t k = 1; k < rays_.size(); ++k) {
+      bool hit = false;
+      for (size_t t = 0; t < wall_.triangles.size() && !hit; ++t)
+        hit = ray_crosses(wall_, t, p, rays_[k]);
+      if (!hit) return Place::kOpen;
+    }
+    return Place::kHollow;
+  }
+  bool hollow(Vec3d p) const { return place(p) == Place::kHollow; }
+  // A region with a hollow among its probes: the hollows; with none inside a
+  // piece either (a region over a solid): the room outside the wall; else
+  // (and past kOpenSideWork for the probes) a shell's inside.
+  ClosedWallHolds mode(Vec3d lo, Vec3d hi) const {
+    constexpr double kProbes = double(kHollowProbes) * kHollowProbes * kHollowProbes;
+    if (work() * kProbes > kOpenSideWork) return ClosedWallHolds::kInside;
+    const Vec3d step = (hi - lo) * (1.0 / kHollowProbes);
+    bool in_piece = false;
+    for (int k = 0; k < kHollowProbes; ++k)
+      for (int j = 0; j < kHollowProbes; ++j)
+        for (int i = 0; i < kHollowProbes; ++i) {
+          const Vec3d p = lo + Vec3d{(i + 0.5) * step.x, (j + 0.5) * step.y, (k + 0.5) * step.z};
+          const Place at = place(p);
+          if (at == Place::kHollow) return ClosedWallHolds::kHollows;
+          in_piece |= at == Place::kInPiece;
+        }
+    return in_piece ? ClosedWallHolds::kInside : ClosedWallHolds::kOutside;
+  }
+
+ private:
+  const TriangleMesh& wall_;
+  std::vector<Vec3d> rays_;
+  std::vector<uint32_t> piece_;  // each triangle's piece
+  size_t pieces_ = 0;
+};
+
+// Groups of places joined without crossing a closed wall, each on one side of
+// it, so each group needs one look at the wall: its winding number (inside or
+// out) and, for a solid's hollows, whether it is one. per_place: a hollow's
+// enclosure is looked at for each place (a group of a hollow may reach over
+// its rim, out of the cup, where a region is taller than the wall).
 class SideOfWall {
  public:
-  explicit SideOfWall(const TriangleMesh& wall) : wall_(wall) {}
+  SideOfWall(const TriangleMesh& wall, ClosedWallHolds mode, const Hollows& hollows,
+             bool per_place)
+      : wall_(wall), mode_(mode), hollows_(hollows), per_place_(per_place) {}
   int new_group() {
     side_.push_back(kUnknown);
     return int(groups_.add());
@@ -79,20 +194,29 @@ class SideOfWall {
   }
   bool inside(int g, Vec3d p) {
     const uint32_t root = groups_.find(uint32_t(g));
-    if (side_[root] == kUnknown) side_[root] = holds(wall_, p) ? kIn : kOut;
+    if (side_[root] == kUnknown) {
+      const bool in_wall = holds(wall_, p);
+      side_[root] = mode_ == ClosedWallHolds::kInside ? (in_wall ? kIn : kOut)
+                    : in_wall                          ? kOut
+                    : mode_ == ClosedWallHolds::kOutside ? kIn
+                    : per_place_                       ? kOutside
+                    : hollows_.hollow(p)               ? kIn
+                                                       : kOut;
+    }
+    if (side_[root] == kOutside) return hollows_.hollow(p);
     return side_[root] == kIn;
   }
 
  private:
-  enum : uint8_t { kUnknown, kIn, kOut };
+  // kOutside: outside the wall, each place's enclosure still to be looked at.
+  enum : uint8_t { kUnknown, kIn, kOut, kOutside };
   const TriangleMesh& wall_;
+  ClosedWallHolds mode_;
+  const Hollows& hollows_;
+  bool per_place_;
   DisjointSets groups_;
   std::vector<uint8_t> side_;
 };
-
-// Solid angles an open wall's sites may sum (triangles x (sites + probes)), about 10 s.
-constexpr double kOpenSideWork = 4e8;
-constexpr int kEnclosureProbes = 4;  // a side: 4^3 probes of the box
 
 // Whether an open wall holds some of the box [lo, hi] as a vessel does: its
 // winding number reaches 0.6 at one of the probes spread through it (a flat
@@ -126,7 +250,7 @@ bool sites_by_winding(const TriangleMesh& wall, Vec3d lo, Vec3d hi, double sites
 // lie inside the wall (closed, or an open vessel's) and clear of its surface,
 // until `count` are found.
 Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl,
-            SplitMix64& rng, ParticleSet* out) {
+            Vec3d down, SplitMix64& rng, ParticleSet* out) {
   const Bounds3d box = mesh_bounds(wall);
   const Vec3d lo = pl.has_region ? pl.region_lo : box.lo,
               hi = pl.has_region ? pl.region_hi : box.hi;
@@ -169,7 +293,11 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
     *counts = std::move(found.counts);
     return Status::ok();
   };
-  SideOfWall side(wall);
+  static const TriangleMesh kNoWall;
+  const Hollows hollows(closed ? wall : kNoWall, down);
+  const ClosedWallHolds mode = closed ? hollows.mode(lo, hi) : ClosedWallHolds::kInside;
+  // A hollow's places looked at one by one where their rays stay within kOpenSideWork.
+  SideOfWall side(wall, mode, hollows, hollows.work() * double(ps.count) <= kOpenSideWork);
   const size_t per_layer = size_t(nx * ny);
   std::vector<int> group(per_layer, -1), last_group(per_layer, -1);  // -1: not clear
   std::vector<double> reach(per_layer, 0), last_reach(per_layer, 0);
@@ -260,7 +388,7 @@ struct InletLayout {
 // two clear neighbours (2.2 r apart, each clear for 1.1 r) lie on one side of
 // it, so each group of them needs one winding number. lattice: each slot's (i, j).
 Status drop_blocked_slots(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl,
-                          const Bounds3d& box, Vec3d centre, std::vector<Vec3d>* disc,
+                          const Bounds3d& box, Vec3d centre, Vec3d down, std::vector<Vec3d>* disc,
                           const std::vector<std::pair<int, int>>& lattice) {
   const double r = ps.r_max;
   DetectConfig dc;
@@ -296,7 +424,9 @@ Status drop_blocked_slots(const TriangleMesh& wall, const ParticleSpec& ps, cons
       if (i < lo_i || i > hi_i || j < lo_j || j > hi_j) return -1;
       return group_at[size_t(j - lo_j) * width + size_t(i - lo_i)];
     };
-    SideOfWall side(wall);
+    const Hollows hollows(wall, down);
+    SideOfWall side(wall, hollows.mode(box.lo, box.hi), hollows,
+                    hollows.work() * double(n) <= kOpenSideWork);
     for (size_t k = 0; k < n; ++k)
       if (found.counts[k] == 0)
         group_at[size_t(lattice[k].second - lo_j) * width + size_t(lattice[k].first - lo_i)] =
@@ -370,7 +500,9 @@ Status inlet_layout(const TriangleMesh& wall, const ParticleSpec& ps, const Plac
   if (disc.empty())
     return invalid_argument("placement.inlet_radius: " + number_text(radius) +
                             " m holds no particle of radius " + number_text(r) + " m");
-  if (Status st = drop_blocked_slots(wall, ps, pl, box, centre, &disc, lattice); !st) return st;
+  const Vec3d down = g > 0 ? gravity : dir;
+  if (Status st = drop_blocked_slots(wall, ps, pl, box, centre, down, &disc, lattice); !st)
+    return st;
   if (disc.empty())
     return invalid_argument(
         "placement: no place in the inlet's disc (centre " + number_text(centre.x) + ", " +
@@ -467,7 +599,8 @@ Expected<ParticleSet> place_particles(const TriangleMesh& wall, const ParticleSp
     return invalid_argument("placement: values must be finite (and rate, inlet_radius >= 0)");
   SplitMix64 rng(seed);
   ParticleSet out;
-  Status s = pl.kind == PlacementKind::kFill ? fill(wall, ps, pl, rng, &out)
+  const Vec3d down = length(gravity) > 0 ? gravity : Vec3d{0, 0, -1};
+  Status s = pl.kind == PlacementKind::kFill ? fill(wall, ps, pl, down, rng, &out)
                                              : inlet(wall, ps, pl, gravity, rng, &out);
   if (!s) return s;
   // Sizes last, so a range never changes where particles sit (the lattice fits r_max).

@@ -3,10 +3,12 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <set>
 #include <string>
 
+#include "sim/mesh.h"
 #include "sim/narrow_phase.h"
 #include "sim/placement.h"
 #include "sim/shapes.h"
@@ -241,6 +243,70 @@ double wall_distance(const TriangleMesh& wall, Vec3d p) {
 // side used to release there, and a pour of 300 lost 40 at up to 700 m/s.
 // A given inlet keeps its places outside (a pour may start beside a wall),
 // and one with no place clear of the wall is refused.
+// A cup modelled as a solid, as CAD and 3D printing export one: the profile
+// (0, 0) (5, 0) (5, 10) (4, 10) (4, 1) (0, 1) turned about z, 48 segments; a
+// closed wall whose inside is the cup's material (1 thick), its hollow outside.
+TriangleMesh solid_cup() {
+  const double prof[6][2] = {{0, 0}, {5, 0}, {5, 10}, {4, 10}, {4, 1}, {0, 1}};
+  constexpr int n = 48;
+  auto at = [&](const double* rz, int k) {
+    const double a = 2 * M_PI * (k % n) / n;
+    return Vec3d{rz[0] * std::cos(a), rz[0] * std::sin(a), rz[1]};
+  };
+  std::vector<std::array<Vec3d, 3>> soup;
+  for (int i = 0; i + 1 < 6; ++i)
+    for (int k = 0; k < n; ++k) {
+      const Vec3d a = at(prof[i], k), b = at(prof[i], k + 1), c = at(prof[i + 1], k + 1),
+                  d = at(prof[i + 1], k);
+      if (prof[i][0] > 0) soup.push_back({a, b, c});
+      if (prof[i + 1][0] > 0) soup.push_back({a, c, d});
+    }
+  return weld_soup(soup, std::vector<uint32_t>(soup.size(), 0), 1e-9, nullptr);
+}
+
+// Particles go into a solid cup's hollow, never into its material (its inside
+// as a closed wall) nor beside it in its box: a fill, and a pour with its
+// default inlet (refused before, no place of its disc being inside the wall).
+// A ball stays a shell: filled inside (APourIntoABall..., FillIsInside...).
+TEST(Placement, ASolidCupIsFilledInItsHollow) {
+  const TriangleMesh cup = solid_cup();
+  ASSERT_TRUE(is_closed_manifold(cup));
+  ParticleSpec ps;
+  ps.count = 200;
+  ps.r_min = ps.r_max = 0.3;
+  for (const PlacementKind kind : {PlacementKind::kFill, PlacementKind::kPour}) {
+    PlacementSpec pl;
+    pl.kind = kind;
+    pl.rate = 200;
+    auto p = place_particles(cup, ps, pl, {0, 0, -9.81}, 5);
+    ASSERT_TRUE(p) << p.status().message();
+    ASSERT_EQ(p->size(), 200u);
+    for (size_t i = 0; i < p->size(); ++i) {
+      const Vec3d c{p->x[i], p->y[i], p->z[i]};
+      EXPECT_LT(std::fabs(winding_number(cup, c)), 0.5) << "in the material at " << i;
+      EXPECT_LT(std::hypot(c.x, c.y) + 0.3, 4.0) << i;  // within the hollow's side
+      EXPECT_GT(c.z - 0.3, 1.0) << i;                   // over its floor
+    }
+  }
+}
+
+// A fill's region over a closed solid (a plate), holding no point inside it,
+// takes the room outside it: a heap dropped onto the plate (refused before,
+// the region holding no site inside the wall).
+TEST(Placement, AFillOverASolidTakesTheRoomAboveIt) {
+  const TriangleMesh plate = make_box(10, 10, 1);
+  ParticleSpec ps;
+  ps.count = 150;
+  ps.r_min = ps.r_max = 0.4;
+  PlacementSpec pl;
+  pl.has_region = true;
+  pl.region_lo = {-4, -4, 1.5}, pl.region_hi = {4, 4, 5};
+  auto p = place_particles(plate, ps, pl, {0, 0, -9.81}, 5);
+  ASSERT_TRUE(p) << p.status().message();
+  ASSERT_EQ(p->size(), 150u);
+  for (size_t i = 0; i < p->size(); ++i) EXPECT_GT(p->z[i] - 0.4, 1.5) << i;
+}
+
 TEST(Placement, APourIntoABallStartsInsideAndClearOfIt) {
   auto ball = make_shape("sphere:r=10,subdivisions=3");
   ASSERT_TRUE(ball);
