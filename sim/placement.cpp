@@ -104,7 +104,7 @@ constexpr int kHollowProbes = 4;
 enum class ClosedWallHolds { kInside, kHollows, kOutside };
 class Hollows {
  public:
-  Hollows(const TriangleMesh& wall, Vec3d down) : wall_(wall) {
+  Hollows(const TriangleMesh& wall, Vec3d down) : wall_(wall), closed_(is_closed_manifold(wall)) {
     // The rays lean a little off the axes, so that none runs along a face or
     // through an edge of an axis-aligned wall.
     const Vec3d d = down * (1.0 / length(down));
@@ -125,18 +125,22 @@ class Hollows {
       piece_.push_back(uint32_t(k));
     }
   }
-  // Work of one look: five rays over every triangle.
-  double work() const { return 5.0 * double(wall_.triangles.size()); }
+  // Work of one look: five rays over every triangle (and a winding number, open).
+  double work() const { return (closed_ ? 5.0 : 6.0) * double(wall_.triangles.size()); }
   enum class Place { kInPiece, kHollow, kOpen };
   Place place(Vec3d p) const {
-    // Inside a piece: an odd count of its crossings along the ray down (the
-    // wall is closed). Outside all, a hollow where every ray meets the wall.
+    // Inside a piece: on a closed wall an odd count of its crossings along
+    // the ray down; on an open one (a solid exported with a seam or a slit
+    // left open) a winding number of 1/4 or more (1/2 on a face, 0 clear of
+    // a solid). Outside all, a hollow where every ray meets the wall.
+    if (!closed_ && std::fabs(winding_number(wall_, p)) >= 0.25) return Place::kInPiece;
     std::vector<uint8_t> odd(pieces_, 0);
     bool met = false;
     for (size_t t = 0; t < wall_.triangles.size(); ++t)
       if (ray_crosses(wall_, t, p, rays_[0])) odd[piece_[t]] ^= 1, met = true;
-    for (uint8_t o : odd)
-      if (o) return Place::kInPiece;
+    if (closed_)
+      for (uint8_t o : odd)
+        if (o) return Place::kInPiece;
     if (!met) return Place::kOpen;
     for (size_t k = 1; k < rays_.size(); ++k) {
       bool hit = false;
@@ -168,6 +172,7 @@ class Hollows {
 
  private:
   const TriangleMesh& wall_;
+  bool closed_;
   std::vector<Vec3d> rays_;
   std::vector<uint32_t> piece_;  // each triangle's piece
   size_t pieces_ = 0;
@@ -274,6 +279,14 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
   // box region holds a cup's corners, outside the cup: 30 of 300 particles
   // were placed there and fell away.
   const bool open_sides = !closed && sites_by_winding(wall, lo, hi, double(ps.count));
+  static const TriangleMesh kNoWall;
+  const Hollows hollows(closed || !open_sides ? wall : kNoWall, down);
+  // An open wall that encloses nothing by its winding number may still be a
+  // solid with a hollow (a cup exported with a seam left open): its sites are
+  // taken in the hollow, one by one.
+  const bool open_hollows = !closed && !open_sides &&
+                            hollows.work() * double(ps.count) <= kOpenSideWork &&
+                            hollows.mode(lo, hi) == ClosedWallHolds::kHollows;
   // The wall's own detector finds sites that would start touching it; on a
   // closed wall a second look at a larger radius finds the sites clear enough
   // to join their neighbours (SideOfWall).
@@ -293,8 +306,6 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
     *counts = std::move(found.counts);
     return Status::ok();
   };
-  static const TriangleMesh kNoWall;
-  const Hollows hollows(closed ? wall : kNoWall, down);
   const ClosedWallHolds mode = closed ? hollows.mode(lo, hi) : ClosedWallHolds::kInside;
   // A hollow's places looked at one by one where their rays stay within kOpenSideWork.
   SideOfWall side(wall, mode, hollows, hollows.work() * double(ps.count) <= kOpenSideWork);
@@ -346,6 +357,7 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
       if (touching[s]) continue;
       if (closed && !side.inside(group[s], {layer.x[s], layer.y[s], layer.z[s]})) continue;
       if (open_sides && !holds(wall, {layer.x[s], layer.y[s], layer.z[s]})) continue;
+      if (open_hollows && !hollows.hollow({layer.x[s], layer.y[s], layer.z[s]})) continue;
       const size_t n = out->size();
       out->resize(n + 1);
       out->x[n] = layer.x[s], out->y[n] = layer.y[s], out->z[n] = layer.z[s];
@@ -444,6 +456,13 @@ Status drop_blocked_slots(const TriangleMesh& wall, const ParticleSpec& ps, cons
   } else if (!pl.has_inlet && !closed && sites_by_winding(wall, box.lo, box.hi, double(n))) {
     for (size_t k = 0; k < n; ++k)
       if (found.counts[k] == 0) inside[k] = holds(wall, centre + (*disc)[k]);
+  } else if (!pl.has_inlet && !closed) {
+    // A solid with a hollow, exported with a seam left open (as in fill()).
+    const Hollows hollows(wall, down);
+    if (hollows.work() * double(n) <= kOpenSideWork &&
+        hollows.mode(box.lo, box.hi) == ClosedWallHolds::kHollows)
+      for (size_t k = 0; k < n; ++k)
+        if (found.counts[k] == 0) inside[k] = hollows.hollow(centre + (*disc)[k]);
   }
   std::vector<Vec3d> kept;
   for (size_t k = 0; k < n; ++k)

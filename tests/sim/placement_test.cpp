@@ -246,12 +246,15 @@ double wall_distance(const TriangleMesh& wall, Vec3d p) {
 // A cup modelled as a solid, as CAD and 3D printing export one: the profile
 // (0, 0) (5, 0) (5, 10) (4, 10) (4, 1) (0, 1) turned about z, 48 segments; a
 // closed wall whose inside is the cup's material (1 thick), its hollow outside.
-TriangleMesh solid_cup() {
+// seam_open: the last segment's far edge 1e-6 off the first's near one (a slit
+// the export left, so the wall is not closed).
+TriangleMesh solid_cup(bool seam_open = false) {
   const double prof[6][2] = {{0, 0}, {5, 0}, {5, 10}, {4, 10}, {4, 1}, {0, 1}};
   constexpr int n = 48;
   auto at = [&](const double* rz, int k) {
     const double a = 2 * M_PI * (k % n) / n;
-    return Vec3d{rz[0] * std::cos(a), rz[0] * std::sin(a), rz[1]};
+    const double slit = seam_open && k == n && rz[0] > 0 ? 1e-6 : 0.0;
+    return Vec3d{rz[0] * std::cos(a), rz[0] * std::sin(a) + slit, rz[1]};
   };
   std::vector<std::array<Vec3d, 3>> soup;
   for (int i = 0; i + 1 < 6; ++i)
@@ -266,26 +269,31 @@ TriangleMesh solid_cup() {
 
 // Particles go into a solid cup's hollow, never into its material (its inside
 // as a closed wall) nor beside it in its box: a fill, and a pour with its
-// default inlet (refused before, no place of its disc being inside the wall).
+// default inlet (refused before, no place of its disc being inside the wall);
+// the same with a slit left in its seam (an open wall that encloses nothing
+// by its winding number: its fill took every clear site, in the base too).
 // A ball stays a shell: filled inside (APourIntoABall..., FillIsInside...).
 TEST(Placement, ASolidCupIsFilledInItsHollow) {
-  const TriangleMesh cup = solid_cup();
-  ASSERT_TRUE(is_closed_manifold(cup));
   ParticleSpec ps;
   ps.count = 200;
   ps.r_min = ps.r_max = 0.3;
-  for (const PlacementKind kind : {PlacementKind::kFill, PlacementKind::kPour}) {
-    PlacementSpec pl;
-    pl.kind = kind;
-    pl.rate = 200;
-    auto p = place_particles(cup, ps, pl, {0, 0, -9.81}, 5);
-    ASSERT_TRUE(p) << p.status().message();
-    ASSERT_EQ(p->size(), 200u);
-    for (size_t i = 0; i < p->size(); ++i) {
-      const Vec3d c{p->x[i], p->y[i], p->z[i]};
-      EXPECT_LT(std::fabs(winding_number(cup, c)), 0.5) << "in the material at " << i;
-      EXPECT_LT(std::hypot(c.x, c.y) + 0.3, 4.0) << i;  // within the hollow's side
-      EXPECT_GT(c.z - 0.3, 1.0) << i;                   // over its floor
+  for (const bool seam_open : {false, true}) {
+    SCOPED_TRACE(seam_open ? "seam open" : "closed");
+    const TriangleMesh cup = solid_cup(seam_open);
+    ASSERT_EQ(is_closed_manifold(cup), !seam_open);
+    for (const PlacementKind kind : {PlacementKind::kFill, PlacementKind::kPour}) {
+      PlacementSpec pl;
+      pl.kind = kind;
+      pl.rate = 200;
+      auto p = place_particles(cup, ps, pl, {0, 0, -9.81}, 5);
+      ASSERT_TRUE(p) << p.status().message();
+      ASSERT_EQ(p->size(), 200u);
+      for (size_t i = 0; i < p->size(); ++i) {
+        const Vec3d c{p->x[i], p->y[i], p->z[i]};
+        EXPECT_LT(std::fabs(winding_number(cup, c)), 0.5) << "in the material at " << i;
+        EXPECT_LT(std::hypot(c.x, c.y) + 0.3, 4.0) << i;  // within the hollow's side
+        EXPECT_GT(c.z - 0.3, 1.0) << i;                   // over its floor
+      }
     }
   }
 }
