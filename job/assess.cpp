@@ -106,4 +106,25 @@ Expected<JobAssessment> assess_job(const JobSpec& spec) {
   return a;
 }
 
+Expected<StartPreview> preview_start(const JobSpec& spec, size_t most) {
+  auto resolved = resolve_scene(spec);
+  if (!resolved) return resolved.status();
+  scene::Scene& s = resolved->scene;
+  auto wall = load_scene_wall(&s);
+  if (!wall) return wall.status();
+  auto placed =
+      sim::place_particles(*wall, s.particles, s.placement, s.dynamics.gravity, s.seed);
+  if (!placed) return placed.status();
+  StartPreview out;
+  out.particles = placed->size();
+  const size_t every = most == 0 ? 0 : (placed->size() + most - 1) / most;
+  const double to_unit = 1.0 / s.length_scale();
+  for (size_t i = 0; every && i < placed->size(); i += every) {
+    out.shown.push_back({placed->x[i] * to_unit, placed->y[i] * to_unit, placed->z[i] * to_unit,
+                         placed->r[i] * to_unit});
+    out.release_s.push_back(placed->release[i]);
+  }
+  return out;
+}
+
 }  // namespace collido::job

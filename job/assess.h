@@ -5,6 +5,8 @@
 // the cost model prices a job by.
 #pragma once
 
+#include <array>
+
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -55,5 +57,17 @@ struct JobAssessment {
 // run_job() gives for the same spec before its first frame, except those of
 // placement (a placement that cannot fit is only found by placing).
 Expected<JobAssessment> assess_job(const JobSpec& spec);
+
+// Where a job's particles start, placed as run_job() places them (the same
+// wall, placement and seed): the whole count, and at most `most` of them,
+// every k-th, in the scene document's length unit (x, y, z, radius), with
+// their release times (0 for a fill). A placement that cannot fit is refused
+// with run_job()'s error, which says how many fit.
+struct StartPreview {
+  uint64_t particles = 0;
+  std::vector<std::array<double, 4>> shown;
+  std::vector<double> release_s;
+};
+Expected<StartPreview> preview_start(const JobSpec& spec, size_t most);
 
 }  // namespace collido::job

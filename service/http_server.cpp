@@ -301,6 +301,11 @@ std::vector<Route> make_routes(JobService* svc, const ServerOptions& opt) {
     auto b = json_body(q, &e);
     return b ? reply(svc->predict(*q.user, *b)) : e;
   });
+  add("POST", "/api/v1/start-preview", Auth::kUser, [=](Request& q) {
+    Response e;
+    auto b = json_body(q, &e);
+    return b ? reply(svc->start_preview(*q.user, *b)) : e;
+  });
   add("POST", "/api/v1/jobs", Auth::kUser, [=](Request& q) {
     Response e;
     auto b = json_body(q, &e);

@@ -719,6 +719,16 @@ Reply JobService::predict(const User& u, const json& body) {
   return r;
 }
 
+Reply JobService::start_preview(const User& u, const json& body) {
+  auto p = prepare(u, body);
+  if (!p) return status_reply(p.status());
+  auto start = job::preview_start(p->spec, kStartShown);
+  if (!start) return status_reply(Status(start.status().code(), "scene: " + start.status().message()));
+  Reply r;
+  r.body = {{"particles", start->particles}, {"shown", start->shown}, {"release_s", start->release_s}};
+  return r;
+}
+
 json JobService::links_of(const std::string& base, const Job& j) {
   json links = {{"manifest", base + "result.json"},
                 {"stats", base + "stats.csv"},

@@ -121,6 +121,11 @@ class JobService {
 
   // Jobs.
   Reply predict(const User& u, const json& body);
+  // Where the particles of a job (predict's body) start, placed as the run
+  // will place them: {"particles": N, "shown": [[x, y, z, r], ...] (at most
+  // kStartShown, spread over the set, in the wall's units), "release_s": [...]}.
+  Reply start_preview(const User& u, const json& body);
+  static constexpr size_t kStartShown = 3000;
   Reply submit(const User& u, const json& body);
   Reply list_jobs(const User& u);
   Reply get_job(const User& u, const std::string& id);

@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -475,6 +476,48 @@ TEST_F(ServiceTest, AdmissionQueueLimitAndCancel) {
   std::string metrics = c.call("GET", "/metrics").body;
   EXPECT_NE(metrics.find("collidoscope_jobs{state=\"cancelled\"}"), std::string::npos);
   EXPECT_NE(metrics.find("collidoscope_queue_length 0"), std::string::npos) << metrics;
+}
+
+// The New job page shows where the particles start: placed as the run places
+// them, inside the vessel, a pour's released over time; a fill that cannot
+// fit is refused before submission, saying how many fit.
+TEST_F(ServiceTest, ShowsWhereTheParticlesStart) {
+  Client c = client();
+  c.sign_up("starter");
+  json fill = tiny_job("cylinder:r=5,h=10,caps=bottom", 400, 0.3);
+  fill["scene"]["placement"] = {{"kind", "fill"}};
+  const json start = c.call_json("POST", "/api/v1/start-preview", fill);
+  EXPECT_EQ(start["particles"], 400);
+  ASSERT_EQ(start["shown"].size(), 400u);
+  ASSERT_EQ(start["release_s"].size(), 400u);
+  for (size_t i = 0; i < 400; ++i) {
+    const json& p = start["shown"][i];
+    ASSERT_EQ(p.size(), 4u);
+    EXPECT_LT(std::hypot(p[0].get<double>(), p[1].get<double>()) + 0.5, 5.0) << p;
+    EXPECT_GT(p[2].get<double>(), 0.5) << p;
+    EXPECT_EQ(p[3], 0.5);
+    EXPECT_EQ(start["release_s"][i], 0.0);
+  }
+  // More than are shown: every k-th, over the whole set.
+  json many = fill;
+  many["scene"]["particles"]["count"] = 4000;
+  many["scene"]["particles"]["radius"] = 0.2;
+  const json more = c.call_json("POST", "/api/v1/start-preview", many);
+  EXPECT_EQ(more["particles"], 4000);
+  EXPECT_EQ(more["shown"].size(), 2000u);  // every 2nd, at most 3,000
+  // A pour releases over time.
+  const json pour = c.call_json("POST", "/api/v1/start-preview", tiny_job("wall1", 300, 1.0));
+  EXPECT_EQ(pour["particles"], 300);
+  EXPECT_GT(pour["release_s"].back().get<double>(), 0.0);
+  // Too many to fill: refused, with how many fit.
+  json crowded = fill;
+  crowded["scene"]["particles"]["count"] = 100000;
+  const auto r = c.call("POST", "/api/v1/start-preview", crowded.dump());
+  EXPECT_EQ(r.status, 400) << r.body;
+  EXPECT_NE(r.body.find("holds only"), std::string::npos) << r.body;
+  // Signed out: refused.
+  Client anonymous = client();
+  EXPECT_EQ(anonymous.call("POST", "/api/v1/start-preview", fill.dump()).status, 401);
 }
 
 TEST_F(ServiceTest, AJobThatCanNeverFitIsRefusedWithTheFigures) {
