@@ -392,6 +392,22 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     assert.match(await pred.locator('dt:text-is("Time") + dd').innerText(), /\(likely .+ to .+\)$/);
     assert.match(await pred.locator('dt:text-is("Peak memory") + dd').innerText(), /\(likely .+ to .+\)$/);
     await pred.locator('dt:text-is("Estimated by") + dd', { hasText: 'job cost model' }).waitFor();
+    // Where the particles start: the vessel and the pour's places, drawn; a
+    // fill starts them through the cup; one that cannot fit says how many do.
+    const startCaption = page.locator('#start-preview + p');
+    // (0.3 s of a pour at the inlet's rate: most of them are released after the run.)
+    await startCaption.getByText(/^40 particles are poured in from the places shown, the last after .+\. The run ends at 300 ms: about \d+ of them never enter it\.$/).waitFor();
+    await waitDrawn(page.locator('#start-preview canvas'), 'the cup with the pour');
+    const pourLook = await canvasDigest(page.locator('#start-preview canvas'));
+    await page.getByLabel('Fill: particles start spread through the vessel').check();
+    await startCaption.getByText(/^40 particles start where shown\.$/).waitFor();
+    assert.notEqual(await canvasDigest(page.locator('#start-preview canvas')), pourLook,
+      'the fill draws its particles elsewhere than the pour');
+    await page.getByLabel('Count').fill('20000');
+    await startCaption.getByText(/^The particles cannot start: .*holds only \d+ of the 20000 particles/).waitFor();
+    await page.getByLabel('Count').fill('40');
+    await page.getByLabel('Pour: particles fall in from above the vessel').check();
+    await startCaption.getByText(/^40 particles are poured in/).waitFor();
     // One thread per job, where the model was trained on two: said in plain words.
     await pred.getByText(/outside what the predictor was trained on \(.*threads/).waitFor();
     // Too many particles for the server's memory: a plain warning that it would be refused.

@@ -61,14 +61,16 @@ export function createViewer(box, label) {
 
   let shown = null;
   let grid = null;
+  let extra = null;  // shown with the object, framed by it (particles in a vessel)
   let home = null;  // the camera's first position for the object shown
+  function drop(o) {
+    if (!o) return;
+    scene.remove(o);
+    o.traverse((c) => { c.geometry?.dispose(); c.material?.dispose(); });
+  }
   function clear() {
-    for (const o of [shown, grid]) {
-      if (!o) continue;
-      scene.remove(o);
-      o.traverse((c) => { c.geometry?.dispose(); c.material?.dispose(); });
-    }
-    shown = grid = null;
+    for (const o of [shown, grid, extra]) drop(o);
+    shown = grid = extra = null;
   }
   function applyWire() {
     shown?.traverse((o) => {
@@ -100,9 +102,11 @@ export function createViewer(box, label) {
     // Shows a group (from stlObject or draftObject) and frames the camera on it.
     // A draft is seen through when it gets several parts, so a part inside
     // shows, and opaque when it gets one; the box is the user's in between.
-    show(object) {
+    // seeThrough: set the box (what is inside the object matters).
+    show(object, { seeThrough } = {}) {
       const parts = object.userData.parts;
       if (parts && parts !== shown?.userData.parts) xray.checked = parts > 1;
+      if (seeThrough !== undefined) xray.checked = seeThrough;
       clear();
       shown = object;
       scene.add(object);
@@ -129,6 +133,13 @@ export function createViewer(box, label) {
       goHome();
       resize();
     },
+    // Shows `object` (null: none) with the object shown, in its frame, in place of the last one.
+    setExtra(object) {
+      drop(extra);
+      extra = object;
+      if (extra) scene.add(extra);
+      draw();
+    },
     setLabel(text) { canvas.setAttribute('aria-label', text); },
     dispose() {
       observer.disconnect();
@@ -138,6 +149,17 @@ export function createViewer(box, label) {
       renderer.forceContextLoss();  // browsers allow few live WebGL contexts
     },
   };
+}
+
+// Particles as spheres: [[x, y, z, r], ...], one draw for all (an instanced mesh).
+export function particlesObject(shown, color = 0xffa64d) {
+  const mesh = new THREE.InstancedMesh(new THREE.SphereGeometry(1, 12, 8),
+    new THREE.MeshStandardMaterial({ color, roughness: 0.5 }), shown.length);
+  const m = new THREE.Matrix4();
+  shown.forEach(([x, y, z, r], i) => mesh.setMatrixAt(i, m.makeScale(r, r, r).setPosition(x, y, z)));
+  mesh.instanceMatrix.needsUpdate = true;
+  mesh.computeBoundingSphere();
+  return mesh;
 }
 
 // A draft's parts in turn: the builder's Part 1, Part 2, ... (and New job's "What moves").

@@ -1,7 +1,9 @@
 // A new job: the scene in a form, its cost predicted as it changes
-// (POST /api/v1/predict, debounced), then submitted (POST /api/v1/jobs).
+// (POST /api/v1/predict, debounced) with where its particles start (POST
+// /api/v1/start-preview, in the vessel's 3D view), then submitted (POST /api/v1/jobs).
 import { get, post } from '../api.js';
 import { h, field, errorBox, showError, fmtBytes, fmtSeconds } from '../dom.js';
+import { createViewer, stlObject, particlesObject } from '../preview.js';
 
 const SIZES = [[160, 96], [320, 180], [640, 360], [1280, 720], [1920, 1080]];
 const AXES = { x: [1, 0, 0], y: [0, 1, 0], z: [0, 0, 1] };
@@ -218,6 +220,43 @@ export async function render(main, ctx, modelParam) {
     predFacts.replaceChildren();
     predNote.textContent = '';
   }
+  // ---- where the particles start ----
+  const startBox = h('div', { class: 'preview-box', id: 'start-preview' });
+  const startCaption = h('p', { class: 'status', 'aria-live': 'polite' }, 'Shown once the form is complete.');
+  const startViewer = createViewer(startBox, 'The vessel, and where the particles start');
+  let wallShown = null;  // the model whose wall the view shows
+  async function showStart(b, signal) {
+    const m = usable.find((x) => String(x.id) === model.value);
+    if (!m) return;
+    try {
+      if (wallShown !== m.id) {
+        const { object } = await stlObject(m.stl);
+        if (signal.aborted) return;
+        startViewer.show(object, { seeThrough: true });
+        wallShown = m.id;
+      }
+      const start = await post('/api/v1/start-preview', b, { signal });
+      startViewer.setExtra(particlesObject(start.shown));
+      const n = start.particles.toLocaleString();
+      const some = start.shown.length < start.particles ? ` (${start.shown.length.toLocaleString()} of them shown)` : '';
+      const last = Math.max(0, ...start.release_s);
+      // Released after the run ends: never in it (the share of those shown, of all).
+      const end = Number(b.scene.duration);
+      const late = Math.round(start.release_s.filter((t) => t > end).length * start.particles / start.shown.length);
+      const text = last > 0
+        ? `${n} particles are poured in from the places shown, the last after ${fmtSeconds(last)}${some}.`
+          + (late > 0 ? ` The run ends at ${fmtSeconds(end)}: about ${late.toLocaleString()} of them never enter it.` : '')
+        : `${n} particles start where shown${some}.`;
+      startCaption.textContent = text;
+      startViewer.setLabel(`3D view of ${m.name}: ${text}`);
+    } catch (e) {
+      if (e.name === 'AbortError' || signal.aborted) return;
+      startViewer.setExtra(null);
+      startCaption.textContent = e.status === 400 ? `The particles cannot start: ${e.message}.`
+        : `Where the particles start is not shown: ${e.message}`;
+    }
+  }
+
   async function predict() {
     inflight?.abort();
     const me = new AbortController();
@@ -255,6 +294,7 @@ export async function render(main, ctx, modelParam) {
       mini(`Prediction: ${time ?? 'time not predicted yet'}, ${memoryText} of memory`
         + `${predWarnings.childElementCount ? ' — see the warnings' : ''}. Show ↑`);
       predStatus.textContent = 'Up to date.';
+      showStart(b, me.signal);
     } catch (e) {
       if (e.name === 'AbortError' || inflight !== me) return;
       clearFigures();
@@ -321,7 +361,9 @@ export async function render(main, ctx, modelParam) {
   });
 
   main.append(h('div', { class: 'split wide-left' },
-    h('section', {}, h('h2', { id: 'scene-h' }, 'Scene'), form),
+    h('section', {}, h('h2', { id: 'scene-h' }, 'Scene'), form,
+      h('h2', { id: 'start-h' }, 'Where the particles start'),
+      h('div', { class: 'card', 'aria-labelledby': 'start-h' }, startBox, startCaption)),
     aside), predMini);
   aside.append(h('h2', { id: 'pred-h' }, 'Prediction'),
     h('div', { class: 'card', id: 'prediction' },
@@ -330,5 +372,5 @@ export async function render(main, ctx, modelParam) {
     h('p', { class: 'hint' }, 'What this job will cost, estimated by the server before it runs. It follows the form as you change it.'));
   clearFigures();
   predict();
-  return () => { clearTimeout(timer); inflight?.abort(); };
+  return () => { clearTimeout(timer); inflight?.abort(); startViewer.dispose(); };
 }
