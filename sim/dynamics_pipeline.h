@@ -228,7 +228,7 @@ class DynamicsPipeline final : public Simulation {
     released_to_ = -std::numeric_limits<double>::infinity();
     close_pending_ = false;  // the restored state is a whole step's
     disp_fresh_ = false;
-    if (Status s = restore_lists(in.lists); !s) return s;
+    restore_lists(in.lists);
     backend_.sync();
     return backend_.status();
   }
@@ -486,17 +486,16 @@ class DynamicsPipeline final : public Simulation {
     });
   }
 
-  // The lists save_lists gave, in place of a build: or, given none, a build at the next step.
-  Status restore_lists(const std::vector<std::vector<uint8_t>>& in) {
+  // The lists save_lists gave, in place of a build; given none, or lists of
+  // another layout (a checkpoint of the other backend: the CPU keeps each
+  // pair's record place, the GPU none), a build at the next step.
+  void restore_lists(const std::vector<std::vector<uint8_t>>& in) {
     nl_valid_ = false;
-    if (in.empty() || !nlist_) return Status::ok();
-    auto refused = [] {
-      return invalid_argument("checkpoint's neighbour lists do not match this run's particles");
-    };
+    if (in.empty() || !nlist_) return;
     ListScalars s{};
-    if (in[0].size() != sizeof s) return refused();
+    if (in[0].size() != sizeof s) return;
     std::memcpy(&s, in[0].data(), sizeof s);
-    if (s.cover > n_ || !(s.skin > 0) || !std::isfinite(s.skin)) return refused();
+    if (s.cover > n_ || !(s.skin > 0) || !std::isfinite(s.skin)) return;
     if (s.skin != skin_) {  // it grew in the saved run: the grid's cells with it
       skin_ = s.skin;
       ts_.neighbour_skin = skin_;
@@ -505,9 +504,9 @@ class DynamicsPipeline final : public Simulation {
     nl_built_step_ = s.built_step, pair_builds_ = s.pair_builds;
     nl_per_particle_ = s.per_particle, wl_per_particle_ = s.wall_per_particle;
     nl_built_at_ = s.built_at, nl_life_ = s.life;
-    if (!s.valid) return Status::ok();
+    if (!s.valid) return;
     uint64_t counts[3];
-    if (in.size() < 2 || in[1].size() != sizeof counts) return refused();
+    if (in.size() < 2 || in[1].size() != sizeof counts) return;
     std::memcpy(counts, in[1].data(), sizeof counts);
     size_t k = 2;
     const bool fits = list_arrays(s, counts[0], counts[1], counts[2], [&](auto& buf, size_t count) {
@@ -518,7 +517,7 @@ class DynamicsPipeline final : public Simulation {
       ++k;
       return true;
     });
-    if (!fits || k != in.size()) return refused();
+    if (!fits || k != in.size()) return;  // some buffers overwritten: the build replaces them
     if (once_ && counts[0] > rec_f_.size()) {  // the records of every listed pair
       backend_.resize(rec_f_, size_t(counts[0]));
       backend_.resize(rec_touched_, size_t(counts[0]));
@@ -527,7 +526,6 @@ class DynamicsPipeline final : public Simulation {
     }
     nl_cover_ = size_t(s.cover);
     nl_valid_ = true;
-    return Status::ok();
   }
 
   // The per-particle arrays as plain pointers, for the loop bodies to capture by value.

@@ -1190,6 +1190,32 @@ TEST_F(DynamicsCuda, RestoredStateContinuesExactlyAtEveryFrame) {
   restored_state_continues_exactly_at_every_frame();
 }
 TEST_F(DynamicsCuda, ALeavingParticlePushesNothing) { a_leaving_particle_pushes_nothing(); }
+// A job resumed where the backend is chosen again ("auto") may move between
+// the CPU and the GPU: the lists' layouts differ (the CPU keeps each pair's
+// record place), so the GPU builds its own, and the run goes on.
+TEST_F(DynamicsCuda, AStateSavedOnTheCpuRestoresOnTheGpu) {
+  const TriangleMesh wall = make_cylinder(50, 100, 40);
+  const ParticleSet p = lattice(8, 8.2, -0.05, 1, 5.0, 5);
+  DynamicsConfig cfg;
+  cfg.particle_contacts = true;
+  cfg.material.friction = 0.4;
+  cfg.backend = Backend::kCpu;
+  auto cpu = Simulation::create(wall, cfg, p);
+  ASSERT_TRUE(cpu) << cpu.status().message();
+  FrameStats st;
+  ASSERT_TRUE((*cpu)->advance(0.01, &st));
+  SimState saved;
+  ASSERT_TRUE((*cpu)->save_state(&saved));
+  ASSERT_FALSE(saved.lists.empty());
+  auto gpu = make_sim(wall, cfg, p);  // the suite's backend: CUDA
+  ASSERT_TRUE(gpu);
+  ASSERT_TRUE(gpu->restore_state(saved));
+  ASSERT_TRUE((*cpu)->advance(0.01, &st));
+  FrameStats on_gpu;
+  ASSERT_TRUE(gpu->advance(0.01, &on_gpu));
+  EXPECT_EQ(on_gpu.active, st.active);
+  EXPECT_NEAR(on_gpu.kinetic, st.kinetic, 1e-3 * st.kinetic);  // rounding apart, the same run
+}
 TEST_F(DynamicsCuda, ReleasesKeepTheirTimes) { releases_keep_their_times(); }
 TEST_F(DynamicsCuda, AReleaseWaitsForItsPlace) { a_release_waits_for_its_place(); }
 TEST_F(DynamicsCuda, FastParticlesGrowTheSkin) { fast_particles_grow_the_skin(); }
