@@ -722,6 +722,16 @@ Reply JobService::predict(const User& u, const json& body) {
 Reply JobService::start_preview(const User& u, const json& body) {
   auto p = prepare(u, body);
   if (!p) return status_reply(p.status());
+  const uint64_t count = p->assessment.value("particles", uint64_t(0));
+  if (count > kStartPlacedMost) {
+    Reply r;
+    r.body = {{"particles", count},
+              {"shown", json::array()},
+              {"release_s", json::array()},
+              {"note", "more than " + std::to_string(kStartPlacedMost) +
+                           " particles are not placed for a preview; the run places them"}};
+    return r;
+  }
   auto start = job::preview_start(p->spec, kStartShown);
   if (!start) return status_reply(Status(start.status().code(), "scene: " + start.status().message()));
   Reply r;

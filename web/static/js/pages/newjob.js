@@ -236,7 +236,11 @@ export async function render(main, ctx, modelParam) {
         wallShown = m.id;
       }
       const start = await post('/api/v1/start-preview', b, { signal });
-      startViewer.setExtra(particlesObject(start.shown));
+      startViewer.setExtra(start.shown.length ? particlesObject(start.shown) : null);
+      if (start.note) {
+        startCaption.textContent = `${start.particles.toLocaleString()} particles: ${start.note}.`;
+        return;
+      }
       const n = start.particles.toLocaleString();
       const some = start.shown.length < start.particles ? ` (${start.shown.length.toLocaleString()} of them shown)` : '';
       const last = Math.max(0, ...start.release_s);
