@@ -1,6 +1,7 @@
-// JSON request bodies into the job service's validation: predictions, job
-// submissions, models and accounts. Whatever the body, the answer is a 2xx or
-// a 4xx with a message: a 5xx means an input reached something it should not.
+// JSON request bodies into the job service's validation: predictions, start
+// previews (the placement itself), job submissions, models and accounts.
+// Whatever the body, the answer is a 2xx or a 4xx with a message: a 5xx means
+// an input reached something it should not.
 // The service lives in a temporary data folder; no worker runs, so submitted
 // jobs stay queued. The committed CPU job cost model prices them where the build
 // knows the source folder, so odd scenes reach the model too.
@@ -60,6 +61,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
                                 nullptr, false);
   if (body.is_discarded()) return 0;
   check(f.service->predict(f.user, body));
+  check(f.service->start_preview(f.user, body));
   check(f.service->submit(f.user, body));
   check(f.service->create_model(f.user, body));
   check(f.service->create_account(body));
