@@ -70,6 +70,19 @@ bool holds(const TriangleMesh& wall, Vec3d p) { return std::fabs(winding_number(
 constexpr double kOpenSideWork = 4e8;
 constexpr int kEnclosureProbes = 4;  // a side: 4^3 probes of the box
 
+// Whether pred holds at one of kEnclosureProbes^3 probes spread through [lo, hi].
+template <class Pred>
+bool some_probe(Vec3d lo, Vec3d hi, Pred&& pred) {
+  constexpr int n = kEnclosureProbes;
+  const Vec3d step = (hi - lo) * (1.0 / n);
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i)
+        if (pred(lo + Vec3d{(i + 0.5) * step.x, (j + 0.5) * step.y, (k + 0.5) * step.z}))
+          return true;
+  return false;
+}
+
 // Whether the ray from p along dir crosses triangle t of the wall (Moller and
 // Trumbore, in double).
 bool ray_crosses(const TriangleMesh& wall, size_t t, Vec3d p, Vec3d dir) {
@@ -95,16 +108,15 @@ bool ray_crosses(const TriangleMesh& wall, size_t t, Vec3d p, Vec3d dir) {
 // connected piece of the wall (inside a block that stands in a box, the
 // block's winding cancels the box's, but the box holds it: an obstacle, not a
 // hollow), and rays from it down (along gravity) and four ways across all meet
-// the wall. A closed wall with a hollow among kHollowProbes^3 probes of the
-// region is a solid; one without is a shell (a plate's holes are open below,
+// the wall. A closed wall with a hollow among the probes of the region
+// (some_probe) is a solid; one without is a shell (a plate's holes are open below,
 // so a plate stays a shell, its inside the only room in its box), unless no
 // probe lies inside the wall either: a region over a solid takes the room
 // outside it (a fill dropped onto a plate).
-constexpr int kHollowProbes = 4;
 enum class ClosedWallHolds { kInside, kHollows, kOutside };
 class Hollows {
  public:
-  Hollows(const TriangleMesh& wall, Vec3d down) : wall_(wall), closed_(is_closed_manifold(wall)) {
+  Hollows(const TriangleMesh& wall, bool closed, Vec3d down) : wall_(wall), closed_(closed) {
     // The rays lean a little off the axes, so that none runs along a face or
     // through an edge of an axis-aligned wall.
     const Vec3d d = down * (1.0 / length(down));
@@ -155,19 +167,17 @@ class Hollows {
   // piece either (a region over a solid): the room outside the wall; else
   // (and past kOpenSideWork for the probes) a shell's inside.
   ClosedWallHolds mode(Vec3d lo, Vec3d hi) const {
-    constexpr double kProbes = double(kHollowProbes) * kHollowProbes * kHollowProbes;
+    constexpr double kProbes = double(kEnclosureProbes) * kEnclosureProbes * kEnclosureProbes;
     if (work() * kProbes > kOpenSideWork) return ClosedWallHolds::kInside;
-    const Vec3d step = (hi - lo) * (1.0 / kHollowProbes);
     bool in_piece = false;
-    for (int k = 0; k < kHollowProbes; ++k)
-      for (int j = 0; j < kHollowProbes; ++j)
-        for (int i = 0; i < kHollowProbes; ++i) {
-          const Vec3d p = lo + Vec3d{(i + 0.5) * step.x, (j + 0.5) * step.y, (k + 0.5) * step.z};
-          const Place at = place(p);
-          if (at == Place::kHollow) return ClosedWallHolds::kHollows;
-          in_piece |= at == Place::kInPiece;
-        }
-    return in_piece ? ClosedWallHolds::kInside : ClosedWallHolds::kOutside;
+    const bool hollow = some_probe(lo, hi, [&](Vec3d p) {
+      const Place at = place(p);
+      in_piece |= at == Place::kInPiece;
+      return at == Place::kHollow;
+    });
+    return hollow     ? ClosedWallHolds::kHollows
+           : in_piece ? ClosedWallHolds::kInside
+                      : ClosedWallHolds::kOutside;
   }
 
  private:
@@ -227,15 +237,7 @@ class SideOfWall {
 // winding number reaches 0.6 at one of the probes spread through it (a flat
 // wall never passes 1/2; a funnel's middle has about 2/3).
 bool encloses_some(const TriangleMesh& wall, Vec3d lo, Vec3d hi) {
-  constexpr int kSamples = kEnclosureProbes;
-  const Vec3d step = (hi - lo) * (1.0 / kSamples);
-  for (int k = 0; k < kSamples; ++k)
-    for (int j = 0; j < kSamples; ++j)
-      for (int i = 0; i < kSamples; ++i) {
-        const Vec3d p = lo + Vec3d{(i + 0.5) * step.x, (j + 0.5) * step.y, (k + 0.5) * step.z};
-        if (std::fabs(winding_number(wall, p)) >= 0.6) return true;
-      }
-  return false;
+  return some_probe(lo, hi, [&](Vec3d p) { return std::fabs(winding_number(wall, p)) >= 0.6; });
 }
 
 // Whether the sites of an open (not closed) wall, a cup or a funnel, are told inside from
@@ -280,7 +282,7 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
   // were placed there and fell away.
   const bool open_sides = !closed && sites_by_winding(wall, lo, hi, double(ps.count));
   static const TriangleMesh kNoWall;
-  const Hollows hollows(closed || !open_sides ? wall : kNoWall, down);
+  const Hollows hollows(closed || !open_sides ? wall : kNoWall, closed, down);
   // An open wall that encloses nothing by its winding number may still be a
   // solid with a hollow (a cup exported with a seam left open): its sites are
   // taken in the hollow, one by one.
@@ -436,7 +438,7 @@ Status drop_blocked_slots(const TriangleMesh& wall, const ParticleSpec& ps, cons
       if (i < lo_i || i > hi_i || j < lo_j || j > hi_j) return -1;
       return group_at[size_t(j - lo_j) * width + size_t(i - lo_i)];
     };
-    const Hollows hollows(wall, down);
+    const Hollows hollows(wall, closed, down);
     SideOfWall side(wall, hollows.mode(box.lo, box.hi), hollows,
                     hollows.work() * double(n) <= kOpenSideWork);
     for (size_t k = 0; k < n; ++k)
@@ -458,7 +460,7 @@ Status drop_blocked_slots(const TriangleMesh& wall, const ParticleSpec& ps, cons
       if (found.counts[k] == 0) inside[k] = holds(wall, centre + (*disc)[k]);
   } else if (!pl.has_inlet && !closed) {
     // A solid with a hollow, exported with a seam left open (as in fill()).
-    const Hollows hollows(wall, down);
+    const Hollows hollows(wall, closed, down);
     if (hollows.work() * double(n) <= kOpenSideWork &&
         hollows.mode(box.lo, box.hi) == ClosedWallHolds::kHollows)
       for (size_t k = 0; k < n; ++k)
