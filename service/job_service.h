@@ -126,9 +126,11 @@ class JobService {
   // kStartShown, spread over the set, in the wall's units), "release_s": [...]}.
   Reply start_preview(const User& u, const json& body);
   static constexpr size_t kStartShown = 3000;
-  // More particles are not placed for a preview (the server would hold them
-  // all): the answer has the count, none shown, and a note that says so.
-  static constexpr uint64_t kStartPlacedMost = 1000000;
+  // More particles are not placed for a preview: the placement runs on the
+  // Pistache reactor thread that owns the connection, which it stalls, and
+  // the server would hold them all. The answer has the count, none shown,
+  // and a note that says so.
+  static constexpr uint64_t kStartPlacedMost = 200000;
   Reply submit(const User& u, const json& body);
   Reply list_jobs(const User& u);
   Reply get_job(const User& u, const std::string& id);
