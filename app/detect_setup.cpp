@@ -111,7 +111,8 @@ std::string detect_summary_json(const DetectSetup& s, const sim::PrepareInfo& in
     << "\",\"traversal\":\"" << sim::to_string(s.config.traversal) << "\",\"precision\":\""
     << sim::to_string(s.config.precision) << "\",\"backend\":\""
     << sim::to_string(s.config.backend) << "\",\"grid_length\":" << info.grid_length
-    << ",\"cells\":" << info.cells << ",\"hashed_grid\":" << (info.hashed ? "true" : "false")
+    << ",\"cells\":" << info.cells << ",\"buckets\":" << info.buckets
+    << ",\"hashed_grid\":" << (info.hashed ? "true" : "false") << ",\"bin_entries\":" << info.bin_entries
     << ",\"tree_nodes\":" << info.bvh_nodes << ",\"tree_depth\":" << info.bvh_depth
     << ",\"contacts\":" << r.contact_count << ",\"colliding_particles\":" << r.colliding_particles
     << ",\"band_pairs\":" << r.band_pairs

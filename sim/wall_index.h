@@ -55,6 +55,59 @@ inline GridSpec make_grid(Vec3d lo, Vec3d hi, double cell, uint64_t max_dense_ce
   return g;
 }
 
+// The bin method's grid, in the wall's local frame (origin at its box's centre):
+// cells of edge `cell` over the box grown by r_max and a cell, hashed past
+// max_dense_cells; a triangle goes into every cell that its distance r_max
+// reaches, with `grow` padded for float rounding so no contact is missed.
+// Shared by the preparation and by the footprint a run is priced with.
+struct BinLayout {
+  GridSpec grid;
+  double grow = 0;
+  uint64_t cells = 0;
+};
+inline BinLayout bin_layout(const Bounds3d& box, Vec3d origin, double r_max, double cell,
+                            uint64_t max_dense_cells, size_t triangles, size_t particles) {
+  BinLayout b;
+  b.grow = r_max * (1 + 1e-5) + 1e-6 * cell;
+  const Vec3d pad{b.grow + cell, b.grow + cell, b.grow + cell};
+  b.grid = make_grid(box.lo - origin - pad, box.hi - origin + pad, cell, max_dense_cells,
+                     4 * uint64_t(triangles) + particles, &b.cells);
+  return b;
+}
+
+// The cells [lo, hi] (inclusive, per axis) of the box around triangle t grown by `grow`.
+COLLIDO_HD inline void bin_cell_range(const GridSpec& g, const TriangleF& t, float grow, int lo[3],
+                                      int hi[3]) {
+  const float tl[3] = {fminf(t.a.x, fminf(t.b.x, t.c.x)) - grow,
+                       fminf(t.a.y, fminf(t.b.y, t.c.y)) - grow,
+                       fminf(t.a.z, fminf(t.b.z, t.c.z)) - grow};
+  const float th[3] = {fmaxf(t.a.x, fmaxf(t.b.x, t.c.x)) + grow,
+                       fmaxf(t.a.y, fmaxf(t.b.y, t.c.y)) + grow,
+                       fmaxf(t.a.z, fmaxf(t.b.z, t.c.z)) + grow};
+  const float o[3] = {g.origin.x, g.origin.y, g.origin.z};
+  const int n[3] = {g.nx, g.ny, g.nz};
+  auto clampi = [](int v, int n) { return v < 0 ? 0 : (v >= n ? n - 1 : v); };
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = clampi(int(floorf((tl[a] - o[a]) * g.inv_cell)), n[a]);
+    hi[a] = clampi(int(floorf((th[a] - o[a]) * g.inv_cell)), n[a]);
+  }
+}
+
+// Calls f(linear cell) for each cell whose box grown by `grow` overlaps the triangle.
+template <class F>
+COLLIDO_HD void for_each_bin_cell(const GridSpec& g, const TriangleF& t, float grow, F&& f) {
+  int lo[3], hi[3];
+  bin_cell_range(g, t, grow, lo, hi);
+  const float h = 0.5f * g.cell + grow;
+  for (int z = lo[2]; z <= hi[2]; ++z)
+    for (int y = lo[1]; y <= hi[1]; ++y)
+      for (int x = lo[0]; x <= hi[0]; ++x) {
+        const Vec3f centre{g.origin.x + (x + 0.5f) * g.cell, g.origin.y + (y + 0.5f) * g.cell,
+                           g.origin.z + (z + 0.5f) * g.cell};
+        if (triangle_box_overlap(t.a, t.b, t.c, centre, Vec3f{h, h, h})) f(g.linear(x, y, z));
+      }
+}
+
 // What a kernel needs to walk the wall near a point; plain pointers, copied by value.
 struct WallView {
   GridSpec g;
@@ -306,12 +359,10 @@ class WallIndex {
     const size_t m = mesh.triangles.size();
     info->triangles_used = m;
     reach = 0;
-    // A particle in a cell can touch a triangle only if the triangle meets the
-    // cell grown by r_max; pad for float rounding so no contact is ever missed.
-    const double grow = r_max_ * (1 + 1e-5) + 1e-6 * cell;
-    const Vec3d pad{grow + cell, grow + cell, grow + cell};
-    grid = make_grid(box.lo - origin - pad, box.hi - origin + pad, cell, max_dense_cells_,
-                     4 * m + particles_, &info->cells);
+    const BinLayout layout = bin_layout(box, origin, r_max_, cell, max_dense_cells_, m, particles_);
+    const double grow = layout.grow;
+    grid = layout.grid;
+    info->cells = layout.cells;
     info->buckets = grid.buckets;
     info->hashed = grid.hashed != 0;
 
@@ -362,33 +413,6 @@ class WallIndex {
     // Fixed order inside each cell (by triangle) makes runs repeatable.
     backend.sort_segments(bin_tri.data(), bin_cell.data(), bin_start.data(), grid.buckets, total);
     return Status::ok();
-  }
-
-  // Calls f(linear cell) for each cell whose box grown by `grow` overlaps the triangle.
-  template <class F>
-  COLLIDO_HD static void for_each_bin_cell(const GridSpec& g, const TriangleF& t, float grow,
-                                           F&& f) {
-    const float lox = fminf(t.a.x, fminf(t.b.x, t.c.x)) - grow,
-                hix = fmaxf(t.a.x, fmaxf(t.b.x, t.c.x)) + grow;
-    const float loy = fminf(t.a.y, fminf(t.b.y, t.c.y)) - grow,
-                hiy = fmaxf(t.a.y, fmaxf(t.b.y, t.c.y)) + grow;
-    const float loz = fminf(t.a.z, fminf(t.b.z, t.c.z)) - grow,
-                hiz = fmaxf(t.a.z, fmaxf(t.b.z, t.c.z)) + grow;
-    auto clampi = [](int v, int n) { return v < 0 ? 0 : (v >= n ? n - 1 : v); };
-    const int x0 = clampi(int(floorf((lox - g.origin.x) * g.inv_cell)), g.nx),
-              x1 = clampi(int(floorf((hix - g.origin.x) * g.inv_cell)), g.nx);
-    const int y0 = clampi(int(floorf((loy - g.origin.y) * g.inv_cell)), g.ny),
-              y1 = clampi(int(floorf((hiy - g.origin.y) * g.inv_cell)), g.ny);
-    const int z0 = clampi(int(floorf((loz - g.origin.z) * g.inv_cell)), g.nz),
-              z1 = clampi(int(floorf((hiz - g.origin.z) * g.inv_cell)), g.nz);
-    const float h = 0.5f * g.cell + grow;
-    for (int z = z0; z <= z1; ++z)
-      for (int y = y0; y <= y1; ++y)
-        for (int x = x0; x <= x1; ++x) {
-          const Vec3f centre{g.origin.x + (x + 0.5f) * g.cell, g.origin.y + (y + 0.5f) * g.cell,
-                             g.origin.z + (z + 0.5f) * g.cell};
-          if (triangle_box_overlap(t.a, t.b, t.c, centre, Vec3f{h, h, h})) f(g.linear(x, y, z));
-        }
   }
 
   // Mesh triangle t in narrow-phase form at `slot`, and in double too when kept.
