@@ -7,6 +7,7 @@
 #include <cstdio>
 
 #include "sim/divide.h"
+#include "sim/wall_footprint.h"
 
 namespace collido::job {
 namespace {
@@ -82,6 +83,10 @@ WorkEstimate estimate_work(const sim::TriangleMesh& wall, const sim::DynamicsCon
                : m4 / 6 <= kCountedPieces         ? sim::division_piece_count(wall, how, r_max)
                                                   : m4 / 6;
   }
+  const sim::WallFootprint f = sim::wall_footprint(wall, config.method, r_max, cell,
+                                                   config.max_dense_cells, particles, e.pieces);
+  e.bin_entries = f.bin_entries;
+  e.wall_buckets = double(f.buckets);
   e.host_bytes = double(particles) * bytes_per_particle(config) + e.pieces * 160 +
                  std::min(e.wall_cells, 1e12) * 12 + 64.0 * (1 << 20);
   return e;

@@ -16,6 +16,8 @@ namespace collido::job {
 struct WorkEstimate {
   double wall_cells = 0;     // (triangle, cell) pairs the bin preparation visits
   double pieces = 0;         // triangles after division (= original for bin)
+  double bin_entries = 0;    // bin: (cell, triangle) pairs the index stores (sim/wall_footprint.h)
+  double wall_buckets = 0;   // the wall grid's table (0 for the tree)
   double host_bytes = 0;     // peak host memory of the engine and its outputs
 };
 

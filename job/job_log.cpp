@@ -45,6 +45,8 @@ JobInputs job_inputs(const JobAssessment& a, const std::string& backend, const s
   in.triangles = a.triangles;
   in.pieces = a.work.pieces;
   in.wall_cells = a.work.wall_cells;
+  in.bin_entries = a.work.bin_entries;
+  in.wall_buckets = a.work.wall_buckets;
   in.wall_area = a.wall_area;
   for (int i = 0; i < 3; ++i) in.box[i] = a.box[i];
   in.r_min = a.r_min;
@@ -76,7 +78,8 @@ JobInputs job_inputs(const JobAssessment& a, const std::string& backend, const s
 
 const std::vector<std::string>& job_log_optional_columns() {
   static const std::vector<std::string> cols = {"active_steps", "wall_contact_steps",
-                                                "pair_contact_steps"};
+                                                "pair_contact_steps", "bin_entries",
+                                                "wall_buckets"};
   return cols;
 }
 
@@ -120,6 +123,9 @@ Status validate(const JobInputs& in) {
                                                    {"gravity", in.gravity}};
   for (const auto& [name, v] : nonneg)
     if (!std::isfinite(v) || v < 0) return invalid_argument(std::string(name) + " must be >= 0");
+  for (const auto& [name, v] : {std::pair<const char*, double>{"bin_entries", in.bin_entries},
+                                {"wall_buckets", in.wall_buckets}})  // NaN: not recorded
+    if (std::isinf(v) || v < 0) return invalid_argument(std::string(name) + " must be >= 0 or empty");
   if (in.r_min > in.r_max) return invalid_argument("r_min must be <= r_max");
   if (!known(in.method, {"bin", "bvh", "gravity", "circumcircle", "midpoint4"}))
     return invalid_argument("method must be bin, gravity, circumcircle or midpoint4");
@@ -210,6 +216,8 @@ std::string cell(const JobRecord& r, const std::string& c) {
   if (c == "active_steps") return note(m.active_steps);
   if (c == "wall_contact_steps") return note(m.wall_contact_steps);
   if (c == "pair_contact_steps") return note(m.pair_contact_steps);
+  if (c == "bin_entries") return note(i.bin_entries);
+  if (c == "wall_buckets") return note(i.wall_buckets);
   return "";
 }
 
@@ -287,13 +295,19 @@ bool read_cell(JobRecord* r, const std::string& c, const std::string& v, std::st
   if (c == "active_steps") return note(&m.active_steps);
   if (c == "wall_contact_steps") return note(&m.wall_contact_steps);
   if (c == "pair_contact_steps") return note(&m.pair_contact_steps);
+  if (c == "bin_entries") return note(&i.bin_entries);
+  if (c == "wall_buckets") return note(&i.wall_buckets);
   *what = "a known column";
   return false;
 }
 
+bool same_or_both_nan(double a, double b) { return a == b || (std::isnan(a) && std::isnan(b)); }
+
 bool same_inputs(const JobInputs& a, const JobInputs& b) {
   return a.wall == b.wall && a.particles == b.particles && a.triangles == b.triangles &&
-         a.pieces == b.pieces && a.wall_cells == b.wall_cells && a.wall_area == b.wall_area &&
+         a.pieces == b.pieces && a.wall_cells == b.wall_cells &&
+         same_or_both_nan(a.bin_entries, b.bin_entries) &&
+         same_or_both_nan(a.wall_buckets, b.wall_buckets) && a.wall_area == b.wall_area &&
          a.box[0] == b.box[0] && a.box[1] == b.box[1] && a.box[2] == b.box[2] &&
          a.r_min == b.r_min && a.r_max == b.r_max && a.method == b.method &&
          a.placement == b.placement && a.release_s == b.release_s &&

@@ -22,6 +22,10 @@ struct JobInputs {
   uint64_t triangles = 0;       // of the wall as loaded
   double pieces = 0;            // triangles after division, estimated (= triangles for bin)
   double wall_cells = 0;        // (triangle, cell) pairs the bin preparation visits (0 if divided)
+  // The wall index's footprint (sim/wall_footprint.h): the (cell, triangle) pairs
+  // the bin method stores, and the wall grid's buckets. NaN: a log written before
+  // they were recorded (the cost model then falls back to wall_cells and the box).
+  double bin_entries = __builtin_nan(""), wall_buckets = __builtin_nan("");
   double wall_area = 0;         // m^2
   double box[3] = {0, 0, 0};    // m: the wall's bounding-box sides
   double r_min = 0, r_max = 0;  // m

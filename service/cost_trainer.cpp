@@ -64,7 +64,7 @@ void CostModelSet::put(std::shared_ptr<const job::JobCostModel> model, const std
 }
 
 Status load_cost_models(const std::vector<std::string>& files, const std::string& retrained_dir,
-                        CostModelSet* set) {
+                        CostModelSet* set, std::vector<std::string>* notes) {
   for (const std::string& path : files) {
     auto m = job::JobCostModel::load(path);
     if (!m) return Status(m.status().code(), "cost model: " + m.status().message());
@@ -83,8 +83,15 @@ Status load_cost_models(const std::vector<std::string>& files, const std::string
     if (!configured.empty() && fs::last_write_time(configured, configured_ec) > retrained_at &&
         !configured_ec)
       continue;
+    // One this build cannot read (a file of an older version, after an upgrade)
+    // gives way to the configured model: the trainer writes a new one from the
+    // service's log after its next jobs, so the service still starts.
     auto m = job::JobCostModel::load(path.string());
-    if (!m) return Status(m.status().code(), "retrained cost model: " + m.status().message());
+    if (!m) {
+      if (notes) notes->push_back("retrained cost model " + path.string() + " left unused: " +
+                                  m.status().message());
+      continue;
+    }
     set->put(std::make_shared<const job::JobCostModel>(std::move(*m)), path.string());
   }
   return Status::ok();

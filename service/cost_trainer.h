@@ -47,9 +47,10 @@ class CostModelSet {
 
 // Loads model files into a set. A retrained model in retrained_dir
 // (job_model_BACKEND.json) takes the place of a configured one of its backend when
-// it is newer; one whose backend no configured file has is added.
+// it is newer; one whose backend no configured file has is added. A configured file
+// that does not load is an error; a retrained one is left with a line in *notes.
 Status load_cost_models(const std::vector<std::string>& files, const std::string& retrained_dir,
-                        CostModelSet* set);
+                        CostModelSet* set, std::vector<std::string>* notes = nullptr);
 
 struct CostTrainerConfig {
   std::vector<std::string> base_logs;  // job logs a candidate trains on besides the service's rows

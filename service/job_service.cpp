@@ -179,8 +179,10 @@ Expected<std::unique_ptr<JobService>> JobService::open(const ServiceConfig& give
   }
 #ifdef COLLIDO_HAVE_JOB_COST
   const std::string retrained_dir = (fs::path(config.data_dir) / "cost_models").string();
-  if (Status st = load_cost_models(config.cost_models, retrained_dir, &svc->cost_->set); !st)
+  std::vector<std::string> notes;
+  if (Status st = load_cost_models(config.cost_models, retrained_dir, &svc->cost_->set, &notes); !st)
     return st;
+  for (const std::string& n : notes) std::fprintf(stderr, "collidoscope serve: %s\n", n.c_str());
 #else
   if (!config.cost_models.empty())
     return invalid_argument("this build has no job cost model (the gvm module was left out)");

@@ -19,6 +19,8 @@
 #include "job/job_log.h"
 #include "gvm/csv.h"
 #include "gvm/run_log.h"
+#include "sim/detect.h"
+#include "sim/shapes.h"
 
 namespace collido::job {
 namespace {
@@ -37,6 +39,7 @@ JobRecord sample_record(uint64_t particles) {
   in.triangles = 128;
   in.pieces = 128;
   in.wall_cells = 31415.5;
+  in.bin_entries = 2718.25, in.wall_buckets = 4096;
   in.wall_area = 2513.2741228718346;
   in.box[0] = 20, in.box[1] = 20.000000000000004, in.box[2] = 30;
   in.r_min = 0.25, in.r_max = 0.5;
@@ -123,6 +126,9 @@ TEST(JobLog, OptionalColumnsMayBeAbsent) {
   ASSERT_EQ(back->size(), 1u);
   EXPECT_TRUE(std::isnan((*back)[0].measure.active_steps));
   EXPECT_TRUE(std::isnan((*back)[0].measure.wall_contact_steps));
+  EXPECT_TRUE(std::isnan((*back)[0].inputs.bin_entries));
+  EXPECT_TRUE(std::isnan((*back)[0].inputs.wall_buckets));
+  EXPECT_EQ((*back)[0].inputs.wall_cells, 31415.5);
   EXPECT_EQ((*back)[0].measure.total_s, 1.5);
   JobRecord neg = sample_record(100);
   neg.measure.wall_contact_steps = -1;
@@ -359,6 +365,37 @@ TEST(JobCostModelPrior, MemoryExtrapolatesAsTheJobHoldsMore) {
   EXPECT_GE(p->peak_host_bytes.p90, 0.97 * host_bytes(200'000));
 }
 
+// Device memory holds the wall's index: its grid's buckets and, for bin, the (cell,
+// triangle) pairs it stores, which are no fixed share of the cells visited.
+TEST(JobCostModelPrior, DeviceMemoryFollowsTheWallsFootprint) {
+  auto device_bytes = [](const JobInputs& in) {
+    return 2e6 + 300.0 * double(in.particles) + 36.0 * in.bin_entries + 20.0 * in.wall_buckets;
+  };
+  auto row = [&](int i) {
+    JobRecord r = sample_record(uint64_t(500 + 97 * i));
+    JobInputs& in = r.inputs;
+    in.backend = "cuda";
+    in.device = "Some GPU";
+    in.threads = 1;
+    in.wall_cells = 1e5 * (1 + i % 7);
+    in.bin_entries = in.wall_cells * (0.05 + 0.15 * std::fmod(0.37 * i, 1.0));  // 5-20 %
+    in.wall_buckets = 2e4 * (1 + (i * 5) % 11);
+    r.measure.peak_device_bytes = device_bytes(in);
+    r.measure.gpu_load = 0.5;
+    return r;
+  };
+  std::vector<JobRecord> rows;
+  for (int i = 0; i < 60; ++i) rows.push_back(row(i));
+  auto m = JobCostModel::train(rows, small_options(), nullptr);
+  ASSERT_TRUE(m) << m.status().message();
+  for (int i : {60, 61, 62, 63}) {  // new walls: ratios and grids no row had together
+    const JobRecord r = row(i);
+    auto p = m->predict(r.inputs);
+    ASSERT_TRUE(p) << p.status().message();
+    EXPECT_NEAR(p->peak_device_bytes.p50 / r.measure.peak_device_bytes, 1.0, 0.03) << i;
+  }
+}
+
 // The pair contacts expected count the particles that have landed: a free fall after
 // each release (half the wall's height in a fill, all of it from an inlet), averaged
 // over the run, in closed form.
@@ -469,6 +506,26 @@ TEST_F(TrainedModel, PricesAnAssessedScene) {
   EXPECT_NE(t->outside_reason.find("the wall moves (rotate)"), std::string::npos) << t->outside_reason;
   EXPECT_NE(t->outside_reason.find("hertz_mindlin"), std::string::npos) << t->outside_reason;
   EXPECT_FALSE(p->outside_reason.find("moves") != std::string::npos) << p->outside_reason;
+}
+
+// An assessed job carries the wall index's footprint as the preparation builds it.
+TEST(JobInputs, CarryTheWallsFootprint) {
+  JobSpec spec;
+  spec.scene_json = R"({"wall": "wall2", "particles": {"count": 500, "radius": 1.3},
+                        "duration": 0.1, "fps": 10, "backend": "cpu"})";
+  spec.out_dir = tmp("footprint");
+  auto a = assess_job(spec);
+  ASSERT_TRUE(a) << a.status().message();
+  const JobInputs in = job_inputs(*a, "cuda", "Some GPU", 1);
+  auto wall = sim::make_shape("wall2");
+  ASSERT_TRUE(wall);
+  sim::DetectConfig c;
+  c.r_max = 1.3;
+  auto d = sim::Detector::create(*wall, c, 500);
+  ASSERT_TRUE(d) << d.status().message();
+  EXPECT_EQ(in.bin_entries, double((*d)->info().bin_entries));
+  EXPECT_EQ(in.wall_buckets, double((*d)->info().buckets));
+  EXPECT_LT(in.bin_entries, 0.5 * in.wall_cells);  // a fraction of the cells visited
 }
 
 // A quick sweep through job-exec children writes job-log rows the model can read.

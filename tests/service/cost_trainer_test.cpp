@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 
 #include "job/job_log.h"
 #include "service/cost_trainer.h"
@@ -94,6 +95,33 @@ TEST(CostModelSet, AModelOfOneBackendLeavesTheOtherToTheModelOfBoth) {
   EXPECT_EQ(set.for_backend("cpu"), both);
   ASSERT_EQ(set.all().size(), 1u);
   EXPECT_EQ(set.all()[0].file, "both-again.json");
+}
+
+// After an upgrade the data directory may hold a retrained model of an older format:
+// the service starts on the configured model and says why it left the other.
+TEST(CostModelSet, ARetrainedModelThisBuildCannotReadGivesWay) {
+  const std::string dir = temp_dir("old_format");
+  fs::create_directories(dir + "/cost_models");
+  const auto cpu = train(committed_rows());
+  const std::string configured = dir + "/configured.json";
+  ASSERT_TRUE(cpu->save(configured));
+  {
+    std::ofstream old(dir + "/cost_models/job_model_cpu.json");
+    old << R"({"kind": "collidoscope-job-cost-model", "version": 1})";
+  }
+  fs::last_write_time(configured, fs::file_time_type::clock::now() - std::chrono::seconds(60));
+  CostModelSet set;
+  std::vector<std::string> notes;
+  ASSERT_TRUE(load_cost_models({configured}, dir + "/cost_models", &set, &notes));
+  ASSERT_NE(set.for_backend("cpu"), nullptr);
+  EXPECT_EQ(set.all()[0].file, configured);
+  ASSERT_EQ(notes.size(), 1u);
+  EXPECT_NE(notes[0].find("job_model_cpu.json left unused"), std::string::npos) << notes[0];
+  EXPECT_NE(notes[0].find("version"), std::string::npos) << notes[0];
+  // A configured file that does not load is still an error.
+  CostModelSet none;
+  EXPECT_FALSE(load_cost_models({dir + "/cost_models/job_model_cpu.json"}, "", &none));
+  fs::remove_all(dir);
 }
 
 TEST(CostTrainer, HeldOutJobsAreAFixedShareChosenByTheirId) {
