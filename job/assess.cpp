@@ -103,17 +103,14 @@ Expected<JobAssessment> assess_job(const JobSpec& spec) {
     if (rs.webm) a.formats.push_back("webm");
     if (rs.gif) a.formats.push_back("gif");
   }
+  a.wall = std::move(*wall);
   return a;
 }
 
-Expected<StartPreview> preview_start(const JobSpec& spec, size_t most) {
-  auto resolved = resolve_scene(spec);
-  if (!resolved) return resolved.status();
-  scene::Scene& s = resolved->scene;
-  auto wall = load_scene_wall(&s);
-  if (!wall) return wall.status();
+Expected<StartPreview> preview_start(const JobAssessment& a, size_t most) {
+  const scene::Scene& s = a.resolved.scene;
   auto placed =
-      sim::place_particles(*wall, s.particles, s.placement, s.dynamics.gravity, s.seed);
+      sim::place_particles(a.wall, s.particles, s.placement, s.dynamics.gravity, s.seed);
   if (!placed) return placed.status();
   StartPreview out;
   out.particles = placed->size();

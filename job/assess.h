@@ -51,6 +51,7 @@ struct JobAssessment {
   // the scene (sim::plan_release, sim::plan_steps) as the engine will size them.
   sim::ReleasePlan release;
   sim::StepPlan steps;
+  sim::TriangleMesh wall;  // as the run loads it (m), kept for what else is asked before it runs
 };
 
 // Resolves, loads and checks the job without running it. The same errors as
@@ -58,8 +59,8 @@ struct JobAssessment {
 // placement (a placement that cannot fit is only found by placing).
 Expected<JobAssessment> assess_job(const JobSpec& spec);
 
-// Where a job's particles start, placed as run_job() places them (the same
-// wall, placement and seed): the whole count, and at most `most` of them,
+// Where an assessed job's particles start, placed as run_job() places them (the
+// same wall, placement and seed): the whole count, and at most `most` of them,
 // every k-th, in the scene document's length unit (x, y, z, radius), with
 // their release times (0 for a fill). A placement that cannot fit is refused
 // with run_job()'s error, which says how many fit.
@@ -68,6 +69,6 @@ struct StartPreview {
   std::vector<std::array<double, 4>> shown;
   std::vector<double> release_s;
 };
-Expected<StartPreview> preview_start(const JobSpec& spec, size_t most);
+Expected<StartPreview> preview_start(const JobAssessment& a, size_t most);
 
 }  // namespace collido::job

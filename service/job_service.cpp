@@ -645,6 +645,7 @@ Expected<JobService::PreparedJob> JobService::prepare(const User& u, const json&
   key_doc["scene"].erase("wall");
   p.key = sha256_hex(key_doc.dump());
   p.prediction = price(a, p.assessment, &p.host_bytes);
+  p.assessed = std::move(*assessed);
   return p;
 }
 
@@ -734,7 +735,7 @@ Reply JobService::start_preview(const User& u, const json& body) {
                            " particles are not placed for a preview; the run places them"}};
     return r;
   }
-  auto start = job::preview_start(p->spec, kStartShown);
+  auto start = job::preview_start(p->assessed, kStartShown);
   if (!start) return status_reply(Status(start.status().code(), "scene: " + start.status().message()));
   Reply r;
   r.body = {{"particles", start->particles}, {"shown", start->shown}, {"release_s", start->release_s}};

@@ -202,6 +202,7 @@ class JobService {
     json assessment;       // what is known before it runs
     json prediction;       // its cost, as the predict route answers
     uint64_t host_bytes = 0;  // the memory the job is admitted by (waits and fits)
+    job::JobAssessment assessed;  // with its wall loaded: a start preview places on it
   };
   Expected<PreparedJob> prepare(const User& u, const json& body);
   // The predicted cost of an assessed job; *admit_bytes: the memory it is admitted by.
