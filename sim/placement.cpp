@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <utility>
 
 #include "common/number_text.h"
@@ -253,6 +254,54 @@ bool sites_by_winding(const TriangleMesh& wall, Vec3d lo, Vec3d hi, double sites
          encloses_some(wall, lo, hi);
 }
 
+// How the clear places that a fill or the default inlet offers in the box
+// [lo, hi] (`places` of them) are told inside the vessel from outside it. A
+// closed wall: by groups of clear neighbours, one look a group (SideOfWall;
+// the caller joins the groups). An open wall that encloses: each place by
+// its winding number (sites_by_winding). An open solid with a hollow (a cup
+// exported with a seam left open): each place by its rays, while they stay
+// within kOpenSideWork. Any other open wall holds nothing (a floor, a
+// plate): every clear place is kept.
+class VesselSides {
+ public:
+  enum class Rule { kGroups, kWinding, kHollows, kEvery };
+  VesselSides(const TriangleMesh& wall, Vec3d lo, Vec3d hi, double places, Vec3d down)
+      : wall_(wall),
+        lo_(lo),
+        hi_(hi),
+        closed_(is_closed_manifold(wall)),
+        winding_(!closed_ && sites_by_winding(wall, lo, hi, places)),
+        hollows_(closed_ || !winding_ ? wall : kNoWall, closed_, down),
+        one_by_one_(hollows_.work() * places <= kOpenSideWork) {
+    rule_ = closed_    ? Rule::kGroups
+            : winding_ ? Rule::kWinding
+            : one_by_one_ && hollows_.mode(lo, hi) == ClosedWallHolds::kHollows ? Rule::kHollows
+                                                                                : Rule::kEvery;
+  }
+  VesselSides(const VesselSides&) = delete;  // its groups hold references to it
+  Rule rule() const { return rule_; }
+  // kGroups: groups for the caller to make and join; where the region has a
+  // hollow, its places' enclosures are looked at one by one (one_by_one_).
+  SideOfWall groups() const {
+    return SideOfWall(wall_, hollows_.mode(lo_, hi_), hollows_, one_by_one_);
+  }
+  // The other rules: whether clear place p is inside.
+  bool inside(Vec3d p) const {
+    return rule_ == Rule::kWinding   ? holds(wall_, p)
+           : rule_ == Rule::kHollows ? hollows_.hollow(p)
+                                     : true;
+  }
+
+ private:
+  static inline const TriangleMesh kNoWall{};  // no pieces to find where no ray is cast
+  const TriangleMesh& wall_;
+  Vec3d lo_, hi_;
+  bool closed_, winding_;
+  Hollows hollows_;
+  bool one_by_one_;
+  Rule rule_ = Rule::kEvery;
+};
+
 // Lattice sites in the region, a layer (fixed z) at a time from the bottom, that
 // lie inside the wall (closed, or an open vessel's) and clear of its surface,
 // until `count` are found.
@@ -275,20 +324,12 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
   if (nx * ny > (uint64_t(1) << 26))
     return invalid_argument("placement.region: a layer of " + std::to_string(nx * ny) +
                             " sites is too large");
-  const bool closed = is_closed_manifold(wall);
   // An open vessel (a cup, a funnel) has no inside by parity: a site is
-  // inside where its own winding number says so (sites_by_winding). A fill's
-  // box region holds a cup's corners, outside the cup: 30 of 300 particles
-  // were placed there and fell away.
-  const bool open_sides = !closed && sites_by_winding(wall, lo, hi, double(ps.count));
-  static const TriangleMesh kNoWall;
-  const Hollows hollows(closed || !open_sides ? wall : kNoWall, closed, down);
-  // An open wall that encloses nothing by its winding number may still be a
-  // solid with a hollow (a cup exported with a seam left open): its sites are
-  // taken in the hollow, one by one.
-  const bool open_hollows = !closed && !open_sides &&
-                            hollows.work() * double(ps.count) <= kOpenSideWork &&
-                            hollows.mode(lo, hi) == ClosedWallHolds::kHollows;
+  // inside where its own winding number says so. A fill's box region holds a
+  // cup's corners, outside the cup: 30 of 300 particles were placed there and
+  // fell away.
+  const VesselSides sides(wall, lo, hi, double(ps.count), down);
+  const bool closed = sides.rule() == VesselSides::Rule::kGroups;
   // The wall's own detector finds sites that would start touching it; on a
   // closed wall a second look at a larger radius finds the sites clear enough
   // to join their neighbours (SideOfWall).
@@ -308,9 +349,8 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
     *counts = std::move(found.counts);
     return Status::ok();
   };
-  const ClosedWallHolds mode = closed ? hollows.mode(lo, hi) : ClosedWallHolds::kInside;
-  // A hollow's places looked at one by one where their rays stay within kOpenSideWork.
-  SideOfWall side(wall, mode, hollows, hollows.work() * double(ps.count) <= kOpenSideWork);
+  std::optional<SideOfWall> side;
+  if (closed) side.emplace(sides.groups());
   const size_t per_layer = size_t(nx * ny);
   std::vector<int> group(per_layer, -1), last_group(per_layer, -1);  // -1: not clear
   std::vector<double> reach(per_layer, 0), last_reach(per_layer, 0);
@@ -349,17 +389,16 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
       for (size_t s = 0; s < per_layer; ++s) {
         if (!(reach[s] > 0)) continue;
         int& g = of_root[sets.find(uint32_t(s))];
-        if (g < 0) g = side.new_group();
+        if (g < 0) g = side->new_group();
         group[s] = g;
         if (k > 0 && last_group[s] >= 0 && joined(site(layer, s), reach[s], site(last, s), last_reach[s]))
-          side.join(last_group[s], g);
+          side->join(last_group[s], g);
       }
     }
     for (size_t s = 0; s < layer.size() && out->size() < ps.count; ++s) {
       if (touching[s]) continue;
-      if (closed && !side.inside(group[s], {layer.x[s], layer.y[s], layer.z[s]})) continue;
-      if (open_sides && !holds(wall, {layer.x[s], layer.y[s], layer.z[s]})) continue;
-      if (open_hollows && !hollows.hollow({layer.x[s], layer.y[s], layer.z[s]})) continue;
+      const Vec3d p{layer.x[s], layer.y[s], layer.z[s]};
+      if (closed ? !side->inside(group[s], p) : !sides.inside(p)) continue;
       const size_t n = out->size();
       out->resize(n + 1);
       out->x[n] = layer.x[s], out->y[n] = layer.y[s], out->z[n] = layer.z[s];
@@ -422,8 +461,10 @@ Status drop_blocked_slots(const TriangleMesh& wall, const ParticleSpec& ps, cons
   if (Status st = (*detector)->detect(&found); !st) return st;
   const size_t n = disc->size();
   std::vector<bool> inside(n, true);
-  const bool closed = is_closed_manifold(wall);
-  if (!pl.has_inlet && closed) {
+  // An inlet the scene places may pour from anywhere; the default one pours into the vessel.
+  std::optional<VesselSides> sides;
+  if (!pl.has_inlet) sides.emplace(wall, box.lo, box.hi, double(n), down);
+  if (sides && sides->rule() == VesselSides::Rule::kGroups) {
     // Clear neighbours joined, as a fill's sites (SideOfWall): along a row, and to
     // the two nearest of the next row (rows alternate by half a spacing; an odd
     // row is shifted to +x).
@@ -438,9 +479,7 @@ Status drop_blocked_slots(const TriangleMesh& wall, const ParticleSpec& ps, cons
       if (i < lo_i || i > hi_i || j < lo_j || j > hi_j) return -1;
       return group_at[size_t(j - lo_j) * width + size_t(i - lo_i)];
     };
-    const Hollows hollows(wall, closed, down);
-    SideOfWall side(wall, hollows.mode(box.lo, box.hi), hollows,
-                    hollows.work() * double(n) <= kOpenSideWork);
+    SideOfWall side = sides->groups();
     for (size_t k = 0; k < n; ++k)
       if (found.counts[k] == 0)
         group_at[size_t(lattice[k].second - lo_j) * width + size_t(lattice[k].first - lo_i)] =
@@ -455,16 +494,9 @@ Status drop_blocked_slots(const TriangleMesh& wall, const ParticleSpec& ps, cons
     for (size_t k = 0; k < n; ++k)
       if (found.counts[k] == 0) inside[k] = side.inside(group(lattice[k].first, lattice[k].second),
                                                         centre + (*disc)[k]);
-  } else if (!pl.has_inlet && !closed && sites_by_winding(wall, box.lo, box.hi, double(n))) {
+  } else if (sides) {
     for (size_t k = 0; k < n; ++k)
-      if (found.counts[k] == 0) inside[k] = holds(wall, centre + (*disc)[k]);
-  } else if (!pl.has_inlet && !closed) {
-    // A solid with a hollow, exported with a seam left open (as in fill()).
-    const Hollows hollows(wall, closed, down);
-    if (hollows.work() * double(n) <= kOpenSideWork &&
-        hollows.mode(box.lo, box.hi) == ClosedWallHolds::kHollows)
-      for (size_t k = 0; k < n; ++k)
-        if (found.counts[k] == 0) inside[k] = hollows.hollow(centre + (*disc)[k]);
+      if (found.counts[k] == 0) inside[k] = sides->inside(centre + (*disc)[k]);
   }
   std::vector<Vec3d> kept;
   for (size_t k = 0; k < n; ++k)
