@@ -33,7 +33,7 @@ namespace {
 
 constexpr const char* kKind = "collidoscope-job-cost-model";
 constexpr const char* kDetectionKind = "collidoscope-resource-predictor";
-constexpr int kVersion = 3;  // 2: each member has its prior; 3: the wall footprint in device memory
+constexpr int kVersion = 3;  // 2: each member has its prior; 3: the wall footprint in the memory priors
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // Memory: the share of out-of-fold jobs whose peak may exceed the point by more than
 // 5 %: the issue allows 5 % of held-out runs, and 4 % of the out-of-fold ones leaves a
