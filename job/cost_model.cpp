@@ -204,15 +204,23 @@ size_t prior_terms(size_t k, const JobInputs& in, double* t) {
   const double pixels = in.renders() ? double(in.render_width) * double(in.render_height) : 0;
   const double render = in.renders() ? 1 : 0;
   const double mp4 = in.has_format("mp4"), webm = in.has_format("webm"), gif = in.has_format("gif");
+  // Memory holds the wall's index: for bin, the (cell, triangle) pairs it stores,
+  // counted before the run (sim/wall_footprint.h). Logs before that count give the
+  // cells its preparation visits instead: ten times as many on a typical wall, in
+  // no fixed ratio (the H200 log's bin jobs without particle contacts or friction,
+  // fitted by least squares: 7.7 % with those, 0.8 % with the counts). Friction
+  // adds spins and two generations of contact springs a particle (kWallSlots of
+  // them, and kPairSlots with particle contacts): more than the rest of a
+  // particle's arrays, so a term of its own.
+  const double entries = std::isnan(in.bin_entries) ? in.wall_cells : in.bin_entries;
+  const double spins = in.friction > 0 ? double(in.particles) : 0;
   size_t n = 0;
   switch (k) {
     case kHost: {
-      // On the CPU the engine's arrays and the wall's index live in host memory:
-      // the same footprint and spins terms as device memory's (below). Measured
-      // (stop 39): the CPU log's host memory 3.0 % with or without them, the H200
-      // log's 2.1 -> 1.9 % (held-out jobs more than 5 % under 4.8 -> 3.4 %).
-      const double entries = std::isnan(in.bin_entries) ? in.wall_cells : in.bin_entries;
-      const double spins = in.friction > 0 ? double(in.particles) : 0;
+      // On the CPU the engine's arrays and the wall's index live in host memory.
+      // Measured (stop 39): the CPU log's host memory 3.0 % with or without the
+      // footprint and spins, the H200 log's 2.1 -> 1.9 % (held-out jobs more than
+      // 5 % under 4.8 -> 3.4 %).
       for (double v : {1.0, double(in.particles), double(in.particles) * in.particle_contacts,
                        spins, spins * in.particle_contacts, entries, in.pieces,
                        double(in.triangles), render, pixels, mp4, pixels * mp4, webm,
@@ -223,21 +231,11 @@ size_t prior_terms(size_t k, const JobInputs& in, double* t) {
     case kDevice: {
       // The engine's grids span the wall's box in cells of 2 r_max (the particle grid
       // only with particle contacts): on the GPU they are most of a small job's memory.
-      // The wall's index is its grid's buckets and, for bin, the (cell, triangle)
-      // pairs it stores, counted before the run (sim/wall_footprint.h): the cells
-      // its preparation visits, which logs before them give instead, are ten times
-      // as many on a typical wall and in no fixed ratio (on the H200 log, bin
-      // jobs without particle contacts or friction: 7.7 % with those, 0.8 % with
-      // the counts, fitted by least squares).
+      // The wall grid's buckets are counted before the run too (logs before: the box's cells).
       const double cell = 2 * in.r_max;
       double grid = 1;
       for (double side : in.box) grid *= (side + 2 * in.r_max) / cell + 2;
-      const double entries = std::isnan(in.bin_entries) ? in.wall_cells : in.bin_entries;
       const double buckets = std::isnan(in.wall_buckets) ? grid : in.wall_buckets;
-      // Friction adds spins and two generations of contact springs a particle
-      // (kWallSlots of them, and kPairSlots with particle contacts): more than the
-      // rest of a particle's arrays, so a term of its own.
-      const double spins = in.friction > 0 ? double(in.particles) : 0;
       for (double v : {1.0, double(in.particles), double(in.particles) * in.particle_contacts,
                        spins, spins * in.particle_contacts, entries, in.pieces,
                        double(in.triangles), buckets, grid * in.particle_contacts})
