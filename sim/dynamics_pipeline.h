@@ -1199,7 +1199,8 @@ class DynamicsPipeline final : public Simulation {
       Vec3d q;
       double h = 0;
       bool face = false;
-      if (closest_point_planar(x, tris_d[k], &q, &h, &face) < reach * reach) f(k);
+      const double r2 = reach * reach;
+      if (may_touch(x, tris_d[k], r2) && closest_point_planar(x, tris_d[k], &q, &h, &face) < r2) f(k);
     });
   }
 
@@ -1618,6 +1619,7 @@ class DynamicsPipeline final : public Simulation {
       const double r2 = r * r, tol = 1e-9 * r;
       // The contact of the centre x with triangle t, when they touch.
       auto touch = [&](const PlanarTriangleD& t, Vec3d x, uint32_t orig, WallContact* out) {
+        if (!may_touch(x, t, r2)) return false;
         Vec3d q;
         double h = 0;
         bool face = false;

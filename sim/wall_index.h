@@ -112,6 +112,7 @@ COLLIDO_HD void for_each_bin_cell(const GridSpec& g, const TriangleF& t, float g
 struct WallView {
   GridSpec g;
   int reach = 0;
+  float piece_search = 0;  // pieces: how far a piece's sphere centre may lie from a touching centre
   bool bin = true;
   const BvhWideNode* bvh = nullptr;  // bvh: the tree (the other layouts: null)
   float bvh_reach = 0;           // bvh: how far from a centre boxes are visited
@@ -145,12 +146,31 @@ struct WallView {
       }
       return;
     }
-    g.for_each_neighbour(x, y, z, reach, [&](uint64_t l, uint32_t b) {
-      for (uint32_t k = tri_start[b], e = tri_end[b]; k < e; ++k) {
-        if (g.hashed && tri_cell[k] != l) continue;
-        f(k, original[k]);
-      }
-    });
+    // Pieces: the cells the cube of half-side piece_search around p overlaps
+    // (8 to 27 of the reach's 27 when the search is under a cell, as it is
+    // with the usual cell of 2 r_max), grown by far more than float's rounding
+    // of p and of the pieces' centres when they were binned.
+    const float pc[3] = {p.x, p.y, p.z}, oc[3] = {g.origin.x, g.origin.y, g.origin.z};
+    const int c[3] = {x, y, z};
+    int lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) {
+      const float rel = pc[a] - oc[a];
+      const float e = piece_search + 1e-6f * (hd_abs(rel) + g.cell);
+      const int l = int(hd_floor((rel - e) * g.inv_cell)), h = int(hd_floor((rel + e) * g.inv_cell));
+      lo[a] = l > c[a] - reach ? l : c[a] - reach;
+      hi[a] = h < c[a] + reach ? h : c[a] + reach;
+    }
+    for (int zz = lo[2]; zz <= hi[2]; ++zz)
+      for (int yy = lo[1]; yy <= hi[1]; ++yy)
+        for (int xx = lo[0]; xx <= hi[0]; ++xx) {
+          if (!g.inside(xx, yy, zz)) continue;
+          const uint64_t l = g.linear(xx, yy, zz);
+          const uint32_t b = g.bucket(l);
+          for (uint32_t k = tri_start[b], e = tri_end[b]; k < e; ++k) {
+            if (g.hashed && tri_cell[k] != l) continue;
+            f(k, original[k]);
+          }
+        }
   }
 
   // The original mesh index of prepared triangle or piece k.
@@ -228,6 +248,7 @@ class WallIndex {
     WallView v;
     v.g = grid;
     v.reach = reach;
+    v.piece_search = piece_search;
     v.bin = method_ == Method::kBin;
     v.tris = tris.data();
     if (method_ == Method::kBvh) {
@@ -260,6 +281,7 @@ class WallIndex {
     // Pad the reach for float rounding of centres and positions.
     const double search = (r_max_ + dv.max_sphere_radius) * (1 + 1e-6) + 1e-6 * r_max_;
     reach = neighbour_reach(search, cell);
+    piece_search = static_cast<float>(search);
     info->reach = reach;
 
     Bounds3d cb;
@@ -431,6 +453,7 @@ class WallIndex {
 
   GridSpec grid;
   int reach = 1;
+  float piece_search = 0;  // pieces: r_max plus the largest piece's sphere, padded
   Vec3d origin{0, 0, 0};
   float band_scale = 0;  // the wall's wall_band_scale in this frame: sizes float's error band
   Buf<PlanarTriangle> tris;     // narrow-phase form
