@@ -59,7 +59,7 @@ COLLIDO_HD COLLIDO_FORCEINLINE double closest_point_planar(Vec3d p, const Planar
 // of t's corners in its plane does by a margin far above the rounding of either.
 // A divided wall's lookup visits 27 cells of pieces and a bin cell may list long
 // slivers, most of them out of reach: the cull spares each the edge tests and
-// their divisions (a fill of wall1 by the gravity method took 7.8 ms a step on
+// their divisions (a fill of wall1 by the gravity method took 7.7 ms a step on
 // the CPU without it; docs/benchmarks.md).
 COLLIDO_HD COLLIDO_FORCEINLINE bool may_touch(Vec3d p, const PlanarTriangleD& t, double r2) {
   const Vec3d ap = p - t.a;
