@@ -3,6 +3,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
+#include <string>
+#include <vector>
 
 namespace collido::sim {
 namespace {
@@ -96,6 +99,59 @@ TEST(Shapes, OpenCapsAreOpen) {
   ASSERT_TRUE(m);
   EXPECT_FALSE(is_closed_manifold(*m));
   EXPECT_EQ(m->triangles.size(), 128u);
+}
+
+// The winding number as the plain sum of each triangle's solid angle, the
+// definition that winding_number computes with one atan2 instead of one a triangle.
+double winding_by_sum(const TriangleMesh& mesh, Vec3d p) {
+  double sum = 0;
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+    const Vec3d a = mesh.corner(t, 0) - p, b = mesh.corner(t, 1) - p, c = mesh.corner(t, 2) - p;
+    const double la = length(a), lb = length(b), lc = length(c);
+    const double num = dot(a, cross(b, c));
+    const double den = la * lb * lc + dot(a, b) * lc + dot(b, c) * la + dot(c, a) * lb;
+    sum += 2 * std::atan2(num, den);
+  }
+  return sum / (4 * kPi);
+}
+
+TEST(Shapes, WindingNumbersAreTheSumOfTheSolidAngles) {
+  std::vector<TriangleMesh> walls;
+  for (const char* spec : {"sphere:r=10,subdivisions=3", "funnel:r1=10,r2=40,h=30,segments=64",
+                           "box:x=2,y=2,z=2", "wall2"})
+    walls.push_back(*make_shape(spec));
+  auto dmax = load_stl(std::string(COLLIDO_TEST_DATA) + "/meshes/3dsmax_export_assimp.stl");
+  ASSERT_TRUE(dmax) << dmax.status().message();
+  walls.push_back(std::move(*dmax));
+  std::mt19937_64 rng(5);
+  size_t inside = 0, outside = 0, fractional = 0;
+  for (const TriangleMesh& m : walls) {
+    Bounds3d box;
+    for (const Vec3d& v : m.vertices) box.grow(v);
+    const Vec3d size = box.hi - box.lo;
+    std::uniform_real_distribution<double> u(-0.2, 1.2);
+    std::vector<Vec3d> points;
+    for (int i = 0; i < 300; ++i)
+      points.push_back(box.lo + Vec3d{u(rng) * size.x, u(rng) * size.y, u(rng) * size.z});
+    // On the wall: its vertices, edges' midpoints and faces' centroids.
+    for (size_t t = 0; t < m.triangles.size(); t += 1 + m.triangles.size() / 60) {
+      points.push_back(m.corner(t, 0));
+      points.push_back((m.corner(t, 0) + m.corner(t, 1)) * 0.5);
+      points.push_back((m.corner(t, 0) + m.corner(t, 1) + m.corner(t, 2)) * (1.0 / 3.0));
+    }
+    points.push_back((box.lo + box.hi) * 0.5);
+    for (const Vec3d& p : points) {
+      const double w = winding_number(m, p), ref = winding_by_sum(m, p);
+      ASSERT_NEAR(w, ref, 1e-9) << "at " << p.x << ", " << p.y << ", " << p.z;
+      inside += std::fabs(w - 1) < 1e-6;
+      outside += std::fabs(w) < 1e-6;
+      fractional += std::fabs(w) > 0.05 && std::fabs(w - 1) > 0.05;
+    }
+  }
+  // Not vacuous: whole turns inside the closed walls, none outside, fractions near the open ones.
+  EXPECT_GT(inside, 100u);
+  EXPECT_GT(outside, 300u);
+  EXPECT_GT(fractional, 100u);
 }
 
 // A union that would take a worker minutes to build (found by fuzz_wall_spec)
