@@ -285,7 +285,7 @@ class JobRunner {
     if (Status st = check_budget(work, spec_.budget); !st) return st;
 
     auto particles = sim::place_particles(wall_, scene_.particles, scene_.placement,
-                                          scene_.dynamics.gravity, scene_.seed);
+                                          scene_.dynamics.gravity, scene_.seed, pool_.get());
     if (!particles) return particles.status();
     result_.particles = particles->size();
     if (Status st = choose_wall_representation(*particles); !st) return st;

@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "common/number_text.h"
+#include "sim/parallel.h"
 #include "sim/particles.h"
 
 namespace collido::sim {
@@ -306,7 +307,7 @@ class VesselSides {
 // lie inside the wall (closed, or an open vessel's) and clear of its surface,
 // until `count` are found.
 Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpec& pl,
-            Vec3d down, SplitMix64& rng, ParticleSet* out) {
+            Vec3d down, SplitMix64& rng, ParticleSet* out, ThreadPool* pool) {
   const Bounds3d box = mesh_bounds(wall);
   const Vec3d lo = pl.has_region ? pl.region_lo : box.lo,
               hi = pl.has_region ? pl.region_hi : box.hi;
@@ -395,10 +396,30 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
           side->join(last_group[s], g);
       }
     }
+    // An open wall's places are looked at one by one, each a pass over every
+    // triangle (a winding number, or rays): a chunk of the layer's clear places
+    // at a time, on the pool when there is one, small enough that the last
+    // layer looks at few places it does not take.
+    const bool one_by_one = !closed && sides.rule() != VesselSides::Rule::kEvery;
+    const size_t chunk = 64 * size_t(pool ? pool->size() : 1);
+    std::vector<uint8_t> in(one_by_one ? layer.size() : 0, 0);
+    size_t looked = 0;  // places [0, looked) of the layer have `in` decided
+    auto look = [&](size_t begin, size_t end) {
+      for (size_t t = begin; t < end; ++t)
+        if (!touching[t]) in[t] = sides.inside(Vec3d{layer.x[t], layer.y[t], layer.z[t]});
+    };
     for (size_t s = 0; s < layer.size() && out->size() < ps.count; ++s) {
       if (touching[s]) continue;
       const Vec3d p{layer.x[s], layer.y[s], layer.z[s]};
-      if (closed ? !side->inside(group[s], p) : !sides.inside(p)) continue;
+      if (one_by_one && s >= looked) {
+        const size_t end = std::min(layer.size(), s + chunk);
+        if (pool)
+          pool->run_chunks(end - s, 1, [&](size_t b, size_t e) { look(s + b, s + e); });
+        else
+          look(s, end);
+        looked = end;
+      }
+      if (closed ? !side->inside(group[s], p) : one_by_one && !in[s]) continue;
       const size_t n = out->size();
       out->resize(n + 1);
       out->x[n] = layer.x[s], out->y[n] = layer.y[s], out->z[n] = layer.z[s];
@@ -638,7 +659,8 @@ Status inlet(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSp
 }  // namespace
 
 Expected<ParticleSet> place_particles(const TriangleMesh& wall, const ParticleSpec& ps,
-                                      const PlacementSpec& pl, Vec3d gravity, uint64_t seed) {
+                                      const PlacementSpec& pl, Vec3d gravity, uint64_t seed,
+                                      ThreadPool* pool) {
   if (ps.count < 1 || ps.count > (uint64_t(1) << 28))
     return invalid_argument("particles.count must lie in [1, 2^28], got " +
                             std::to_string(ps.count));
@@ -653,7 +675,7 @@ Expected<ParticleSet> place_particles(const TriangleMesh& wall, const ParticleSp
   SplitMix64 rng(seed);
   ParticleSet out;
   const Vec3d down = length(gravity) > 0 ? gravity : Vec3d{0, 0, -1};
-  Status s = pl.kind == PlacementKind::kFill ? fill(wall, ps, pl, down, rng, &out)
+  Status s = pl.kind == PlacementKind::kFill ? fill(wall, ps, pl, down, rng, &out, pool)
                                              : inlet(wall, ps, pl, gravity, rng, &out);
   if (!s) return s;
   // Sizes last, so a range never changes where particles sit (the lattice fits r_max).

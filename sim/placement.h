@@ -42,8 +42,12 @@ struct PlacementSpec {
 
 // Builds the particle set. Fill refuses a region that cannot hold the count
 // (the message says how many fit); inlets refuse a disc too small for one particle.
+// pool: where a fill in an open wall looks at its places (a winding number or
+// rays each, a pass over every triangle); null: this thread. The set is the
+// same either way.
 Expected<ParticleSet> place_particles(const TriangleMesh& wall, const ParticleSpec& particles,
-                                      const PlacementSpec& placement, Vec3d gravity, uint64_t seed);
+                                      const PlacementSpec& placement, Vec3d gravity, uint64_t seed,
+                                      ThreadPool* pool = nullptr);
 
 // When a placement's particles take part, known before placing them: a fill
 // places all at once; an inlet (pour, jet) releases `slots` particles every

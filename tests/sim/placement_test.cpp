@@ -7,8 +7,10 @@
 #include <cmath>
 #include <set>
 #include <string>
+#include <vector>
 
 #include "sim/mesh.h"
+#include "sim/parallel.h"
 #include "sim/narrow_phase.h"
 #include "sim/placement.h"
 #include "sim/shapes.h"
@@ -293,6 +295,38 @@ TEST(Placement, ASolidCupIsFilledInItsHollow) {
         EXPECT_LT(std::fabs(winding_number(cup, c)), 0.5) << "in the material at " << i;
         EXPECT_LT(std::hypot(c.x, c.y) + 0.3, 4.0) << i;  // within the hollow's side
         EXPECT_GT(c.z - 0.3, 1.0) << i;                   // over its floor
+      }
+    }
+  }
+}
+
+// An open wall's places are looked at on the job's pool a chunk at a time;
+// the set is the same as on one thread, whatever the pool's size (by winding
+// numbers: an open cup, a funnel over it; by rays: a solid cup with its seam open).
+TEST(Placement, AnOpenWallsFillIsTheSameOnAPool) {
+  ParticleSpec ps;
+  ps.count = 700;
+  ps.r_min = 0.2, ps.r_max = 0.3;
+  std::vector<TriangleMesh> walls;
+  for (const char* spec : {"cylinder:r=5,h=10,segments=48,caps=bottom",
+                           "funnel:r1=2,r2=8,h=8,segments=48,dz=12+cylinder:r=5,h=10,segments=48,caps=bottom"})
+    walls.push_back(*make_shape(spec));
+  walls.push_back(solid_cup(true));
+  ThreadPool two(2), five(5);
+  for (const TriangleMesh& wall : walls) {
+    ASSERT_FALSE(is_closed_manifold(wall));
+    auto alone = place_particles(wall, ps, PlacementSpec{}, {0, 0, -9.81}, 4);
+    ASSERT_TRUE(alone) << alone.status().message();
+    ASSERT_EQ(alone->size(), ps.count);
+    for (ThreadPool* pool : {&two, &five}) {
+      auto shared = place_particles(wall, ps, PlacementSpec{}, {0, 0, -9.81}, 4, pool);
+      ASSERT_TRUE(shared) << shared.status().message();
+      ASSERT_EQ(shared->size(), alone->size());
+      for (size_t i = 0; i < alone->size(); ++i) {
+        ASSERT_EQ(shared->x[i], alone->x[i]) << i;
+        ASSERT_EQ(shared->y[i], alone->y[i]) << i;
+        ASSERT_EQ(shared->z[i], alone->z[i]) << i;
+        ASSERT_EQ(shared->r[i], alone->r[i]) << i;
       }
     }
   }
