@@ -25,16 +25,45 @@ COLLIDO_HD COLLIDO_FORCEINLINE double segment_closest_2d(double u, double v, dou
   return x * x + y * y;
 }
 
+// Whether a point at in-plane coordinates (u, v) and height h over triangle
+// t's plane lies farther than sqrt(reach2) from t, by a test cheaper than the
+// closest point: the height alone (exact: the squared distance is at least
+// h^2), then the box of t's corners in its plane, by a margin of 1e-6 reach2
+// far above the rounding of either. A divided wall's lookup visits cells of
+// pieces and a bin cell may list long slivers, most of them out of reach: the
+// test spares each the edge tests and their divisions (a fill of wall1 by the
+// gravity method took 7.7 ms a step on the CPU without it; docs/benchmarks.md).
+COLLIDO_HD COLLIDO_FORCEINLINE bool out_of_reach(double u, double v, double h,
+                                                 const PlanarTriangleD& t, double reach2) {
+  const double left = reach2 - h * h;
+  if (!(left > 0)) return true;
+  const double u_lo = t.c1 < 0 ? t.c1 : 0, u_hi = t.c1 > t.b1 ? t.c1 : t.b1;
+  const double du = u < u_lo ? u_lo - u : (u > u_hi ? u - u_hi : 0);
+  const double dv = v < 0 ? -v : (v > t.c2 ? v - t.c2 : 0);
+  return !(du * du + dv * dv < left + 1e-6 * reach2);
+}
+
 // Squared distance from p to the triangle (prepared in double: a float
 // closest point would carry the coordinates' rounding, about 1e-7 of them,
 // into the push's direction, a sideways force that walks a resting particle
 // across a floor), the closest point *q, p's signed height *h over the plane,
-// and whether the closest point is inside the face (then the push is along +-n exactly).
+// and *aside, the squared distance in the plane from p's foot to the face (0
+// inside it: then the push is along +-n exactly). *aside is its own figure, not
+// the total less h^2, which would carry h^2's rounding (1e-17 of it, more where
+// nvcc fuses the multiply and add) into the test of a centre over an edge.
+// Where p lies beyond sqrt(reach2) by its height, then by out_of_reach, it
+// returns reach2 and leaves *q, *h and *aside as they were: the height first,
+// before the in-plane coordinates, since it alone culls most candidates (a
+// wall1 fill by the gravity method 0.85 -> 0.73 ms a step).
 COLLIDO_HD COLLIDO_FORCEINLINE double closest_point_planar(Vec3d p, const PlanarTriangleD& t,
-                                                           Vec3d* q, double* h, bool* face) {
+                                                           double reach2, Vec3d* q, double* h,
+                                                           double* aside) {
   const Vec3d ap = p - t.a;
+  const double hh = dot(ap, t.n);
+  if (!(hh * hh < reach2)) return reach2;  // the plane alone: most culled candidates, cheapest
   const Vec3d e2 = cross(t.n, t.e1);
-  const double u = dot(ap, t.e1), v = dot(ap, e2), hh = dot(ap, t.n);
+  const double u = dot(ap, t.e1), v = dot(ap, e2);
+  if (out_of_reach(u, v, hh, t, reach2)) return reach2;
   double qu = u, qv = v, d = 0;
   const bool inside =
       t.c2 > 0 && v >= 0 && (t.c1 - t.b1) * v - t.c2 * (u - t.b1) >= 0 && t.c2 * u - t.c1 * v >= 0;
@@ -49,28 +78,8 @@ COLLIDO_HD COLLIDO_FORCEINLINE double closest_point_planar(Vec3d p, const Planar
   }
   *q = t.a + t.e1 * qu + e2 * qv;
   *h = hh;
-  *face = inside;
+  *aside = d;
   return d + hh * hh;
-}
-
-// Whether p may lie within sqrt(r2) of triangle t, answered cheaply before
-// closest_point_planar: false when t's plane keeps p out of reach (exact: that
-// function's squared distance is at least the height's square), or when the box
-// of t's corners in its plane does by a margin far above the rounding of either.
-// A divided wall's lookup visits 27 cells of pieces and a bin cell may list long
-// slivers, most of them out of reach: the cull spares each the edge tests and
-// their divisions (a fill of wall1 by the gravity method took 7.7 ms a step on
-// the CPU without it; docs/benchmarks.md).
-COLLIDO_HD COLLIDO_FORCEINLINE bool may_touch(Vec3d p, const PlanarTriangleD& t, double r2) {
-  const Vec3d ap = p - t.a;
-  const double h = dot(ap, t.n);
-  const double left = r2 - h * h;
-  if (!(left > 0)) return false;
-  const double u = dot(ap, t.e1), v = dot(ap, cross(t.n, t.e1));
-  const double u_lo = t.c1 < 0 ? t.c1 : 0, u_hi = t.c1 > t.b1 ? t.c1 : t.b1;
-  const double du = u < u_lo ? u_lo - u : (u > u_hi ? u - u_hi : 0);
-  const double dv = v < 0 ? -v : (v > t.c2 ? v - t.c2 : 0);
-  return du * du + dv * dv < left + 1e-6 * r2;
 }
 
 // One wall contact of a particle: the closest point q on the wall, the unit

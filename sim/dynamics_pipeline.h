@@ -1197,10 +1197,9 @@ class DynamicsPipeline final : public Simulation {
                                                        double reach, float e, F&& f) {
     wall.for_each_candidate_near(cast3<float>(x), e, [&](uint32_t k) {
       Vec3d q;
-      double h = 0;
-      bool face = false;
+      double h = 0, aside = 0;
       const double r2 = reach * reach;
-      if (may_touch(x, tris_d[k], r2) && closest_point_planar(x, tris_d[k], &q, &h, &face) < r2) f(k);
+      if (closest_point_planar(x, tris_d[k], r2, &q, &h, &aside) < r2) f(k);
     });
   }
 
@@ -1619,11 +1618,9 @@ class DynamicsPipeline final : public Simulation {
       const double r2 = r * r, tol = 1e-9 * r;
       // The contact of the centre x with triangle t, when they touch.
       auto touch = [&](const PlanarTriangleD& t, Vec3d x, uint32_t orig, WallContact* out) {
-        if (!may_touch(x, t, r2)) return false;
         Vec3d q;
-        double h = 0;
-        bool face = false;
-        const double d2 = closest_point_planar(x, t, &q, &h, &face);
+        double h = 0, aside = 0;
+        const double d2 = closest_point_planar(x, t, r2, &q, &h, &aside);
         if (!(d2 < r2)) return false;
         double d = sqrt(d2);
         Vec3d nrm;
@@ -1632,7 +1629,7 @@ class DynamicsPipeline final : public Simulation {
         // the centre. An edge's own normal there would carry the vertices'
         // rounding (a floor's edge 6e-19 m off its line) into a sideways push
         // that walks a resting ball off the edge, as off a ridge.
-        if (face || !(d2 - h * h > 1e-18 * r2)) {
+        if (!(aside > 1e-18 * r2)) {
           nrm = h >= 0 ? t.n : t.n * -1.0;
           d = hd_abs(h);
         } else {

@@ -53,7 +53,6 @@ COLLIDO_HD COLLIDO_FORCEINLINE T norm2(Vec3T<T> a) {
 // Scalar helpers that pick the float or double routine on both host and device.
 COLLIDO_HD COLLIDO_FORCEINLINE float hd_sqrt(float v) { return sqrtf(v); }
 COLLIDO_HD COLLIDO_FORCEINLINE double hd_sqrt(double v) { return sqrt(v); }
-COLLIDO_HD COLLIDO_FORCEINLINE float hd_floor(float v) { return floorf(v); }
 template <class T>
 COLLIDO_HD COLLIDO_FORCEINLINE T hd_min(T a, T b) { return b < a ? b : a; }
 template <class T>

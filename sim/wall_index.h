@@ -146,31 +146,16 @@ struct WallView {
       }
       return;
     }
-    // Pieces: the cells the cube of half-side piece_search around p overlaps
-    // (8 to 27 of the reach's 27 when the search is under a cell, as it is
-    // with the usual cell of 2 r_max), grown by far more than float's rounding
-    // of p and of the pieces' centres when they were binned.
-    const float pc[3] = {p.x, p.y, p.z}, oc[3] = {g.origin.x, g.origin.y, g.origin.z};
-    const int c[3] = {x, y, z};
+    // Pieces: those of the cells the cube of half-side piece_search around p
+    // overlaps (8 to 27 of the 27 around its cell, with the usual cell of
+    // 2 r_max), the cube grown by far more than float's rounding of p and of
+    // the pieces' centres when they were binned.
+    const float pad = 1e-6f * (hd_max(hd_abs(p.x), hd_max(hd_abs(p.y), hd_abs(p.z))) +
+                               hd_max(hd_abs(g.origin.x), hd_max(hd_abs(g.origin.y), hd_abs(g.origin.z))) +
+                               g.cell);
     int lo[3], hi[3];
-    for (int a = 0; a < 3; ++a) {
-      const float rel = pc[a] - oc[a];
-      const float e = piece_search + 1e-6f * (hd_abs(rel) + g.cell);
-      const int l = int(hd_floor((rel - e) * g.inv_cell)), h = int(hd_floor((rel + e) * g.inv_cell));
-      lo[a] = l > c[a] - reach ? l : c[a] - reach;
-      hi[a] = h < c[a] + reach ? h : c[a] + reach;
-    }
-    for (int zz = lo[2]; zz <= hi[2]; ++zz)
-      for (int yy = lo[1]; yy <= hi[1]; ++yy)
-        for (int xx = lo[0]; xx <= hi[0]; ++xx) {
-          if (!g.inside(xx, yy, zz)) continue;
-          const uint64_t l = g.linear(xx, yy, zz);
-          const uint32_t b = g.bucket(l);
-          for (uint32_t k = tri_start[b], e = tri_end[b]; k < e; ++k) {
-            if (g.hashed && tri_cell[k] != l) continue;
-            f(k, original[k]);
-          }
-        }
+    if (cube_cells(p, piece_search + pad, lo, hi))
+      for_each_listed(lo, hi, 0, [&](uint32_t k) { f(k, original[k]); });
   }
 
   // The original mesh index of prepared triangle or piece k.
@@ -190,18 +175,32 @@ struct WallView {
       return;
     }
     int lo[3], hi[3];
+    if (!cube_cells(p, e, lo, hi)) return;
+    for_each_listed(lo, hi, bin ? 0 : reach, f);  // pieces: the cells within reach of each of those
+  }
+
+  // The cells [lo, hi] of the grid that the cube [p - e, p + e] overlaps,
+  // clamped to the grid; false when the cube misses it.
+  COLLIDO_HD COLLIDO_FORCEINLINE bool cube_cells(Vec3f p, float e, int lo[3], int hi[3]) const {
     const float pc[3] = {p.x, p.y, p.z}, oc[3] = {g.origin.x, g.origin.y, g.origin.z};
     const int n[3] = {g.nx, g.ny, g.nz};
     for (int a = 0; a < 3; ++a) {
       const float f0 = (pc[a] - e - oc[a]) * g.inv_cell, f1 = (pc[a] + e - oc[a]) * g.inv_cell;
-      if (!(f1 >= 0.f) || !(f0 < float(n[a]))) return;  // the cube misses the grid
+      if (!(f1 >= 0.f) || !(f0 < float(n[a]))) return false;
       lo[a] = f0 < 0.f ? 0 : (int(f0) < n[a] ? int(f0) : n[a] - 1);
       hi[a] = int(f1) < n[a] ? int(f1) : n[a] - 1;
     }
-    const int r = bin ? 0 : reach;  // pieces: the cells within reach of each of those
-    for (int z = lo[2] - r; z <= hi[2] + r; ++z)
-      for (int y = lo[1] - r; y <= hi[1] + r; ++y)
-        for (int x = lo[0] - r; x <= hi[0] + r; ++x) {
+    return true;
+  }
+
+  // Calls f(k) for each triangle (bin) or piece listed in the cells [lo, hi]
+  // grown by `grow` cells each way, inside the grid.
+  template <class F>
+  COLLIDO_HD COLLIDO_FORCEINLINE void for_each_listed(const int lo[3], const int hi[3], int grow,
+                                                      F&& f) const {
+    for (int z = lo[2] - grow; z <= hi[2] + grow; ++z)
+      for (int y = lo[1] - grow; y <= hi[1] + grow; ++y)
+        for (int x = lo[0] - grow; x <= hi[0] + grow; ++x) {
           if (!g.inside(x, y, z)) continue;
           const uint64_t l = g.linear(x, y, z);
           const uint32_t b = g.bucket(l);

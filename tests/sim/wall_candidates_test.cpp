@@ -2,6 +2,7 @@
 // cheap cull before the exact distance, never lose a triangle within reach.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <string>
@@ -11,21 +12,22 @@
 #include "sim/contact_force.h"
 #include "sim/shapes.h"
 #include "sim/wall_index.h"
+#include "tests/sim/wall_shape.h"
 
 namespace collido::sim {
 namespace {
 
-TriangleMesh shape(const std::string& spec) {
-  auto m = make_shape(spec);
-  EXPECT_TRUE(m.has_value()) << spec;
-  return m ? std::move(*m) : TriangleMesh{};
+// The squared distance with no reach to cull by.
+double exact_d2(Vec3d p, const PlanarTriangleD& t, double reach2 = INFINITY) {
+  Vec3d q;
+  double h = 0, aside = 0;
+  return closest_point_planar(p, t, reach2, &q, &h, &aside);
 }
 
-double exact_d2(Vec3d p, const PlanarTriangleD& t) {
-  Vec3d q;
-  double h = 0;
-  bool face = false;
-  return closest_point_planar(p, t, &q, &h, &face);
+// Whether out_of_reach keeps t for p.
+bool kept_by_cull(Vec3d p, const PlanarTriangleD& t, double reach2) {
+  const Vec3d ap = p - t.a;
+  return !out_of_reach(dot(ap, t.e1), dot(ap, cross(t.n, t.e1)), dot(ap, t.n), t, reach2);
 }
 
 // A point at `dist` from a random point of t, in a random direction.
@@ -71,7 +73,9 @@ TEST(WallLookup, TheCullNeverRejectsATriangleWithinReach) {
                                        : r * 3 * u01(rng);
       const Vec3d p = point_near(t, dist, rng);
       const bool within = exact_d2(p, t) < r * r;
-      const bool kept = may_touch(p, t, r * r);
+      const bool kept = kept_by_cull(p, t, r * r);
+      // With the cull inside it, the closest point decides as without.
+      ASSERT_EQ(exact_d2(p, t, r * r) < r * r, within);
       ++tried;
       touching += within;
       clear += dist > 1.5 * r;
@@ -82,6 +86,43 @@ TEST(WallLookup, TheCullNeverRejectsATriangleWithinReach) {
   // Not vacuous: many points touch, and the cull rejects more than those well clear.
   EXPECT_GT(touching, tried / 4);
   EXPECT_GT(culled, clear);
+}
+
+// A centre over a triangle's edge has its foot on the edge: the in-plane
+// distance the closest point gives is the coordinates' rounding alone, far
+// under the 1e-18 r^2 below which the dynamics pushes along the face's normal
+// (the total less h^2 carries h^2's rounding, about 1e-17 r^2: a sideways
+// push that walked a resting ball off a cup's bottom on the GPU). Elsewhere
+// the in-plane part and the height make up the total.
+TEST(WallLookup, AnEdgesFootLiesInThePlaneWithoutTheHeightsRounding) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u01(0, 1);
+  size_t over_edges = 0;
+  for (const PlanarTriangleD& t : odd_triangles(rng)) {
+    const double r = 1.0, r2 = r * r;
+    const double size = std::sqrt(t.b1 * t.b1 + t.c1 * t.c1 + t.c2 * t.c2);
+    if (!(t.c2 > 1e-3 * size) || size < 1e-2 || size > 1e2) continue;  // no slivers, a ball's size
+    const Vec3d e2 = cross(t.n, t.e1);
+    const Vec3d corner[3] = {t.a, t.a + t.e1 * t.b1, t.a + t.e1 * t.c1 + e2 * t.c2};
+    for (int k = 0; k < 30; ++k) {
+      const int e = k % 3;
+      const double s = 0.2 + 0.6 * u01(rng), height = r * (0.3 + 0.6 * u01(rng));
+      const Vec3d foot = corner[e] + (corner[(e + 1) % 3] - corner[e]) * s;
+      const Vec3d p = foot + t.n * height;
+      Vec3d q;
+      double h = 0, aside = -1;
+      const double d2 = closest_point_planar(p, t, r2, &q, &h, &aside);
+      ASSERT_LT(d2, r2);
+      const double scale = std::max({std::fabs(p.x), std::fabs(p.y), std::fabs(p.z), size});
+      EXPECT_LE(aside, 1e-28 * scale * scale) << "over edge " << e;
+      ++over_edges;
+      // A point beside the face: the parts add up to the total.
+      const Vec3d off = p + (foot - (corner[(e + 2) % 3])) * (0.1 * u01(rng));
+      const double d2_off = closest_point_planar(off, t, INFINITY, &q, &h, &aside);
+      EXPECT_NEAR(aside + h * h, d2_off, 1e-12 * d2_off);
+    }
+  }
+  EXPECT_GT(over_edges, 1000u);
 }
 
 // Every prepared triangle or piece within r_max of a point is among the

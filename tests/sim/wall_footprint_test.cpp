@@ -6,15 +6,10 @@
 #include <string>
 
 #include "sim/shapes.h"
+#include "tests/sim/wall_shape.h"
 
 namespace collido::sim {
 namespace {
-
-TriangleMesh shape(const std::string& spec) {
-  auto m = make_shape(spec);
-  EXPECT_TRUE(m.has_value()) << spec;
-  return m ? std::move(*m) : TriangleMesh{};
-}
 
 // The CPU preparation's figures for `mesh` (the GPU's share the code).
 PrepareInfo prepared(const TriangleMesh& mesh, Method method, double r_max,
