@@ -183,41 +183,46 @@ double signed_volume(const TriangleMesh& mesh) {
   return v / 6.0;
 }
 
-double winding_number(const TriangleMesh& mesh, Vec3d p) {
+bool SolidAngleSum::add(Vec3d a, Vec3d b, Vec3d c) {
   // Van Oosterom and Strackee: triangle t subtends 2 arg(w_t), w_t = den + i num.
   // The sum of the arguments is the argument of the product of the w_t plus the
-  // full turns the product makes on the way, so the loop multiplies and counts
+  // full turns the product makes on the way, so add() multiplies and counts
   // turns, and one atan2 ends it instead of one a triangle (atan2 was three
   // quarters of placing a fill in an open wall of 2,000 triangles, by winding
   // numbers). A turn is counted when two factors of the same half-plane multiply
   // into the other one; those products' imaginary parts are sums of two terms of
   // one sign, so rounding cannot miss a turn (only a sum near pi is ambiguous,
   // and there both readings give the same angle).
-  double re = 1, im = 0;  // the running product, rescaled by powers of two
-  long turns = 0;         // full turns made by the product
-  double halves = 0;      // factors on the negative real axis (p in a face's plane, inside it): +-pi
-  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
-    const Vec3d a = mesh.corner(t, 0) - p, b = mesh.corner(t, 1) - p, c = mesh.corner(t, 2) - p;
-    const double la = length(a), lb = length(b), lc = length(c);
-    const double num = dot(a, cross(b, c));
-    const double den = la * lb * lc + dot(a, b) * lc + dot(b, c) * la + dot(c, a) * lb;
-    if (num == 0) {  // atan2(+-0, den): 0 for den > 0 or +0, +-pi for den < 0 or -0
-      if (den < 0 || (den == 0 && std::signbit(den))) halves += std::signbit(num) ? -1 : 1;
-      continue;
-    }
-    const bool upper = im >= 0;  // the product's angle in [0, pi] (im == 0 and re < 0: pi)
-    const double pre = re * den - im * num, pim = re * num + im * den;
-    if (upper && num > 0 && (pim < 0 || (pim == 0 && pre > 0))) ++turns;  // past pi
-    if (!upper && num < 0 && pim >= 0) --turns;                           // past -pi
-    re = pre, im = pim;
-    const double size = std::fabs(re) + std::fabs(im);
-    if (size > 1e150 || size < 1e-150) {
-      const int e = std::ilogb(size);
-      re = std::ldexp(re, -e), im = std::ldexp(im, -e);
-    }
+  const double la = length(a), lb = length(b), lc = length(c);
+  const double num = dot(a, cross(b, c));
+  const double den = la * lb * lc + dot(a, b) * lc + dot(b, c) * la + dot(c, a) * lb;
+  if (num == 0) {  // atan2(+-0, den): 0 for den > 0 or +0, +-pi for den < 0 or -0
+    if (den < 0 || (den == 0 && std::signbit(den))) halves_ += std::signbit(num) ? -1 : 1;
+    return false;
   }
-  const double angle = im == 0 ? (re < 0 ? M_PI : 0.0) : std::atan2(im, re);
-  return (angle + 2 * M_PI * double(turns) + M_PI * halves) / (2 * M_PI);
+  const bool upper = im_ >= 0;  // the product's angle in [0, pi] (im == 0 and re < 0: pi)
+  const double pre = re_ * den - im_ * num, pim = re_ * num + im_ * den;
+  if (upper && num > 0 && (pim < 0 || (pim == 0 && pre > 0))) ++turns_;  // past pi
+  if (!upper && num < 0 && pim >= 0) --turns_;                            // past -pi
+  re_ = pre, im_ = pim;
+  const double size = std::fabs(re_) + std::fabs(im_);
+  if (size > 1e150 || size < 1e-150) {
+    const int e = std::ilogb(size);
+    re_ = std::ldexp(re_, -e), im_ = std::ldexp(im_, -e);
+  }
+  return std::fabs(num) > 1e-9 * (la * lb * lc);
+}
+
+double SolidAngleSum::winding() const {
+  const double angle = im_ == 0 ? (re_ < 0 ? M_PI : 0.0) : std::atan2(im_, re_);
+  return (angle + 2 * M_PI * double(turns_) + M_PI * halves_) / (2 * M_PI);
+}
+
+double winding_number(const TriangleMesh& mesh, Vec3d p) {
+  SolidAngleSum sum;
+  for (size_t t = 0; t < mesh.triangles.size(); ++t)
+    sum.add(mesh.corner(t, 0) - p, mesh.corner(t, 1) - p, mesh.corner(t, 2) - p);
+  return sum.winding();
 }
 
 }  // namespace collido::sim

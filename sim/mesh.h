@@ -78,6 +78,26 @@ bool is_closed_manifold(const TriangleMesh& mesh);
 double signed_volume(const TriangleMesh& mesh);
 // Generalised winding number of p (sum of the triangles' signed solid angles
 // over 4 pi): 1 inside a closed outward mesh, 0 outside, fractional near holes.
+// A pass over every triangle; WindingField (sim/winding_field.h) answers many
+// points of one mesh faster.
 double winding_number(const TriangleMesh& mesh, Vec3d p);
+
+// The signed solid angles of triangles seen from one point, summed exactly as
+// far as rounding lets (no atan2 a triangle: see mesh.cpp), as a winding number.
+class SolidAngleSum {
+ public:
+  // Adds the triangle whose corners lie at a, b and c from the point; false
+  // when the point lies in the triangle's plane to 1e-9 of its distances to
+  // the corners (on the triangle or beside it), where a surface's winding
+  // number jumps.
+  bool add(Vec3d a, Vec3d b, Vec3d c);
+  // The sum over 4 pi.
+  double winding() const;
+
+ private:
+  double re_ = 1, im_ = 0;  // the product of the triangles' factors, rescaled by powers of two
+  long turns_ = 0;          // full turns made by the product
+  double halves_ = 0;       // factors on the negative real axis (the point inside a face): +-pi
+};
 
 }  // namespace collido::sim

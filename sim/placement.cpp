@@ -8,6 +8,7 @@
 #include "common/number_text.h"
 #include "sim/parallel.h"
 #include "sim/particles.h"
+#include "sim/winding_field.h"
 
 namespace collido::sim {
 
@@ -65,7 +66,7 @@ struct DisjointSets {
 // Whether p lies inside the wall as a vessel holds it: a generalized winding
 // number of 1/2 or more in magnitude (a vessel wound inward, as other DEM codes
 // export them, has w = -1 inside).
-bool holds(const TriangleMesh& wall, Vec3d p) { return std::fabs(winding_number(wall, p)) >= 0.5; }
+bool holds(const WindingField& wall, Vec3d p) { return std::fabs(wall.at(p)) >= 0.5; }
 
 // Solid angles an open wall's sites may sum (triangles x (sites + probes)),
 // about 10 s; a closed wall's rays (Hollows) are held to it too.
@@ -118,7 +119,9 @@ bool ray_crosses(const TriangleMesh& wall, size_t t, Vec3d p, Vec3d dir) {
 enum class ClosedWallHolds { kInside, kHollows, kOutside };
 class Hollows {
  public:
-  Hollows(const TriangleMesh& wall, bool closed, Vec3d down) : wall_(wall), closed_(closed) {
+  // field: the open wall's winding numbers (null for a closed wall, or none).
+  Hollows(const TriangleMesh& wall, const WindingField* field, bool closed, Vec3d down)
+      : wall_(wall), field_(field), closed_(closed) {
     // The rays lean a little off the axes, so that none runs along a face or
     // through an edge of an axis-aligned wall.
     const Vec3d d = down * (1.0 / length(down));
@@ -147,7 +150,7 @@ class Hollows {
     // the ray down; on an open one (a solid exported with a seam or a slit
     // left open) a winding number of 1/4 or more (1/2 on a face, 0 clear of
     // a solid). Outside all, a hollow where every ray meets the wall.
-    if (!closed_ && std::fabs(winding_number(wall_, p)) >= 0.25) return Place::kInPiece;
+    if (!closed_ && field_ && std::fabs(field_->at(p)) >= 0.25) return Place::kInPiece;
     std::vector<uint8_t> odd(pieces_, 0);
     bool met = false;
     for (size_t t = 0; t < wall_.triangles.size(); ++t)
@@ -184,6 +187,7 @@ class Hollows {
 
  private:
   const TriangleMesh& wall_;
+  const WindingField* field_;
   bool closed_;
   std::vector<Vec3d> rays_;
   std::vector<uint32_t> piece_;  // each triangle's piece
@@ -197,7 +201,7 @@ class Hollows {
 // its rim, out of the cup, where a region is taller than the wall).
 class SideOfWall {
  public:
-  SideOfWall(const TriangleMesh& wall, ClosedWallHolds mode, const Hollows& hollows,
+  SideOfWall(const WindingField& wall, ClosedWallHolds mode, const Hollows& hollows,
              bool per_place)
       : wall_(wall), mode_(mode), hollows_(hollows), per_place_(per_place) {}
   int new_group() {
@@ -227,7 +231,7 @@ class SideOfWall {
  private:
   // kOutside: outside the wall, each place's enclosure still to be looked at.
   enum : uint8_t { kUnknown, kIn, kOut, kOutside };
-  const TriangleMesh& wall_;
+  const WindingField& wall_;
   ClosedWallHolds mode_;
   const Hollows& hollows_;
   bool per_place_;
@@ -238,8 +242,8 @@ class SideOfWall {
 // Whether an open wall holds some of the box [lo, hi] as a vessel does: its
 // winding number reaches 0.6 at one of the probes spread through it (a flat
 // wall never passes 1/2; a funnel's middle has about 2/3).
-bool encloses_some(const TriangleMesh& wall, Vec3d lo, Vec3d hi) {
-  return some_probe(lo, hi, [&](Vec3d p) { return std::fabs(winding_number(wall, p)) >= 0.6; });
+bool encloses_some(const WindingField& wall, Vec3d lo, Vec3d hi, WindingField::Work* work) {
+  return some_probe(lo, hi, [&](Vec3d p) { return std::fabs(wall.at(p, work)) >= 0.6; });
 }
 
 // Whether the sites of an open (not closed) wall, a cup or a funnel, are told inside from
@@ -247,12 +251,17 @@ bool encloses_some(const TriangleMesh& wall, Vec3d lo, Vec3d hi) {
 // constant between sites the wall does not part (it falls through the
 // opening). Only where the wall encloses some of [lo, hi] (an open wall that
 // holds nothing, a floor or a plate, keeps every clear site), and only where
-// the probes and one pass over every triangle a site stay within
+// the sites' winding numbers, at the probes' work each, stay within
 // kOpenSideWork (past it, every clear site is kept).
-bool sites_by_winding(const TriangleMesh& wall, Vec3d lo, Vec3d hi, double sites) {
-  const double probes = double(kEnclosureProbes) * kEnclosureProbes * kEnclosureProbes;
-  return double(wall.triangles.size()) * (sites + probes) <= kOpenSideWork &&
-         encloses_some(wall, lo, hi);
+bool sites_by_winding(const WindingField& wall, size_t triangles, Vec3d lo, Vec3d hi,
+                      double sites) {
+  WindingField::Work work;
+  if (!encloses_some(wall, lo, hi, &work)) return false;
+  // Solid angles a point: the exact ones, the dipoles, and a pass over every
+  // triangle for each point the plain sum answered.
+  const double per_point = double(work.exact_triangles + work.far_nodes + work.plain * triangles) /
+                           double(std::max<uint64_t>(work.points, 1));
+  return per_point * sites <= kOpenSideWork;
 }
 
 // How the clear places that a fill or the default inlet offers in the box
@@ -271,8 +280,10 @@ class VesselSides {
         lo_(lo),
         hi_(hi),
         closed_(is_closed_manifold(wall)),
-        winding_(!closed_ && sites_by_winding(wall, lo, hi, places)),
-        hollows_(closed_ || !winding_ ? wall : kNoWall, closed_, down),
+        field_(wall),
+        winding_(!closed_ && sites_by_winding(field_, wall.triangles.size(), lo, hi, places)),
+        hollows_(closed_ || !winding_ ? wall : kNoWall, closed_ || winding_ ? nullptr : &field_,
+                 closed_, down),
         one_by_one_(hollows_.work() * places <= kOpenSideWork) {
     rule_ = closed_    ? Rule::kGroups
             : winding_ ? Rule::kWinding
@@ -284,11 +295,11 @@ class VesselSides {
   // kGroups: groups for the caller to make and join; where the region has a
   // hollow, its places' enclosures are looked at one by one (one_by_one_).
   SideOfWall groups() const {
-    return SideOfWall(wall_, hollows_.mode(lo_, hi_), hollows_, one_by_one_);
+    return SideOfWall(field_, hollows_.mode(lo_, hi_), hollows_, one_by_one_);
   }
   // The other rules: whether clear place p is inside.
   bool inside(Vec3d p) const {
-    return rule_ == Rule::kWinding   ? holds(wall_, p)
+    return rule_ == Rule::kWinding   ? holds(field_, p)
            : rule_ == Rule::kHollows ? hollows_.hollow(p)
                                      : true;
   }
@@ -297,7 +308,9 @@ class VesselSides {
   static inline const TriangleMesh kNoWall{};  // no pieces to find where no ray is cast
   const TriangleMesh& wall_;
   Vec3d lo_, hi_;
-  bool closed_, winding_;
+  bool closed_;
+  WindingField field_;  // the wall's winding numbers, many sites' worth
+  bool winding_;
   Hollows hollows_;
   bool one_by_one_;
   Rule rule_ = Rule::kEvery;

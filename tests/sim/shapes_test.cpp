@@ -2,10 +2,13 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <string>
 #include <vector>
+
+#include "sim/winding_field.h"
 
 namespace collido::sim {
 namespace {
@@ -115,32 +118,42 @@ double winding_by_sum(const TriangleMesh& mesh, Vec3d p) {
   return sum / (4 * kPi);
 }
 
+// Points to ask a wall's winding number at: 300 in and around its box (a
+// fifth of its size beyond each face), its vertices, edges' midpoints and
+// faces' centroids, and the box's centre.
+std::vector<Vec3d> winding_probes(const TriangleMesh& m, std::mt19937_64& rng) {
+  Bounds3d box;
+  for (const Vec3d& v : m.vertices) box.grow(v);
+  const Vec3d size = box.hi - box.lo;
+  std::uniform_real_distribution<double> u(-0.2, 1.2);
+  std::vector<Vec3d> points;
+  for (int i = 0; i < 300; ++i)
+    points.push_back(box.lo + Vec3d{u(rng) * size.x, u(rng) * size.y, u(rng) * size.z});
+  for (size_t t = 0; t < m.triangles.size(); t += 1 + m.triangles.size() / 60) {
+    points.push_back(m.corner(t, 0));
+    points.push_back((m.corner(t, 0) + m.corner(t, 1)) * 0.5);
+    points.push_back((m.corner(t, 0) + m.corner(t, 1) + m.corner(t, 2)) * (1.0 / 3.0));
+  }
+  points.push_back((box.lo + box.hi) * 0.5);
+  return points;
+}
+
+TriangleMesh test_mesh(const std::string& name) {
+  auto m = load_stl(std::string(COLLIDO_TEST_DATA) + "/meshes/" + name);
+  EXPECT_TRUE(m) << m.status().message();
+  return m ? std::move(*m) : TriangleMesh{};
+}
+
 TEST(Shapes, WindingNumbersAreTheSumOfTheSolidAngles) {
   std::vector<TriangleMesh> walls;
   for (const char* spec : {"sphere:r=10,subdivisions=3", "funnel:r1=10,r2=40,h=30,segments=64",
                            "box:x=2,y=2,z=2", "wall2"})
     walls.push_back(*make_shape(spec));
-  auto dmax = load_stl(std::string(COLLIDO_TEST_DATA) + "/meshes/3dsmax_export_assimp.stl");
-  ASSERT_TRUE(dmax) << dmax.status().message();
-  walls.push_back(std::move(*dmax));
+  walls.push_back(test_mesh("3dsmax_export_assimp.stl"));
   std::mt19937_64 rng(5);
   size_t inside = 0, outside = 0, fractional = 0;
   for (const TriangleMesh& m : walls) {
-    Bounds3d box;
-    for (const Vec3d& v : m.vertices) box.grow(v);
-    const Vec3d size = box.hi - box.lo;
-    std::uniform_real_distribution<double> u(-0.2, 1.2);
-    std::vector<Vec3d> points;
-    for (int i = 0; i < 300; ++i)
-      points.push_back(box.lo + Vec3d{u(rng) * size.x, u(rng) * size.y, u(rng) * size.z});
-    // On the wall: its vertices, edges' midpoints and faces' centroids.
-    for (size_t t = 0; t < m.triangles.size(); t += 1 + m.triangles.size() / 60) {
-      points.push_back(m.corner(t, 0));
-      points.push_back((m.corner(t, 0) + m.corner(t, 1)) * 0.5);
-      points.push_back((m.corner(t, 0) + m.corner(t, 1) + m.corner(t, 2)) * (1.0 / 3.0));
-    }
-    points.push_back((box.lo + box.hi) * 0.5);
-    for (const Vec3d& p : points) {
+    for (const Vec3d& p : winding_probes(m, rng)) {
       const double w = winding_number(m, p), ref = winding_by_sum(m, p);
       ASSERT_NEAR(w, ref, 1e-9) << "at " << p.x << ", " << p.y << ", " << p.z;
       inside += std::fabs(w - 1) < 1e-6;
@@ -152,6 +165,66 @@ TEST(Shapes, WindingNumbersAreTheSumOfTheSolidAngles) {
   EXPECT_GT(inside, 100u);
   EXPECT_GT(outside, 300u);
   EXPECT_GT(fractional, 100u);
+}
+
+// The field gives the plain sum's number on closed walls, open ones (a cup,
+// a funnel, CAD exports with holes and slits), one whose faces are wound
+// every which way, and a plate with holes; at points in the open, on faces,
+// edges and vertices, and on the cap's plane (a cup's rim). And it does less
+// work than the plain sum: most points settle from the tree and the cap.
+TEST(Shapes, AWindingFieldGivesThePlainSum) {
+  std::vector<TriangleMesh> walls;
+  for (const char* spec : {"sphere:r=10,subdivisions=3", "funnel:r1=10,r2=40,h=30,segments=64",
+                           "cylinder:r=10,h=20,segments=48,caps=bottom", "box:x=2,y=2,z=2", "wall2"})
+    walls.push_back(*make_shape(spec));
+  for (const char* name : {"3dsmax_export_assimp.stl", "sphere_with_hole_assimp.stl",
+                           "plate_holes_trimesh_binary_solid_header.stl", "teapot_trimesh.stl",
+                           "counter_unitsmm_trimesh_83750tri.stl"})
+    walls.push_back(test_mesh(name));
+  TriangleMesh mixed = *make_shape("sphere:r=5,subdivisions=2");
+  for (size_t t = 0; t < mixed.triangles.size(); t += 3) std::swap(mixed.triangles[t][1], mixed.triangles[t][2]);
+  walls.push_back(std::move(mixed));
+  std::mt19937_64 rng(9);
+  size_t fractional = 0, whole = 0;
+  for (const TriangleMesh& m : walls) {
+    const WindingField field(m);
+    std::vector<Vec3d> points = winding_probes(m, rng);
+    // Just off the faces, where the near triangles' dipoles would be poor.
+    for (size_t t = 0; t < m.triangles.size(); t += 1 + m.triangles.size() / 60) {
+      const Vec3d a = m.corner(t, 0), b = m.corner(t, 1), c = m.corner(t, 2);
+      const Vec3d n = cross(b - a, c - a);
+      const double size = std::sqrt(length(n));
+      if (!(size > 0)) continue;
+      for (double off : {-1e-2, -1e-5, 1e-5, 1e-2})
+        points.push_back((a + b + c) * (1.0 / 3.0) + n * (off * size / length(n)));
+    }
+    // The cup's rim plane, where its cap lies (the cone over a level rim is flat).
+    if (m.triangles.size() == 142) {
+      double top = -INFINITY;
+      for (const Vec3d& v : m.vertices) top = std::max(top, v.z);
+      for (int i = 0; i < 40; ++i) points.push_back({-12 + 0.6 * i, 0.3 * i - 6, top});
+    }
+    WindingField::Work work;
+    for (const Vec3d& p : points) {
+      const double w = field.at(p, &work), ref = winding_number(m, p);
+      ASSERT_NEAR(w, ref, 1e-11) << m.triangles.size() << " triangles, at " << p.x << ", " << p.y
+                                 << ", " << p.z;
+      fractional += std::fabs(w - std::nearbyint(w)) > 0.05;
+      whole += std::fabs(w - std::nearbyint(w)) < 1e-9;
+    }
+    if (m.triangles.size() > 1000) {
+      // Work per point against the plain sum's pass over every triangle: the
+      // plain sum only for the points on the wall (its vertices, edges and
+      // faces, 180 of about 720), the tree's exact triangles half or less.
+      ASSERT_FALSE(field.plain());
+      EXPECT_LT(double(work.plain), 0.45 * double(work.points)) << m.triangles.size();
+      EXPECT_LT(double(work.exact_triangles), 0.5 * double(m.triangles.size() * work.points))
+          << m.triangles.size() << " triangles";
+      EXPECT_GT(work.far_nodes, work.points) << m.triangles.size();
+    }
+  }
+  EXPECT_GT(fractional, 200u);
+  EXPECT_GT(whole, 1000u);
 }
 
 // A union that would take a worker minutes to build (found by fuzz_wall_spec)
