@@ -73,6 +73,7 @@ struct CostDrivers {
   double landed = 0;          // share of the particles resting, averaged over the run (gravity)
   double pair_contacts = 0;   // expected touching pairs, averaged over the run (particle contacts on)
   double near_wall = 0;       // particles within a radius of the wall, if spread evenly
+  double near_wall_share = 0;  // share of the released particles near the wall: spread evenly, or landed
   double packing = 0;         // particles' volume over the wall's box volume
   double pixel_frames = 0;    // rendered pixels x frames written
   double snapshot_bytes = 0;  // the frames' snapshots, about 29 bytes a released particle

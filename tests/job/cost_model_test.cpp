@@ -461,6 +461,66 @@ TEST(JobCostModelPrior, TimeExtrapolatesWithTheWork) {
   EXPECT_GE(p->total_s.p90, p->total_s.p50);
 }
 
+// A divided wall's lookup visits only the cells within a particle's reach, so
+// its cost lies with the particles near the wall: spread evenly through the
+// wall's box (without gravity), or landed on it.
+TEST(CostDrivers, ADividedWallsLookupsAreThoseNearIt) {
+  JobInputs in = sample_record(1000).inputs;
+  in.gravity = 0;
+  const double r = in.r_max;
+  const double volume = (in.box[0] + 2 * r) * (in.box[1] + 2 * r) * (in.box[2] + 2 * r);
+  EXPECT_NEAR(cost_drivers(in).near_wall_share, 2 * r * in.wall_area / volume, 1e-12);
+  in.wall_area = 1e9;  // more wall than box: every particle is near it
+  EXPECT_EQ(cost_drivers(in).near_wall_share, 1.0);
+  in = sample_record(1000).inputs;
+  in.gravity = 9.81, in.placement = "fill", in.release_s = 0;
+  in.box[2] = 2 * 4.905, in.duration = 2;  // half of them landed, over the run
+  in.wall_area = 100;                      // few near it if spread evenly
+  EXPECT_NEAR(cost_drivers(in).near_wall_share, 0.5, 1e-12);
+}
+
+// Trained on jobs of a divided wall whose time is the lookups by the particles
+// near it, the prior prices two jobs that differ only in that share apart (it
+// priced them alike, by every released particle, before model version 4).
+TEST(JobCostModelPrior, ADividedWallsTimeFollowsTheParticlesNearIt) {
+  constexpr double kSetup = 0.05, kPerNearStep = 4e-8;
+  auto base = [](uint64_t particles) {
+    JobRecord r = sample_record(particles);
+    r.inputs.method = "gravity";
+    r.inputs.gravity = 0, r.inputs.placement = "fill", r.inputs.release_s = 0;
+    r.inputs.particle_contacts = false, r.inputs.friction = 0;
+    r.inputs.formats = "none", r.inputs.render_width = 0, r.inputs.render_height = 0;
+    return r;
+  };
+  auto total = [&](const JobInputs& in) {
+    return kSetup + kPerNearStep * double(in.particles) * double(in.steps) *
+                        cost_drivers(in).near_wall_share;
+  };
+  std::vector<JobRecord> rows;
+  for (int i = 0; i < 48; ++i) {
+    JobRecord r = base(uint64_t(100 * std::pow(100.0, (i % 12) / 11.0)));  // 100 .. 10,000
+    r.inputs.steps = 1000 + 997 * uint64_t(i % 7);
+    r.inputs.wall_area *= std::pow(0.02, (i / 12) / 3.0);  // near share 0.18 .. 0.004
+    const double scatter = 1 + 0.03 * std::sin(5.0 * i);
+    r.measure.total_s = kSetup + (total(r.inputs) - kSetup) * scatter;
+    r.measure.per_frame_s = (r.measure.total_s - kSetup) / double(r.inputs.frames + 1);
+    rows.push_back(r);
+  }
+  auto m = JobCostModel::train(rows, small_options(), nullptr);
+  ASSERT_TRUE(m) << m.status().message();
+  // Ten times the particle-steps of any trained job: the prior carries the
+  // price there (the GVM's correction saturates), near the wall or not.
+  JobInputs crowded = base(20'000).inputs, sparse = crowded;
+  crowded.steps = sparse.steps = 20'000;
+  sparse.wall_area *= 0.02;  // the fewest near the wall that any trained job had
+  auto pc = m->predict(crowded), ps = m->predict(sparse);
+  ASSERT_TRUE(pc && ps);
+  EXPECT_TRUE(pc->outside_training);
+  EXPECT_NEAR(pc->total_s.p50, total(crowded), 0.2 * total(crowded));
+  EXPECT_NEAR(ps->total_s.p50, total(sparse), 0.2 * total(sparse));
+  EXPECT_GT(pc->total_s.p50, 20 * ps->total_s.p50);  // the law: 40 times
+}
+
 TEST_F(TrainedModel, PricesAnAssessedScene) {
   JobSpec spec;
   spec.scene_json = R"({"wall": "wall1", "particles": {"count": 2000, "radius": 1},
