@@ -68,8 +68,9 @@ struct DisjointSets {
 // export them, has w = -1 inside).
 bool holds(const WindingField& wall, Vec3d p) { return std::fabs(wall.at(p)) >= 0.5; }
 
-// Solid angles an open wall's sites may sum (triangles x (sites + probes)),
-// about 10 s; a closed wall's rays (Hollows) are held to it too.
+// Solid angles an open wall's sites may sum (each site's share of the winding
+// field's work, measured at the probes), about 10 s of plain sums; a closed
+// wall's rays (Hollows) are held to it too.
 constexpr double kOpenSideWork = 4e8;
 constexpr int kEnclosureProbes = 4;  // a side: 4^3 probes of the box
 
@@ -255,6 +256,10 @@ bool encloses_some(const WindingField& wall, Vec3d lo, Vec3d hi, WindingField::W
 // kOpenSideWork (past it, every clear site is kept).
 bool sites_by_winding(const WindingField& wall, size_t triangles, Vec3d lo, Vec3d hi,
                       double sites) {
+  const double probes = double(kEnclosureProbes) * kEnclosureProbes * kEnclosureProbes;
+  // A field that answers by the plain sum (a wall wound every which way): a pass
+  // over every triangle a point, the probes' included.
+  if (wall.plain() && double(triangles) * (sites + probes) > kOpenSideWork) return false;
   WindingField::Work work;
   if (!encloses_some(wall, lo, hi, &work)) return false;
   // Solid angles a point: the exact ones, the dipoles, and a pass over every
@@ -276,8 +281,7 @@ class VesselSides {
  public:
   enum class Rule { kGroups, kWinding, kHollows, kEvery };
   VesselSides(const TriangleMesh& wall, Vec3d lo, Vec3d hi, double places, Vec3d down)
-      : wall_(wall),
-        lo_(lo),
+      : lo_(lo),
         hi_(hi),
         closed_(is_closed_manifold(wall)),
         field_(wall),
@@ -306,7 +310,6 @@ class VesselSides {
 
  private:
   static inline const TriangleMesh kNoWall{};  // no pieces to find where no ray is cast
-  const TriangleMesh& wall_;
   Vec3d lo_, hi_;
   bool closed_;
   WindingField field_;  // the wall's winding numbers, many sites' worth

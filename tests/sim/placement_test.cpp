@@ -96,6 +96,36 @@ TEST(Placement, OpenVesselsFillInsideAndAFloorAbove) {
   EXPECT_EQ(q->size(), 100u);
 }
 
+// An open vessel of many triangles is filled inside it too: a ball of 81,920
+// triangles with a hole at its top and 5,000 particles pass the 4e8 solid
+// angles that plain sums a site would take (then every clear site of the box
+// was kept, its corners included); the winding-number field's work a site is a
+// few hundred.
+TEST(Placement, AnOpenVesselOfManyTrianglesIsFilledInside) {
+  TriangleMesh ball = *make_shape("sphere:r=5,subdivisions=6");
+  const Vec3d centre = mesh_bounds(ball).center();
+  TriangleMesh open;
+  open.vertices = ball.vertices;
+  for (size_t t = 0; t < ball.triangles.size(); ++t)
+    if ((ball.corner(t, 0).z + ball.corner(t, 1).z + ball.corner(t, 2).z) / 3 < centre.z + 4.8) {
+      open.triangles.push_back(ball.triangles[t]);
+      open.source_ids.push_back(ball.source_ids[t]);
+    }
+  ASSERT_FALSE(is_closed_manifold(open));
+  ASSERT_GT(double(open.triangles.size()) * 5'000, 4e8);
+  ParticleSpec ps;
+  ps.count = 5'000;
+  ps.r_min = ps.r_max = 0.15;
+  auto p = place_particles(open, ps, PlacementSpec{}, {0, 0, -9.81}, 3);
+  ASSERT_TRUE(p) << p.status().message();
+  ASSERT_EQ(p->size(), 5'000u);
+  for (size_t i = 0; i < p->size(); i += 17) {
+    const Vec3d c{p->x[i], p->y[i], p->z[i]};
+    EXPECT_GE(std::fabs(winding_number(open, c)), 0.5) << "outside the ball at " << i;
+    EXPECT_LT(length(c - centre) + 0.15, 5.0) << i;
+  }
+}
+
 // Inside is decided once per connected group of sites (sim/placement.cpp,
 // SideOfWall): two closed boxes apart, and a solid block inside one of them,
 // take particles in both cavities and none between them, in the block or
