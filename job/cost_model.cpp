@@ -395,15 +395,17 @@ CostDrivers cost_drivers(const JobInputs& in) {
   // counted from when a particle lands: a fall after its release, from half the wall's
   // height (a fill) or from an inlet over its top; a gas without gravity meets in
   // proportion to its packing (0.55: a loose random pack).
+  const double landed = landed_share(in);  // 0 without gravity
   if (in.particle_contacts) {
-    if (in.gravity > 0)
-      d.landed = landed_share(in);
+    d.landed = landed;
     d.pair_contacts = in.gravity > 0 ? double(in.particles) * 3 * d.landed
                                      : active * 3 * std::min(1.0, d.packing / 0.55);
   }
-  d.near_wall = std::max(1.0, active * std::min(1.0, 2 * r * in.wall_area / volume));
-  // Near the wall: spread evenly through its box, or landed on it under gravity.
-  d.near_wall_share = std::max(std::min(1.0, 2 * r * in.wall_area / volume), landed_share(in));
+  // Near the wall: within a radius of it if spread evenly through its box, or
+  // landed on it under gravity.
+  const double spread_near = std::min(1.0, 2 * r * in.wall_area / volume);
+  d.near_wall = std::max(1.0, active * spread_near);
+  d.near_wall_share = std::max(spread_near, landed);
   if (in.renders())
     d.pixel_frames = double(in.render_width) * double(in.render_height) * double(in.frames + 1);
   d.snapshot_bytes = double(in.frames + 1) * active * 29;

@@ -25,18 +25,17 @@ COLLIDO_HD COLLIDO_FORCEINLINE double segment_closest_2d(double u, double v, dou
   return x * x + y * y;
 }
 
-// Whether a point at in-plane coordinates (u, v) and height h over triangle
-// t's plane lies farther than sqrt(reach2) from t, by a test cheaper than the
-// closest point: the height alone (exact: the squared distance is at least
-// h^2), then the box of t's corners in its plane, by a margin of 1e-6 reach2
-// far above the rounding of either. A divided wall's lookup visits cells of
-// pieces and a bin cell may list long slivers, most of them out of reach: the
-// test spares each the edge tests and their divisions (a fill of wall1 by the
-// gravity method took 7.7 ms a step on the CPU without it; docs/benchmarks.md).
-COLLIDO_HD COLLIDO_FORCEINLINE bool out_of_reach(double u, double v, double h,
+// Whether a point at in-plane coordinates (u, v) lies farther from triangle
+// t's box of corners in its plane than `left`, what reach2 leaves after the
+// point's height (the squared distance is at least h^2 plus that), by a margin
+// of 1e-6 reach2 far above the rounding of either: so beyond sqrt(reach2) of t,
+// by a test cheaper than the closest point. A divided wall's lookup visits
+// cells of pieces and a bin cell may list long slivers, most of them out of
+// reach: the test spares each the edge tests and their divisions (a fill of
+// wall1 by the gravity method took 7.7 ms a step on the CPU without it;
+// docs/benchmarks.md).
+COLLIDO_HD COLLIDO_FORCEINLINE bool out_of_reach(double u, double v, double left,
                                                  const PlanarTriangleD& t, double reach2) {
-  const double left = reach2 - h * h;
-  if (!(left > 0)) return true;
   const double u_lo = t.c1 < 0 ? t.c1 : 0, u_hi = t.c1 > t.b1 ? t.c1 : t.b1;
   const double du = u < u_lo ? u_lo - u : (u > u_hi ? u - u_hi : 0);
   const double dv = v < 0 ? -v : (v > t.c2 ? v - t.c2 : 0);
@@ -59,11 +58,11 @@ COLLIDO_HD COLLIDO_FORCEINLINE double closest_point_planar(Vec3d p, const Planar
                                                            double reach2, Vec3d* q, double* h,
                                                            double* aside) {
   const Vec3d ap = p - t.a;
-  const double hh = dot(ap, t.n);
-  if (!(hh * hh < reach2)) return reach2;  // the plane alone: most culled candidates, cheapest
+  const double hh = dot(ap, t.n), left = reach2 - hh * hh;
+  if (!(left > 0)) return reach2;  // the plane alone (exact): most culled candidates, cheapest
   const Vec3d e2 = cross(t.n, t.e1);
   const double u = dot(ap, t.e1), v = dot(ap, e2);
-  if (out_of_reach(u, v, hh, t, reach2)) return reach2;
+  if (out_of_reach(u, v, left, t, reach2)) return reach2;
   double qu = u, qv = v, d = 0;
   const bool inside =
       t.c2 > 0 && v >= 0 && (t.c1 - t.b1) * v - t.c2 * (u - t.b1) >= 0 && t.c2 * u - t.c1 * v >= 0;

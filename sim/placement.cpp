@@ -63,10 +63,10 @@ struct DisjointSets {
   }
 };
 
-// Whether p lies inside the wall as a vessel holds it: a generalized winding
-// number of 1/2 or more in magnitude (a vessel wound inward, as other DEM codes
+// Whether a point of this generalized winding number lies inside the wall as a
+// vessel holds it: 1/2 or more in magnitude (a vessel wound inward, as other DEM codes
 // export them, has w = -1 inside).
-bool holds(const WindingField& wall, Vec3d p) { return std::fabs(wall.at(p)) >= 0.5; }
+bool holds(double winding) { return std::fabs(winding) >= 0.5; }
 
 // Solid angles an open wall's sites may sum (each site's share of the winding
 // field's work, measured at the probes), about 10 s of plain sums; a closed
@@ -202,7 +202,7 @@ class Hollows {
 // its rim, out of the cup, where a region is taller than the wall).
 class SideOfWall {
  public:
-  SideOfWall(const WindingField& wall, ClosedWallHolds mode, const Hollows& hollows,
+  SideOfWall(const TriangleMesh& wall, ClosedWallHolds mode, const Hollows& hollows,
              bool per_place)
       : wall_(wall), mode_(mode), hollows_(hollows), per_place_(per_place) {}
   int new_group() {
@@ -217,7 +217,7 @@ class SideOfWall {
   bool inside(int g, Vec3d p) {
     const uint32_t root = groups_.find(uint32_t(g));
     if (side_[root] == kUnknown) {
-      const bool in_wall = holds(wall_, p);
+      const bool in_wall = holds(winding_number(wall_, p));  // one a group: the plain sum
       side_[root] = mode_ == ClosedWallHolds::kInside ? (in_wall ? kIn : kOut)
                     : in_wall                          ? kOut
                     : mode_ == ClosedWallHolds::kOutside ? kIn
@@ -232,7 +232,7 @@ class SideOfWall {
  private:
   // kOutside: outside the wall, each place's enclosure still to be looked at.
   enum : uint8_t { kUnknown, kIn, kOut, kOutside };
-  const WindingField& wall_;
+  const TriangleMesh& wall_;
   ClosedWallHolds mode_;
   const Hollows& hollows_;
   bool per_place_;
@@ -254,8 +254,8 @@ bool encloses_some(const WindingField& wall, Vec3d lo, Vec3d hi, WindingField::W
 // holds nothing, a floor or a plate, keeps every clear site), and only where
 // the sites' winding numbers, at the probes' work each, stay within
 // kOpenSideWork (past it, every clear site is kept).
-bool sites_by_winding(const WindingField& wall, size_t triangles, Vec3d lo, Vec3d hi,
-                      double sites) {
+bool sites_by_winding(const WindingField& wall, Vec3d lo, Vec3d hi, double sites) {
+  const size_t triangles = wall.triangles();
   const double probes = double(kEnclosureProbes) * kEnclosureProbes * kEnclosureProbes;
   // A field that answers by the plain sum (a wall wound every which way): a pass
   // over every triangle a point, the probes' included.
@@ -281,11 +281,12 @@ class VesselSides {
  public:
   enum class Rule { kGroups, kWinding, kHollows, kEvery };
   VesselSides(const TriangleMesh& wall, Vec3d lo, Vec3d hi, double places, Vec3d down)
-      : lo_(lo),
+      : wall_(wall),
+        lo_(lo),
         hi_(hi),
         closed_(is_closed_manifold(wall)),
-        field_(wall),
-        winding_(!closed_ && sites_by_winding(field_, wall.triangles.size(), lo, hi, places)),
+        field_(closed_ ? kNoWall : wall),
+        winding_(!closed_ && sites_by_winding(field_, lo, hi, places)),
         hollows_(closed_ || !winding_ ? wall : kNoWall, closed_ || winding_ ? nullptr : &field_,
                  closed_, down),
         one_by_one_(hollows_.work() * places <= kOpenSideWork) {
@@ -299,20 +300,24 @@ class VesselSides {
   // kGroups: groups for the caller to make and join; where the region has a
   // hollow, its places' enclosures are looked at one by one (one_by_one_).
   SideOfWall groups() const {
-    return SideOfWall(field_, hollows_.mode(lo_, hi_), hollows_, one_by_one_);
+    return SideOfWall(wall_, hollows_.mode(lo_, hi_), hollows_, one_by_one_);
   }
   // The other rules: whether clear place p is inside.
   bool inside(Vec3d p) const {
-    return rule_ == Rule::kWinding   ? holds(field_, p)
+    return rule_ == Rule::kWinding   ? holds(field_.at(p))
            : rule_ == Rule::kHollows ? hollows_.hollow(p)
                                      : true;
   }
 
  private:
   static inline const TriangleMesh kNoWall{};  // no pieces to find where no ray is cast
+  const TriangleMesh& wall_;
   Vec3d lo_, hi_;
   bool closed_;
-  WindingField field_;  // the wall's winding numbers, many sites' worth
+  // An open wall's winding numbers, many sites' worth. A closed wall's groups
+  // need one each, where building the field would cost more (1.7 s for a ball
+  // of 1.3 million triangles): none there.
+  WindingField field_;
   bool winding_;
   Hollows hollows_;
   bool one_by_one_;
@@ -412,8 +417,8 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
           side->join(last_group[s], g);
       }
     }
-    // An open wall's places are looked at one by one, each a pass over every
-    // triangle (a winding number, or rays): a chunk of the layer's clear places
+    // An open wall's places are looked at one by one (a winding number from
+    // the field, or rays over every triangle): a chunk of the layer's clear places
     // at a time, on the pool when there is one, small enough that the last
     // layer looks at few places it does not take.
     const bool one_by_one = !closed && sides.rule() != VesselSides::Rule::kEvery;

@@ -43,8 +43,7 @@ struct PlacementSpec {
 // Builds the particle set. Fill refuses a region that cannot hold the count
 // (the message says how many fit); inlets refuse a disc too small for one particle.
 // pool: where a fill in an open wall looks at its places (a winding number or
-// rays each, a pass over every triangle); null: this thread. The set is the
-// same either way.
+// rays each); null: this thread. The set is the same either way.
 Expected<ParticleSet> place_particles(const TriangleMesh& wall, const ParticleSpec& particles,
                                       const PlacementSpec& placement, Vec3d gravity, uint64_t seed,
                                       ThreadPool* pool = nullptr);

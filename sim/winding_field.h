@@ -39,6 +39,7 @@ class WindingField {
   // at(), counting its work into *work.
   double at(Vec3d p, Work* work) const;
   size_t cap_triangles() const { return cap_.size(); }
+  size_t triangles() const { return mesh_.triangles.size(); }
   // Whether at() is the plain sum (a mesh whose boundary is as large as itself).
   bool plain() const { return plain_; }
 

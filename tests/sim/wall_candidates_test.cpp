@@ -24,10 +24,11 @@ double exact_d2(Vec3d p, const PlanarTriangleD& t, double reach2 = INFINITY) {
   return closest_point_planar(p, t, reach2, &q, &h, &aside);
 }
 
-// Whether out_of_reach keeps t for p.
+// Whether the cull in closest_point_planar keeps t for p: the height, then out_of_reach.
 bool kept_by_cull(Vec3d p, const PlanarTriangleD& t, double reach2) {
   const Vec3d ap = p - t.a;
-  return !out_of_reach(dot(ap, t.e1), dot(ap, cross(t.n, t.e1)), dot(ap, t.n), t, reach2);
+  const double h = dot(ap, t.n), left = reach2 - h * h;
+  return left > 0 && !out_of_reach(dot(ap, t.e1), dot(ap, cross(t.n, t.e1)), left, t, reach2);
 }
 
 // A point at `dist` from a random point of t, in a random direction.
