@@ -33,8 +33,10 @@ namespace {
 
 constexpr const char* kKind = "collidoscope-job-cost-model";
 constexpr const char* kDetectionKind = "collidoscope-resource-predictor";
-constexpr int kVersion = 4;  // 2: each member has its prior; 3: the wall footprint in the memory priors;
-                              // 4: a divided wall's lookups charged to the particles near it
+constexpr int kVersion = 5;  // 2: each member has its prior; 3: the wall footprint in the memory priors;
+                              // 4: a divided wall's lookups charged to the particles near it;
+                              // 5: the lookups priced by the pieces within reach, GPU load
+                              // learnt as a log
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // Memory: the share of out-of-fold jobs whose peak may exceed the point by more than
 // 5 %: the issue allows 5 % of held-out runs, and 4 % of the out-of-fold ones leaves a
@@ -125,6 +127,11 @@ constexpr FlagFeature kFlagFeatures[] = {
 
 double lg(double v) { return std::log10(std::max(v, 1e-300)); }
 
+// GPU load is learnt as its log, like the times: it spans three decades (4e-4 to
+// 0.99 in the H200 log), and learnt as a share the small loads were lost in the
+// large ones' error. Its log needs a floor below any load measured.
+constexpr double kLeastGpuLoad = 1e-4;
+
 std::string figure(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.4g", v);
@@ -164,7 +171,7 @@ bool is_cuda(const JobInputs& in) { return in.backend == "cuda"; }
 // Each backend has weights of its own. The time per frame is the same sum without the set-up,
 // divided by the frames, with the total's weights (fitted on the per-frame times
 // directly it was worse: 56 against 32 % on the CPU log; docs/gvm.md).
-constexpr size_t kTimeTerms = 25;  // per backend
+constexpr size_t kTimeTerms = 28;  // per backend
 constexpr size_t kMaxPriorTerms = 2 * kTimeTerms;
 
 // The time terms of a job (see above); the set-up's are zero when per_frame, and the
@@ -186,6 +193,12 @@ void time_terms(const JobInputs& in, const CostDrivers& d, bool per_frame, doubl
   // charged to those near the wall, the H200 log's total 12.3 -> 11.9 % (the
   // CPU's 17.1 -> 17.4; docs/gvm.md).
   const double near_steps = active * d.near_wall_share;
+  // And a lookup's work is the pieces within a particle's reach, about pieces x r^2 /
+  // wall area: in the CPU log's divided jobs without particle contacts the time per
+  // near lookup grows with it (slopes 1.0 and 1.4 in log-log for circumcircle and
+  // midpoint4, 1.8 to 64 pieces an r^2), and kept beside the plain count the terms
+  // took the totals 17.4 -> 17.2 % (CPU) and 11.9 -> 11.2 % (H200; docs/gvm.md).
+  const double density = in.wall_area > 0 ? in.pieces * in.r_max * in.r_max / in.wall_area : 0;
   // A fixed cost a frame (its statistics, a snapshot file): on the CPU log it took the
   // time per frame from 38.6 to 34.3 % and the total from 27.9 to 27.3 %; on the
   // H200's it made the time per frame worse (46.0 -> 48.4 %), so the GPU goes without.
@@ -195,6 +208,8 @@ void time_terms(const JobInputs& in, const CostDrivers& d, bool per_frame, doubl
       steps, steps * contacts, steps * n, steps * n * contacts, active, active * contacts,
       d.pair_contacts * steps,  // the steps
       near_steps * divided[0], near_steps * divided[1], near_steps * divided[2],
+      near_steps * density * divided[0], near_steps * density * divided[1],
+      near_steps * density * divided[2],
       setup * in.pieces * divided[0], setup * in.pieces * divided[1],
       setup * in.pieces * divided[2],  // set-up: dividing the wall
       setup * in.wall_cells, setup * double(in.triangles), setup * n,  // bins, wall, placement
@@ -470,7 +485,7 @@ void job_measure_to_array(const JobMeasure& m, double* out) {
 double encode_cost(size_t k, double v, bool cuda) {
   switch (k) {
     case kDevice: return cuda ? std::log10(1 + v) : kNaN;
-    case kGpuLoad: return cuda ? v : kNaN;
+    case kGpuLoad: return cuda ? std::log10(std::max(v, kLeastGpuLoad)) : kNaN;
     case kOutputBytes: return std::log10(1 + v);
     default: return lg(v);
   }
@@ -479,7 +494,7 @@ double encode_cost(size_t k, double v, bool cuda) {
 double decode_cost(size_t k, double y, bool cuda) {
   switch (k) {
     case kDevice: return cuda ? std::max(0.0, std::pow(10.0, y) - 1) : 0.0;
-    case kGpuLoad: return cuda ? std::clamp(y, 0.0, 1.0) : 0.0;
+    case kGpuLoad: return cuda ? std::min(1.0, std::pow(10.0, y)) : 0.0;
     case kOutputBytes: return std::max(0.0, std::pow(10.0, y) - 1);
     default: return std::pow(10.0, y);
   }
@@ -1065,11 +1080,9 @@ json JobCostModel::summary() const {
   j["costs"] = json::object();
   for (size_t k = 0; k < kJobOutputs; ++k) {
     if (members_.size() != kJobOutputs || members_[k].empty()) continue;
-    // The interval as factors of the median (times and bytes are predicted as logs).
-    const bool log_cost = k != kGpuLoad;
+    // The interval as factors of the median (every cost is predicted as a log).
     json c = {{"held_out", held_out_[k]}};
-    if (log_cost) c["interval_factors"] = {std::pow(10.0, q_lo_[k]), std::pow(10.0, q_hi_[k])};
-    else c["interval_offsets"] = {q_lo_[k], q_hi_[k]};
+    c["interval_factors"] = {std::pow(10.0, q_lo_[k]), std::pow(10.0, q_hi_[k])};
     j["costs"][job_output_names()[k]] = c;
   }
   return j;

@@ -521,6 +521,50 @@ TEST(JobCostModelPrior, ADividedWallsTimeFollowsTheParticlesNearIt) {
   EXPECT_GT(pc->total_s.p50, 20 * ps->total_s.p50);  // the law: 40 times
 }
 
+// Trained on jobs of a divided wall whose lookups cost in proportion to the pieces
+// within a particle's reach (pieces x r^2 / wall area: a lookup visits the cells its
+// reach overlaps), the prior prices a finely and a coarsely divided wall apart at
+// ten times the trained steps (before model version 5 it priced a lookup alike
+// whatever the pieces).
+TEST(JobCostModelPrior, ADividedWallsLookupsCostByThePiecesWithinReach) {
+  constexpr double kSetup = 0.05, kPerPieceLookup = 2e-7;
+  auto base = [](uint64_t particles) {
+    JobRecord r = sample_record(particles);
+    r.inputs.method = "midpoint4";
+    r.inputs.gravity = 0, r.inputs.placement = "fill", r.inputs.release_s = 0;
+    r.inputs.particle_contacts = false, r.inputs.friction = 0;
+    r.inputs.formats = "none", r.inputs.render_width = 0, r.inputs.render_height = 0;
+    return r;
+  };
+  auto total = [&](const JobInputs& in) {
+    const double within_reach = in.pieces * in.r_max * in.r_max / in.wall_area;
+    return kSetup + kPerPieceLookup * double(in.particles) * double(in.steps) *
+                        cost_drivers(in).near_wall_share * within_reach;
+  };
+  std::vector<JobRecord> rows;
+  for (int i = 0; i < 48; ++i) {
+    JobRecord r = base(uint64_t(100 * std::pow(100.0, (i % 12) / 11.0)));  // 100 .. 10,000
+    r.inputs.steps = 1000 + 997 * uint64_t(i % 7);
+    r.inputs.pieces = r.inputs.triangles * std::pow(50.0, (i / 12) / 3.0);  // 1 .. 50 a triangle
+    const double scatter = 1 + 0.03 * std::sin(5.0 * i);
+    r.measure.total_s = kSetup + (total(r.inputs) - kSetup) * scatter;
+    r.measure.per_frame_s = (r.measure.total_s - kSetup) / double(r.inputs.frames + 1);
+    rows.push_back(r);
+  }
+  auto m = JobCostModel::train(rows, small_options(), nullptr);
+  ASSERT_TRUE(m) << m.status().message();
+  JobInputs fine = base(20'000).inputs, coarse = fine;
+  fine.steps = coarse.steps = 20'000;
+  fine.pieces = 50 * fine.triangles;
+  coarse.pieces = coarse.triangles;
+  auto pf = m->predict(fine), pc = m->predict(coarse);
+  ASSERT_TRUE(pf && pc);
+  EXPECT_TRUE(pf->outside_training);
+  EXPECT_NEAR(pf->total_s.p50, total(fine), 0.2 * total(fine));
+  EXPECT_NEAR(pc->total_s.p50, total(coarse), 0.2 * total(coarse));
+  EXPECT_GT(pf->total_s.p50, 20 * pc->total_s.p50);  // the law: 39 times, set-up included
+}
+
 TEST_F(TrainedModel, PricesAnAssessedScene) {
   JobSpec spec;
   spec.scene_json = R"({"wall": "wall1", "particles": {"count": 2000, "radius": 1},
