@@ -310,6 +310,43 @@ int gvm_merge_jobs(const std::vector<std::string>& paths, const std::string& out
   return kExitOk;
 }
 
+int gvm_replay(const Args& args) {
+  const char* cmd = "gvm replay";
+  static const std::vector<FlagSpec> flags = {
+      {"model", true, "job cost model JSON (required)"},
+      {"help", false, "show this help"},
+  };
+  std::string error;
+  auto parsed = parse_args(args, flags, &error);
+  if (!parsed) return usage_error(cmd, error);
+  if (parsed->has("help")) {
+    print_help(
+        "usage: collidoscope gvm replay JOBS.csv --model MODEL.json\n\n"
+        "Prices every job of a job log in the log's order, as the service meets jobs: by\n"
+        "the model alone, and scaled by the machine's pace (the median of measured over\n"
+        "predicted total time of the 10 jobs before it, as the service scales its prices).\n"
+        "Prints the total time's mean absolute percentage error and how often the 10-90 %\n"
+        "interval holds, both ways: a log swept on a day the machine ran slower or faster\n"
+        "than the model's own shows what the pace gives.",
+        flags);
+    return kExitOk;
+  }
+  if (parsed->positional().size() != 1) return usage_error(cmd, "expects one JOBS.csv");
+  if (!parsed->has("model")) return usage_error(cmd, "--model MODEL.json is required");
+  auto model = job::JobCostModel::load(parsed->get("model"));
+  if (!model) return usage_error(cmd, model.status().message());
+  auto rows = job::read_job_log(parsed->positional()[0]);
+  if (!rows) return usage_error(cmd, rows.status().message());
+  const job::PaceReplay r = job::replay_with_pace(*model, *rows);
+  if (r.jobs == 0) return usage_error(cmd, "no job of the log could be priced by this model");
+  std::printf("%zu of %zu jobs priced; total time:\n", r.jobs, rows->size());
+  std::printf("  model alone:        MAPE %5.1f %%, 10-90 %% interval holds %3.0f %%\n", r.mape,
+              100 * r.holds);
+  std::printf("  scaled by the pace: MAPE %5.1f %%, 10-90 %% interval holds %3.0f %% (pace after the last job: %.3f)\n",
+              r.paced_mape, 100 * r.paced_holds, r.last_factor);
+  return kExitOk;
+}
+
 int predict_scene(const ParsedArgs& p, const std::string& path, const std::string& text) {
   const char* cmd = "predict";
   std::string error;

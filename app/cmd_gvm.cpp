@@ -396,7 +396,11 @@ void print_gvm_usage() {
       "usage: collidoscope gvm SUBCOMMAND [options]   (SUBCOMMAND --help for its options)\n\n"
       "  train   train the resource predictor on a run log and compare it with baselines\n"
       "  synth   write a synthetic run log (made-up costs) to try train with\n"
-      "  merge   combine run logs; repeated configurations become one row\n");
+      "  merge   combine run logs; repeated configurations become one row\n"
+#ifdef COLLIDO_HAVE_JOB_COST
+      "  replay  a job cost model on a job log in its order, alone and with the pace\n"
+#endif
+  );
 }
 
 // ---- predict ---------------------------------------------------------------------------
@@ -436,7 +440,10 @@ int cmd_gvm(const Args& args) {
   if (sub == "train") return gvm_train(rest);
   if (sub == "synth") return gvm_synth(rest);
   if (sub == "merge") return gvm_merge(rest);
-  return usage_error("gvm", "unknown subcommand '" + sub + "' (train, synth, merge)");
+#ifdef COLLIDO_HAVE_JOB_COST
+  if (sub == "replay") return gvm_replay(rest);
+#endif
+  return usage_error("gvm", "unknown subcommand '" + sub + "' (train, synth, merge, replay)");
 }
 
 int cmd_predict(const Args& args) {

@@ -51,6 +51,7 @@ class ParsedArgs;
 // app/cmd_cost.cpp: cmd_gvm.cpp sends job logs and scene files here.
 int gvm_train_jobs(const ParsedArgs& parsed, const std::string& log_path);
 int gvm_merge_jobs(const std::vector<std::string>& paths, const std::string& out);
+int gvm_replay(const Args& args);  // `gvm replay`: a job cost model on a job log, with the pace
 int predict_scene(const ParsedArgs& parsed, const std::string& path, const std::string& text);
 #endif
 

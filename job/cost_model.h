@@ -235,4 +235,38 @@ Expected<JobComparison> compare_job_models(const std::vector<JobRecord>& rows,
                                            const JobCostOptions& options, uint64_t split_seed,
                                            int mlp_epochs = 10000);
 
+// ---- The machine's pace ------------------------------------------------------------
+
+// How fast the machine runs now against what a model prices: the median of measured
+// over predicted total time of its most recent jobs. A shared machine's speed moves
+// (the 2-vCPU development VM ran the same 280 jobs 17 % slower a session after the
+// log's sweep; docs/gvm.md), which a model trained on earlier runs cannot see; the
+// service scales its time prices by the pace of the jobs it ran last.
+struct Pace {
+  double factor = 1;  // measured over predicted total time, in [kPaceFastest, kPaceSlowest]
+  size_t jobs = 0;    // the jobs it stands on (0: too few, factor 1)
+};
+inline constexpr size_t kPaceWindow = 25;  // the most recent jobs it reads (10: noisier)
+inline constexpr size_t kPaceLeast = 6;    // with fewer, no pace (5 all one way is chance at 5 %)
+// A few odd jobs must not halve or double every price: the factor stays within these.
+inline constexpr double kPaceFastest = 0.5, kPaceSlowest = 2.0;
+// From the ratios measured / predicted of the most recent jobs, newest first (the
+// first kPaceWindow count).
+Pace pace_of(const std::vector<double>& ratios);
+// The model's pace on finished jobs, newest first; a job it cannot price is skipped.
+Pace pace_of(const JobCostModel& model, const std::vector<JobRecord>& newest_first);
+// A time interval scaled by the pace.
+CostInterval paced(const CostInterval& t, const Pace& pace);
+
+// A model on a job log replayed in the log's order, as the service meets jobs: each
+// job's total time priced by the model alone, and scaled by the pace of the jobs
+// before it (`gvm replay`).
+struct PaceReplay {
+  size_t jobs = 0;               // priced
+  double mape = 0, paced_mape = 0;    // total time, %
+  double holds = 0, paced_holds = 0;  // share of jobs inside the 10-90 % interval
+  double last_factor = 1;        // the pace after the last job
+};
+PaceReplay replay_with_pace(const JobCostModel& model, const std::vector<JobRecord>& in_run_order);
+
 }  // namespace collido::job

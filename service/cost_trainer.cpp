@@ -63,6 +63,17 @@ void CostModelSet::put(std::shared_ptr<const job::JobCostModel> model, const std
   entries_ = std::move(kept);
 }
 
+job::Pace CostModelSet::pace(const std::string& backend) const {
+  std::lock_guard lock(mu_);
+  const auto it = pace_.find(backend);
+  return it == pace_.end() ? job::Pace{} : it->second;
+}
+
+void CostModelSet::set_pace(const std::string& backend, const job::Pace& pace) {
+  std::lock_guard lock(mu_);
+  pace_[backend] = pace;
+}
+
 Status load_cost_models(const std::vector<std::string>& files, const std::string& retrained_dir,
                         CostModelSet* set, std::vector<std::string>* notes) {
   for (const std::string& path : files) {
@@ -126,7 +137,9 @@ json held_out_errors(const job::JobCostModel& model, const std::vector<job::JobR
 // ---- The trainer ------------------------------------------------------------------------
 
 CostTrainer::CostTrainer(CostTrainerConfig config, Store& store, CostModelSet& models)
-    : config_(std::move(config)), store_(store), models_(models) {}
+    : config_(std::move(config)), store_(store), models_(models) {
+  for (const char* backend : {"cpu", "cuda"}) update_pace(backend);  // the log's last jobs
+}
 
 CostTrainer::~CostTrainer() { wait_idle(); }
 
@@ -139,7 +152,29 @@ void CostTrainer::wait_idle() {
   if (t.joinable()) t.join();
 }
 
+void CostTrainer::update_pace(const std::string& backend) {
+  const auto model = models_.for_backend(backend);
+  if (!model) return;
+  // The backend's newest rows: a page of the log is enough unless the other backend
+  // ran most of the last jobs; at most a few pages are read.
+  std::vector<job::JobRecord> newest;
+  int64_t before = 0;
+  for (int page_no = 0; page_no < 4 && newest.size() < job::kPaceWindow; ++page_no) {
+    auto page = store_.logs(100, before);
+    if (!page || page->empty()) break;
+    for (const LogRow& l : *page) {
+      before = l.id;
+      if (l.job_record.empty() || newest.size() == job::kPaceWindow) continue;
+      auto rec = job::parse_job_log(l.job_record);
+      if (rec && rec->size() == 1 && rec->front().inputs.backend == backend)
+        newest.push_back(rec->front());
+    }
+  }
+  models_.set_pace(backend, job::pace_of(*model, newest));
+}
+
 void CostTrainer::job_logged(const std::string& backend) {
+  update_pace(backend);
   {
     std::lock_guard lock(mu_);
     if (config_.every <= 0 || ++new_rows_[backend] < config_.every) return;
@@ -159,11 +194,17 @@ bool CostTrainer::start() {
 
 json CostTrainer::status() const {
   std::lock_guard lock(mu_);
+  json pace = json::object();
+  for (const char* backend : {"cpu", "cuda"}) {
+    const job::Pace p = models_.pace(backend);
+    if (p.jobs > 0) pace[backend] = {{"factor", p.factor}, {"jobs", p.jobs}};
+  }
   return {{"running", running_},
           {"retrainings", retrainings_},
           {"every", config_.every},
           {"held_out_percent", config_.held_out_percent},
-          {"last", last_}};
+          {"last", last_},
+          {"pace", pace}};
 }
 
 void CostTrainer::run() {
@@ -197,6 +238,7 @@ void CostTrainer::run() {
   for (const char* backend : {"cpu", "cuda"}) {
     json r = retrain(backend, base, service_rows);
     if (!r.is_null()) result[backend] = std::move(r);
+    update_pace(backend);  // against the model now in use
   }
   std::lock_guard lock(mu_);
   last_ = {{"started_at", started},

@@ -9,6 +9,11 @@
 // been trained on them and the comparison stays fair. A model swapped in is written
 // to DIR/job_model_BACKEND.json (temporary name, renamed), which the next start
 // loads in place of an older configured file.
+//
+// Between retrainings the machine's speed moves (a shared VM ran the same jobs 17 %
+// slower one session than another; docs/gvm.md): the trainer also keeps each
+// backend's pace, the median of measured over predicted total time of its last jobs
+// (job/cost_model.h), by which the service scales its time prices.
 #pragma once
 
 #include <atomic>
@@ -39,10 +44,14 @@ class CostModelSet {
   std::vector<Entry> all() const;
   // Adds a model, which answers first for its backends; one it covers entirely goes.
   void put(std::shared_ptr<const job::JobCostModel> model, const std::string& file);
+  // The machine's pace against a backend's model (factor 1 until jobs have run).
+  job::Pace pace(const std::string& backend) const;
+  void set_pace(const std::string& backend, const job::Pace& pace);
 
  private:
   mutable std::mutex mu_;
   std::vector<Entry> entries_;
+  std::map<std::string, job::Pace> pace_;
 };
 
 // Loads model files into a set. A retrained model in retrained_dir
@@ -77,11 +86,15 @@ class CostTrainer {
   CostTrainer(const CostTrainer&) = delete;
   CostTrainer& operator=(const CostTrainer&) = delete;
 
-  // A job of `backend` wrote its log row: starts a retraining once `every` have.
+  // A job of `backend` wrote its log row: its pace is measured again, and a
+  // retraining starts once `every` rows have come.
   void job_logged(const std::string& backend);
+  // Measures a backend's pace again: its model on the newest log rows of the backend.
+  void update_pace(const std::string& backend);
   // Starts a retraining of every backend now; false when one is running.
   bool start();
-  // {"running", "retrainings", "every", "last": {per backend: rows, errors, decision}}.
+  // {"running", "retrainings", "every", "last": {per backend: rows, errors, decision},
+  //  "pace": {per backend: factor, jobs}}.
   nlohmann::json status() const;
   // Blocks until no retraining runs (tests).
   void wait_idle();

@@ -682,8 +682,12 @@ json JobService::price(const job::JobAssessment& a, const json& assessment,
         return json{{"value", v.p50}, {"low", v.p10}, {"high", v.p90}};
       };
       p["basis"] = "job cost model";
-      p["total_time_s"] = iv(c->total_s);
-      p["time_per_frame_s"] = iv(c->per_frame_s);
+      // Times follow the machine's pace: how much slower or faster its last jobs ran
+      // than the model priced them (service/cost_trainer.h).
+      const job::Pace pace = cost_->set.pace(backend);
+      p["total_time_s"] = iv(job::paced(c->total_s, pace));
+      p["time_per_frame_s"] = iv(job::paced(c->per_frame_s, pace));
+      if (pace.jobs > 0) p["pace"] = {{"factor", pace.factor}, {"jobs", pace.jobs}};
       p["output_bytes"] = iv(c->output_bytes);
       if (backend == "cuda") {
         p["peak_device_bytes"] = iv(c->peak_device_bytes);

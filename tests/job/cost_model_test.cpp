@@ -272,6 +272,61 @@ class TrainedModel : public ::testing::Test {
 JobCostModel* TrainedModel::model_ = nullptr;
 std::vector<JobRecord>* TrainedModel::rows_ = nullptr;
 
+// The pace: the median of measured over predicted total time of the newest jobs
+// (at most kPaceWindow), none with fewer than kPaceLeast, 1 while they lean no way
+// beyond chance, within its bounds.
+TEST(JobCostPace, TheMedianOfTheNewestJobsWithinItsBounds) {
+  EXPECT_EQ(pace_of(std::vector<double>(kPaceLeast - 1, 1.5)).jobs, 0u);
+  EXPECT_EQ(pace_of(std::vector<double>(kPaceLeast - 1, 1.5)).factor, 1.0);
+  // One job slowed tenfold by a neighbour moves the median little.
+  std::vector<double> r(kPaceLeast + 2, 1.2);
+  r[1] = 12;
+  EXPECT_EQ(pace_of(r).factor, 1.2);
+  EXPECT_EQ(pace_of(r).jobs, r.size());
+  // Jobs either side of their prices, as a right model's scatter: no pace.
+  std::vector<double> mixed;
+  for (size_t i = 0; i < kPaceWindow; ++i) mixed.push_back(i % 3 ? 1.3 : 0.9);  // 16 of 25 slower
+  EXPECT_EQ(pace_of(mixed).factor, 1.0);
+  EXPECT_EQ(pace_of(mixed).jobs, kPaceWindow);
+  mixed[0] = mixed[3] = 1.3;  // 18 of 25: beyond chance at 5 %
+  EXPECT_EQ(pace_of(mixed).factor, 1.3);
+  // Only the newest kPaceWindow count: older jobs ran at another pace.
+  std::vector<double> newest_first(kPaceWindow, 0.8);
+  newest_first.insert(newest_first.end(), 3 * kPaceWindow, 1.6);
+  EXPECT_EQ(pace_of(newest_first).factor, 0.8);
+  EXPECT_EQ(pace_of(newest_first).jobs, kPaceWindow);
+  // Within its bounds; ratios that are not ratios are left out.
+  EXPECT_EQ(pace_of(std::vector<double>(kPaceLeast, 5.0)).factor, kPaceSlowest);
+  EXPECT_EQ(pace_of(std::vector<double>(kPaceLeast, 0.1)).factor, kPaceFastest);
+  std::vector<double> odd(kPaceLeast, 1.1);
+  odd.insert(odd.begin(), {0.0, -1.0, std::nan("")});
+  EXPECT_NEAR(pace_of(odd).factor, 1.1, 1e-12);
+  EXPECT_EQ(pace_of(odd).jobs, kPaceLeast);
+  const CostInterval t = paced({1, 2, 4}, {1.5, 9});
+  EXPECT_EQ(t.p10, 1.5);
+  EXPECT_EQ(t.p50, 3.0);
+  EXPECT_EQ(t.p90, 6.0);
+}
+
+// Replayed on jobs that all ran 1.5 times what the model prices them at (a machine
+// slower than the one it was trained on), the pace takes the error away after the
+// first jobs; the model alone keeps missing by a third.
+TEST_F(TrainedModel, ThePaceFollowsAMachineSlowerThanTheModels) {
+  std::vector<JobRecord> slower(rows_->begin(), rows_->begin() + 200);
+  for (JobRecord& r : slower) {
+    auto p = model_->predict(r.inputs);
+    ASSERT_TRUE(p) << p.status().message();
+    r.measure.total_s = 1.5 * p->total_s.p50;
+  }
+  const PaceReplay replay = replay_with_pace(*model_, slower);
+  EXPECT_EQ(replay.jobs, 200u);
+  EXPECT_NEAR(replay.mape, 100.0 / 3, 1e-6);
+  EXPECT_NEAR(replay.last_factor, 1.5, 1e-9);
+  // Only the jobs before the pace had kPaceLeast to stand on miss.
+  EXPECT_NEAR(replay.paced_mape, 100.0 / 3 * double(kPaceLeast) / 200, 1e-6);
+  EXPECT_GT(replay.paced_holds, replay.holds);
+}
+
 TEST_F(TrainedModel, IntervalsAreOrderedAndPositive) {
   ASSERT_TRUE(model_->trained_for("cpu"));
   EXPECT_FALSE(model_->trained_for("cuda"));

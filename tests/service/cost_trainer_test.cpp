@@ -78,6 +78,37 @@ CostTrainerConfig trainer_config(const std::string& dir) {
   return c;
 }
 
+// The trainer keeps each backend's pace from the newest log rows: measured at its
+// start from the log it finds, and again as jobs are logged, against the model in use.
+TEST(CostTrainer, KeepsTheMachinesPaceFromItsNewestJobs) {
+  const std::string dir = temp_dir("pace");
+  std::vector<job::JobRecord> rows = committed_rows();
+  rows.resize(120);
+  const auto model = train(rows);
+  // The first 60 ran 1.4 times what the model prices them at, the next 60 as priced.
+  std::vector<job::JobRecord> slow(rows.begin(), rows.begin() + 60), even(rows.begin() + 60, rows.end());
+  for (job::JobRecord& r : slow) r.measure.total_s = 1.4 * model->predict(r.inputs)->total_s.p50;
+  for (job::JobRecord& r : even) r.measure.total_s = model->predict(r.inputs)->total_s.p50;
+  auto store = store_with_jobs(dir, slow, slow.size());
+  CostModelSet models;
+  models.put(model, "cpu.json");
+  EXPECT_EQ(models.pace("cpu").jobs, 0u);
+  CostTrainer trainer(trainer_config(dir), *store, models);
+  EXPECT_NEAR(models.pace("cpu").factor, 1.4, 1e-9);
+  EXPECT_EQ(models.pace("cpu").jobs, job::kPaceWindow);
+  EXPECT_EQ(models.pace("cuda").jobs, 0u);  // no model, no jobs
+  EXPECT_NEAR(trainer.status()["pace"]["cpu"]["factor"].get<double>(), 1.4, 1e-9);
+  for (size_t i = 0; i < even.size(); ++i) {
+    LogRow l;
+    l.job_id = "even-" + std::to_string(i);
+    l.inputs_json = l.measured_json = l.predicted_json = "{}";
+    l.job_record = job::format_job_log({even[i]});
+    ASSERT_TRUE(store->insert_log(l));
+    trainer.job_logged("cpu");
+  }
+  EXPECT_NEAR(models.pace("cpu").factor, 1.0, 1e-9);
+}
+
 TEST(CostModelSet, AModelOfOneBackendLeavesTheOtherToTheModelOfBoth) {
   auto cuda = job::read_job_log(std::string(COLLIDO_SOURCE_DIR) + "/bench/data/jobs_cuda.csv");
   ASSERT_TRUE(cuda) << cuda.status().message();

@@ -21,6 +21,7 @@
 #include <thread>
 
 #include "common/atomic_file.h"
+#include "job/cost_model.h"
 #include "job/job_log.h"
 #include "service/http_server.h"
 #include "service/job_service.h"
@@ -93,6 +94,53 @@ class ServiceTest : public ::testing::Test {
   std::unique_ptr<JobService> svc_;
   std::unique_ptr<Server> server_;
 };
+
+// Times are priced at the machine's pace: after jobs that ran 1.3 times what the
+// model priced them at, the same job's times come 1.3 times the model's, and the
+// answer says by what and on how many jobs.
+TEST_F(ServiceTest, PricesTimesAtTheMachinesPace) {
+  server_.reset();
+  svc_.reset();
+  const std::string data = std::string(COLLIDO_SOURCE_DIR) + "/bench/data/";
+  const std::vector<std::string> models = {data + "job_model_cpu.json", data + "job_model_cuda.json"};
+  start(0, 8, models);
+  Client c = client();
+  c.sign_up("ada");
+  const json before = c.call_json("POST", "/api/v1/predict", tiny_job("wall1", 400, 1.0));
+  ASSERT_TRUE(before["total_time_s"].is_object()) << before.dump();
+  EXPECT_FALSE(before.contains("pace")) << before.dump();
+  server_.reset();
+  svc_.reset();
+  {  // the log of a slower machine's jobs
+    auto model = job::JobCostModel::load(models[0]);
+    auto rows = job::read_job_log(data + "jobs_cpu.csv");
+    ASSERT_TRUE(model && rows);
+    auto store = open_sqlite_store(dir_ + "/collidoscope.db");
+    ASSERT_TRUE(store) << store.status().message();
+    for (size_t i = 0; i < 30; ++i) {
+      job::JobRecord r = (*rows)[i];
+      r.measure.total_s = 1.3 * model->predict(r.inputs)->total_s.p50;
+      LogRow l;
+      l.job_id = "slow-" + std::to_string(i);
+      l.inputs_json = l.measured_json = l.predicted_json = "{}";
+      l.job_record = job::format_job_log({r});
+      ASSERT_TRUE((*store)->insert_log(l));
+    }
+  }
+  start(0, 8, models);
+  Client again = client();  // the new server's port; the session outlives the restart
+  again.token = c.token;
+  const json after = again.call_json("POST", "/api/v1/predict", tiny_job("wall1", 400, 1.0));
+  ASSERT_TRUE(after.contains("pace")) << after.dump();
+  EXPECT_NEAR(after["pace"]["factor"].get<double>(), 1.3, 1e-9);
+  EXPECT_EQ(after["pace"]["jobs"], job::kPaceWindow);
+  for (const char* k : {"total_time_s", "time_per_frame_s"})
+    for (const char* q : {"low", "value", "high"})
+      EXPECT_NEAR(after[k][q].get<double>(), 1.3 * before[k][q].get<double>(),
+                  1e-9 * before[k][q].get<double>())
+          << k << " " << q;
+  EXPECT_EQ(after["peak_host_bytes"]["value"], before["peak_host_bytes"]["value"]);  // memory: as priced
+}
 
 // With the committed job cost models, a prediction gives time and memory with their
 // ranges, says when a job lies outside the training, and admits memory by the range's

@@ -120,8 +120,11 @@ function predictorSections(models) {
 function retrainText(r) {
   const every = r.every > 0 ? `Retrains after every ${r.every} finished jobs of a backend, or when asked.`
     : 'Retrains only when asked.';
-  if (r.running) return [`Retraining now. ${every}`];
-  if (!r.last?.backends) return [`Not retrained since the server started. ${every}`];
+  const paces = Object.entries(r.pace || {}).map(([backend, p]) =>
+    `${backend} ${p.factor.toFixed(2)}× (its last ${p.jobs} jobs)`);
+  const pace = paces.length ? ` Time prices follow the machine's pace, measured over predicted: ${paces.join(', ')}.` : '';
+  if (r.running) return [`Retraining now. ${every}${pace}`];
+  if (!r.last?.backends) return [`Not retrained since the server started. ${every}${pace}`];
   const pct = (e) => (e ? Object.entries(e).map(([k, v]) => `${k.replaceAll('_', ' ')} ${v.toFixed(1)} %`).join(', ') : '');
   const parts = Object.entries(r.last.backends).map(([backend, b]) => {
     const rows = `${b.rows.base} logged and ${b.rows.service} service jobs to train on, ${b.rows.held_out} held out`;
@@ -129,7 +132,7 @@ function retrainText(r) {
       + `${b.current_errors ? `; in use ${pct(b.current_errors)}` : ''}.` : '';
     return h('span', { class: 'retrain-backend' }, h('strong', {}, `${backend}: `), `${b.decision} (${rows}).${errs} `);
   });
-  return [`Last retraining ${fmtDate(r.last.started_at)}, ${fmtSeconds(r.last.took_s)}: `, ...parts, every];
+  return [`Last retraining ${fmtDate(r.last.started_at)}, ${fmtSeconds(r.last.took_s)}: `, ...parts, every + pace];
 }
 
 // How far the predictions given at submission were from what the jobs measured,

@@ -292,7 +292,8 @@ export async function render(main, ctx, modelParam) {
         ...fact('Wall triangles', i.triangles?.toLocaleString()),
         ...fact('Pieces after division', i.pieces?.toLocaleString()),
         ...fact('Method', i.method),
-        ...fact('Estimated by', p.basis === 'analytic' ? 'formula (no trained model on this server)' : p.basis));
+        ...fact('Estimated by', p.basis === 'analytic' ? 'formula (no trained model on this server)' : p.basis),
+        ...(p.pace ? fact('Machine pace', `${p.pace.factor.toFixed(2)}× the model's time (its last ${p.pace.jobs} jobs)`) : []));
       predNote.textContent = p.note ? `${p.note[0].toUpperCase()}${p.note.slice(1)}.` : '';
       showWarnings(warningsOf(p, l));
       mini(`Prediction: ${time ?? 'time not predicted yet'}, ${memoryText} of memory`
