@@ -323,8 +323,9 @@ int gvm_replay(const Args& args) {
     print_help(
         "usage: collidoscope gvm replay JOBS.csv --model MODEL.json\n\n"
         "Prices every job of a job log in the log's order, as the service meets jobs: by\n"
-        "the model alone, and scaled by the machine's pace (the median of measured over\n"
-        "predicted total time of the 10 jobs before it, as the service scales its prices).\n"
+        "the model alone, and scaled by the machine's pace as the service scales its\n"
+        "prices (the median of measured over predicted total time of the 25 jobs before\n"
+        "it, where they lean one way beyond chance; docs/service.md).\n"
         "Prints the total time's mean absolute percentage error and how often the 10-90 %\n"
         "interval holds, both ways: a log swept on a day the machine ran slower or faster\n"
         "than the model's own shows what the pace gives.",

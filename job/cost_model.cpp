@@ -1328,15 +1328,16 @@ Pace pace_of(const std::vector<double>& ratios) {
   // A model's own misses scatter a job either way (by 15-20 % on the CPU log), so a
   // median of a few jobs is itself off by several percent: the pace moves only when
   // the jobs lean one way beyond what chance gives a model that is right on median
-  // (a sign test at 5 %, 2.5 % a tail). Otherwise it is 1. Replayed on the CPU log a
+  // (a sign test at 5 %, kPaceTail a side). Otherwise it is 1. Replayed on the CPU log a
   // steady machine's pace then costs 0.4 points where the bare median cost 0.6, and
   // on a day the VM ran 17 % slower it gains 1.2 where the bare median gained 1.5
   // (`gvm replay`, docs/gvm.md).
   const size_t slower = size_t(std::count_if(r.begin(), r.end(), [](double v) { return v > 1; }));
-  double tail = 0, term = std::pow(0.5, double(n));  // P(X >= k), X ~ Binomial(n, 1/2)
+  // k: the most jobs of n that chance puts on one side more often than 2.5 %, that is
+  // P(X >= k) > 2.5 % for X ~ Binomial(n, 1/2), summed down from the tail.
+  double tail = 0, term = std::pow(0.5, double(n));  // term = P(X = k)
   size_t k = n;
-  for (; k > 0; --k) {  // the smallest k whose upper tail stays under 0.5 %
-    if (tail + term > 0.025) break;
+  for (; k > 0 && tail + term <= kPaceTail; --k) {
     tail += term;
     term *= double(k) / double(n - k + 1);  // C(n, k-1) = C(n, k) k / (n - k + 1)
   }

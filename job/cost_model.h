@@ -238,7 +238,9 @@ Expected<JobComparison> compare_job_models(const std::vector<JobRecord>& rows,
 // ---- The machine's pace ------------------------------------------------------------
 
 // How fast the machine runs now against what a model prices: the median of measured
-// over predicted total time of its most recent jobs. A shared machine's speed moves
+// over predicted total time of its most recent jobs, where more of them ran slower
+// (or faster) than priced than chance would put on one side; 1 otherwise. A shared
+// machine's speed moves
 // (the 2-vCPU development VM ran the same 280 jobs 17 % slower a session after the
 // log's sweep; docs/gvm.md), which a model trained on earlier runs cannot see; the
 // service scales its time prices by the pace of the jobs it ran last.
@@ -248,6 +250,7 @@ struct Pace {
 };
 inline constexpr size_t kPaceWindow = 25;  // the most recent jobs it reads (10: noisier)
 inline constexpr size_t kPaceLeast = 6;    // with fewer, no pace (5 all one way is chance at 5 %)
+inline constexpr double kPaceTail = 0.025;  // the sign test's level a side (5 % in all)
 // A few odd jobs must not halve or double every price: the factor stays within these.
 inline constexpr double kPaceFastest = 0.5, kPaceSlowest = 2.0;
 // From the ratios measured / predicted of the most recent jobs, newest first (the

@@ -13,7 +13,8 @@
 // Between retrainings the machine's speed moves (a shared VM ran the same jobs 17 %
 // slower one session than another; docs/gvm.md): the trainer also keeps each
 // backend's pace, the median of measured over predicted total time of its last jobs
-// (job/cost_model.h), by which the service scales its time prices.
+// where they lean one way beyond chance (job/cost_model.h), by which the service
+// scales its time prices.
 #pragma once
 
 #include <atomic>

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -534,38 +535,53 @@ TEST(CostDrivers, ADividedWallsLookupsAreThoseNearIt) {
   EXPECT_NEAR(cost_drivers(in).near_wall_share, 0.5, 1e-12);
 }
 
+// A job of a divided wall without gravity, particle contacts or rendering: its
+// steps' time is the wall's lookups alone.
+JobRecord divided_wall_job(const std::string& method, uint64_t particles) {
+  JobRecord r = sample_record(particles);
+  r.inputs.method = method;
+  r.inputs.gravity = 0, r.inputs.placement = "fill", r.inputs.release_s = 0;
+  r.inputs.particle_contacts = false, r.inputs.friction = 0;
+  r.inputs.formats = "none", r.inputs.render_width = 0, r.inputs.render_height = 0;
+  return r;
+}
+
+// 48 such jobs, 100 .. 10,000 particles and 1,000 .. 6,982 steps, in four groups that
+// `vary` (given the group, 0 .. 3) sets apart in a third input, each timed by `total`
+// (a set-up of `setup` seconds and the steps') with a 3 % scatter on the steps' part.
+std::vector<JobRecord> jobs_by_law(const std::string& method, double setup,
+                                   const std::function<double(const JobInputs&)>& total,
+                                   const std::function<void(int, JobInputs*)>& vary) {
+  std::vector<JobRecord> rows;
+  for (int i = 0; i < 48; ++i) {
+    JobRecord r = divided_wall_job(method, uint64_t(100 * std::pow(100.0, (i % 12) / 11.0)));
+    r.inputs.steps = 1000 + 997 * uint64_t(i % 7);
+    vary(i / 12, &r.inputs);
+    const double scatter = 1 + 0.03 * std::sin(5.0 * i);
+    r.measure.total_s = setup + (total(r.inputs) - setup) * scatter;
+    r.measure.per_frame_s = (r.measure.total_s - setup) / double(r.inputs.frames + 1);
+    rows.push_back(r);
+  }
+  return rows;
+}
+
 // Trained on jobs of a divided wall whose time is the lookups by the particles
 // near it, the prior prices two jobs that differ only in that share apart (it
 // priced them alike, by every released particle, before model version 4).
 TEST(JobCostModelPrior, ADividedWallsTimeFollowsTheParticlesNearIt) {
   constexpr double kSetup = 0.05, kPerNearStep = 4e-8;
-  auto base = [](uint64_t particles) {
-    JobRecord r = sample_record(particles);
-    r.inputs.method = "gravity";
-    r.inputs.gravity = 0, r.inputs.placement = "fill", r.inputs.release_s = 0;
-    r.inputs.particle_contacts = false, r.inputs.friction = 0;
-    r.inputs.formats = "none", r.inputs.render_width = 0, r.inputs.render_height = 0;
-    return r;
-  };
   auto total = [&](const JobInputs& in) {
     return kSetup + kPerNearStep * double(in.particles) * double(in.steps) *
                         cost_drivers(in).near_wall_share;
   };
-  std::vector<JobRecord> rows;
-  for (int i = 0; i < 48; ++i) {
-    JobRecord r = base(uint64_t(100 * std::pow(100.0, (i % 12) / 11.0)));  // 100 .. 10,000
-    r.inputs.steps = 1000 + 997 * uint64_t(i % 7);
-    r.inputs.wall_area *= std::pow(0.02, (i / 12) / 3.0);  // near share 0.18 .. 0.004
-    const double scatter = 1 + 0.03 * std::sin(5.0 * i);
-    r.measure.total_s = kSetup + (total(r.inputs) - kSetup) * scatter;
-    r.measure.per_frame_s = (r.measure.total_s - kSetup) / double(r.inputs.frames + 1);
-    rows.push_back(r);
-  }
+  const auto rows = jobs_by_law("gravity", kSetup, total, [](int q, JobInputs* in) {
+    in->wall_area *= std::pow(0.02, q / 3.0);  // near share 0.18 .. 0.004
+  });
   auto m = JobCostModel::train(rows, small_options(), nullptr);
   ASSERT_TRUE(m) << m.status().message();
   // Ten times the particle-steps of any trained job: the prior carries the
   // price there (the GVM's correction saturates), near the wall or not.
-  JobInputs crowded = base(20'000).inputs, sparse = crowded;
+  JobInputs crowded = divided_wall_job("gravity", 20'000).inputs, sparse = crowded;
   crowded.steps = sparse.steps = 20'000;
   sparse.wall_area *= 0.02;  // the fewest near the wall that any trained job had
   auto pc = m->predict(crowded), ps = m->predict(sparse);
@@ -583,32 +599,17 @@ TEST(JobCostModelPrior, ADividedWallsTimeFollowsTheParticlesNearIt) {
 // whatever the pieces).
 TEST(JobCostModelPrior, ADividedWallsLookupsCostByThePiecesWithinReach) {
   constexpr double kSetup = 0.05, kPerPieceLookup = 2e-7;
-  auto base = [](uint64_t particles) {
-    JobRecord r = sample_record(particles);
-    r.inputs.method = "midpoint4";
-    r.inputs.gravity = 0, r.inputs.placement = "fill", r.inputs.release_s = 0;
-    r.inputs.particle_contacts = false, r.inputs.friction = 0;
-    r.inputs.formats = "none", r.inputs.render_width = 0, r.inputs.render_height = 0;
-    return r;
-  };
   auto total = [&](const JobInputs& in) {
     const double within_reach = in.pieces * in.r_max * in.r_max / in.wall_area;
     return kSetup + kPerPieceLookup * double(in.particles) * double(in.steps) *
                         cost_drivers(in).near_wall_share * within_reach;
   };
-  std::vector<JobRecord> rows;
-  for (int i = 0; i < 48; ++i) {
-    JobRecord r = base(uint64_t(100 * std::pow(100.0, (i % 12) / 11.0)));  // 100 .. 10,000
-    r.inputs.steps = 1000 + 997 * uint64_t(i % 7);
-    r.inputs.pieces = r.inputs.triangles * std::pow(50.0, (i / 12) / 3.0);  // 1 .. 50 a triangle
-    const double scatter = 1 + 0.03 * std::sin(5.0 * i);
-    r.measure.total_s = kSetup + (total(r.inputs) - kSetup) * scatter;
-    r.measure.per_frame_s = (r.measure.total_s - kSetup) / double(r.inputs.frames + 1);
-    rows.push_back(r);
-  }
+  const auto rows = jobs_by_law("midpoint4", kSetup, total, [](int q, JobInputs* in) {
+    in->pieces = in->triangles * std::pow(50.0, q / 3.0);  // 1 .. 50 a triangle
+  });
   auto m = JobCostModel::train(rows, small_options(), nullptr);
   ASSERT_TRUE(m) << m.status().message();
-  JobInputs fine = base(20'000).inputs, coarse = fine;
+  JobInputs fine = divided_wall_job("midpoint4", 20'000).inputs, coarse = fine;
   fine.steps = coarse.steps = 20'000;
   fine.pieces = 50 * fine.triangles;
   coarse.pieces = coarse.triangles;
