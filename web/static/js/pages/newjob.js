@@ -72,7 +72,9 @@ export async function render(main, ctx, modelParam) {
     h('optgroup', { label: 'Presets' }, usable.filter((m) => m.preset).map(option)),
     mine.length ? h('optgroup', { label: 'Your models' }, mine.map(option)) : null);
   const count = num({ min: '1', step: '1', value: '500' });
-  const radius = num({ min: '0.000001', step: 'any', value: '0.5' });
+  // 1 puts the default job on either preset wall inside what the job cost model was
+  // trained on (0.5 on wall1 lay outside it, and the first prediction said so).
+  const radius = num({ min: '0.000001', step: 'any', value: '1' });
   // Optional: a mix of sizes, spread evenly from the radius up to this one (a drum sorts them).
   const radiusMax = num({ min: '0.000001', step: 'any', value: '', required: false });
   // Optional: how fast the pour releases; empty, as fast as its inlet allows.
