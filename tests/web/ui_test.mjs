@@ -372,6 +372,20 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
   });
 
   await step('new job: live prediction, warnings, submit', async () => {
+    // Until one is typed, the radius follows the wall: 1 % of its largest side.
+    await page.goto(`${base}/#/new`);
+    const wallPick = page.getByLabel('Wall (a model)');
+    const radiusField = page.getByLabel('Radius', { exact: true });
+    await wallPick.selectOption({ label: (await wallPick.locator('option', { hasText: /^wall2 / }).innerText()) });
+    for (let tries = 0; (await radiusField.inputValue()) !== '2'; ++tries) {  // wall2 is 200 tall
+      assert.ok(tries < 150, `the radius did not follow wall2: ${await radiusField.inputValue()}`);
+      await page.waitForTimeout(100);
+    }
+    await radiusField.fill('0.7');
+    await wallPick.selectOption({ label: (await wallPick.locator('option', { hasText: /^wall1 / }).innerText()) });
+    // Once wall1 is loaded and shown with the particles, the typed radius is still there.
+    await page.locator('canvas[aria-label^="3D view of wall1:"]').waitFor();
+    assert.equal(await radiusField.inputValue(), '0.7', 'a typed radius stays when the wall changes');
     await page.goto(`${base}/#/models`);
     await page.getByRole('link', { name: 'Use in a job: test cup' }).click();
     await page.getByRole('heading', { name: 'New job', level: 1 }).waitFor();

@@ -200,7 +200,9 @@ export function stlObjectFromBuffer(buffer) {
   const geometry = new STLLoader().parse(buffer);
   const triangles = (geometry.attributes.position?.count || 0) / 3;
   if (!triangles) throw new Error('no triangles in the file');
-  return { object: meshObject(geometry), triangles };
+  geometry.computeBoundingBox();
+  const extent = geometry.boundingBox.getSize(new THREE.Vector3());
+  return { object: meshObject(geometry), triangles, largestSide: Math.max(extent.x, extent.y, extent.z) };
 }
 
 // A lathe (cylinder, cone, funnel) standing on z = 0: the side and the caps

@@ -72,9 +72,13 @@ export async function render(main, ctx, modelParam) {
     h('optgroup', { label: 'Presets' }, usable.filter((m) => m.preset).map(option)),
     mine.length ? h('optgroup', { label: 'Your models' }, mine.map(option)) : null);
   const count = num({ min: '1', step: '1', value: '500' });
-  // 1 puts the default job on either preset wall inside what the job cost model was
-  // trained on (0.5 on wall1 lay outside it, and the first prediction said so).
+  // Until the user types one, the radius follows the wall: 1 % of its largest side
+  // (set once its mesh is loaded), in whatever units the wall has. That puts the
+  // default job on either preset wall inside what the job cost model was trained on
+  // (0.5 on wall1 lay outside it, and the first prediction said so).
   const radius = num({ min: '0.000001', step: 'any', value: '1' });
+  let radiusTyped = false;
+  radius.addEventListener('input', () => { radiusTyped = true; });
   // Optional: a mix of sizes, spread evenly from the radius up to this one (a drum sorts them).
   const radiusMax = num({ min: '0.000001', step: 'any', value: '', required: false });
   // Optional: how fast the pour releases; empty, as fast as its inlet allows.
@@ -263,6 +267,21 @@ export async function render(main, ctx, modelParam) {
     }
   }
 
+  // The radius the wall's size suggests, once its mesh is loaded (see `radius`).
+  let fittedFor = null;  // the model whose size set it
+  async function fitRadius() {
+    const m = usable.find((x) => String(x.id) === model.value);
+    if (!m || radiusTyped || fittedFor === m.id) return;
+    fittedFor = m.id;
+    try {
+      const { largestSide } = await stlObject(m.stl);
+      const fitting = String(Number((largestSide / 100).toPrecision(2)));
+      if (radiusTyped || String(m.id) !== model.value || !(largestSide > 0) || fitting === radius.value) return;
+      radius.value = fitting;
+      schedule();
+    } catch { /* the 3D view says why the wall did not load */ }
+  }
+
   async function predict() {
     inflight?.abort();
     const me = new AbortController();
@@ -317,7 +336,7 @@ export async function render(main, ctx, modelParam) {
   const form = h('form', { class: 'card', novalidate: true, 'aria-labelledby': 'scene-h' },
     field('Wall (a model)', model, 'Build or upload one on the Models page.'),
     h('fieldset', {}, h('legend', {}, 'Particles'),
-      h('div', { class: 'row' }, field('Count', count), field('Radius', radius, 'In the wall’s units.'),
+      h('div', { class: 'row' }, field('Count', count), field('Radius', radius, 'In the wall’s units; 1 % of its size until you type one.'),
         field('Largest radius', radiusMax, 'Optional: sizes spread evenly up to it.'))),
     h('fieldset', {}, h('legend', {}, 'Placement'),
       h('label', { class: 'check' }, placement[0], 'Pour: particles fall in from above the vessel'),
@@ -345,6 +364,7 @@ export async function render(main, ctx, modelParam) {
   form.addEventListener('change', (e) => {
     if (e.target === method) showMethod();
     if (e.target === motion || e.target === model) showMotion();
+    if (e.target === model) fitRadius();
     if (placement.includes(e.target)) showPlacement();
     schedule();
   });
@@ -379,5 +399,6 @@ export async function render(main, ctx, modelParam) {
     h('p', { class: 'hint' }, 'What this job will cost, estimated by the server before it runs. It follows the form as you change it.'));
   clearFigures();
   predict();
+  fitRadius();
   return () => { clearTimeout(timer); inflight?.abort(); startViewer.dispose(); };
 }
