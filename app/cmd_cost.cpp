@@ -324,8 +324,10 @@ int gvm_replay(const Args& args) {
         "usage: collidoscope gvm replay JOBS.csv --model MODEL.json\n\n"
         "Prices every job of a job log in the log's order, as the service meets jobs: by\n"
         "the model alone, and scaled by the machine's pace as the service scales its\n"
-        "prices (the median of measured over predicted total time of the 25 jobs before\n"
-        "it, where they lean one way beyond chance; docs/service.md).\n"
+        "prices (the median of measured over predicted total time of the " +
+            std::to_string(job::kPaceWindow) +
+            " jobs before\n"
+            "it, where they lean one way beyond chance; docs/service.md).\n"
         "Prints the total time's mean absolute percentage error and how often the 10-90 %\n"
         "interval holds, both ways: a log swept on a day the machine ran slower or faster\n"
         "than the model's own shows what the pace gives.",

@@ -1349,12 +1349,12 @@ Pace pace_of(const std::vector<double>& ratios) {
 }
 
 Pace pace_of(const JobCostModel& model, const std::vector<JobRecord>& newest_first) {
-  std::vector<double> ratios;
+  std::vector<double> ratios;  // pace_of(ratios) leaves out those that are not ratios
   for (const JobRecord& r : newest_first) {
     if (ratios.size() == kPaceWindow) break;
-    auto p = model.predict(r.inputs);
-    if (p && p->total_s.p50 > 0 && r.measure.total_s > 0)
-      ratios.push_back(r.measure.total_s / p->total_s.p50);
+    double point[kJobOutputs];  // the median alone: no interval, no range check
+    model.predict_point(r.inputs, point);
+    ratios.push_back(r.measure.total_s / point[kTotal]);
   }
   return pace_of(ratios);
 }

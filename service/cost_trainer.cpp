@@ -163,8 +163,9 @@ void CostTrainer::update_pace(const std::string& backend) {
     auto page = store_.logs(100, before);
     if (!page || page->empty()) break;
     for (const LogRow& l : *page) {
+      if (newest.size() == job::kPaceWindow) break;
       before = l.id;
-      if (l.job_record.empty() || newest.size() == job::kPaceWindow) continue;
+      if (l.job_record.empty()) continue;
       auto rec = job::parse_job_log(l.job_record);
       if (rec && rec->size() == 1 && rec->front().inputs.backend == backend)
         newest.push_back(rec->front());

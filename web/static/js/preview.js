@@ -188,13 +188,17 @@ function meshObject(geometries, color = PART_COLORS[0]) {
 // The STL at url (a model's GET /api/v1/models/{id}/stl), as an object to
 // show, and its triangle count.
 export async function stlObject(url) {
+  return stlObjectFromBuffer(await fetchStl(url));
+}
+// An STL file's bytes, or an Error saying why the server did not give them.
+export async function fetchStl(url) {
   const res = await fetch(url, { credentials: 'same-origin' });
   if (!res.ok) {
     let message = `${res.status} ${res.statusText}`;
     try { message = (await res.json()).error || message; } catch { /* not JSON */ }
     throw new Error(message);
   }
-  return stlObjectFromBuffer(await res.arrayBuffer());
+  return res.arrayBuffer();
 }
 export function stlObjectFromBuffer(buffer) {
   const geometry = new STLLoader().parse(buffer);

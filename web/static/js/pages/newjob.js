@@ -3,7 +3,7 @@
 // /api/v1/start-preview, in the vessel's 3D view), then submitted (POST /api/v1/jobs).
 import { get, post } from '../api.js';
 import { h, field, errorBox, showError, fmtBytes, fmtSeconds } from '../dom.js';
-import { createViewer, stlObject, particlesObject } from '../preview.js';
+import { createViewer, fetchStl, stlObjectFromBuffer, particlesObject } from '../preview.js';
 
 const SIZES = [[160, 96], [320, 180], [640, 360], [1280, 720], [1920, 1080]];
 const AXES = { x: [1, 0, 0], y: [0, 1, 0], z: [0, 0, 1] };
@@ -231,12 +231,19 @@ export async function render(main, ctx, modelParam) {
   const startCaption = h('p', { class: 'status', 'aria-live': 'polite' }, 'Shown once the form is complete.');
   const startViewer = createViewer(startBox, 'The vessel, and where the particles start');
   let wallShown = null;  // the model whose wall the view shows
+  // Each wall's file, fetched once for the view and the radius alike; each use
+  // parses its own mesh (the view disposes the one it drops).
+  const files = new Map();
+  async function wallMesh(m) {
+    if (!files.has(m.id)) files.set(m.id, fetchStl(m.stl).catch((e) => { files.delete(m.id); throw e; }));
+    return stlObjectFromBuffer(await files.get(m.id));
+  }
   async function showStart(b, signal) {
     const m = usable.find((x) => String(x.id) === model.value);
     if (!m) return;
     try {
       if (wallShown !== m.id) {
-        const { object } = await stlObject(m.stl);
+        const { object } = await wallMesh(m);
         if (signal.aborted) return;
         startViewer.show(object, { seeThrough: true });
         wallShown = m.id;
@@ -274,7 +281,7 @@ export async function render(main, ctx, modelParam) {
     if (!m || radiusTyped || fittedFor === m.id) return;
     fittedFor = m.id;
     try {
-      const { largestSide } = await stlObject(m.stl);
+      const { largestSide } = await wallMesh(m);
       const fitting = String(Number((largestSide / 100).toPrecision(2)));
       if (radiusTyped || String(m.id) !== model.value || !(largestSide > 0) || fitting === radius.value) return;
       radius.value = fitting;
