@@ -31,6 +31,9 @@ const std::vector<FlagSpec> kFlags = {
     {"pairs-once", true,
      "auto | on | off: a listed pair's force evaluated once, or by both particles (default auto: "
      "the backend's choice)"},
+    {"simd-pairs", true,
+     "auto | off: CPU pairs evaluated once under the linear law four at a time in AVX2 vectors "
+     "(default auto: where the CPU has AVX2)"},
     {"lanes", true,
      "auto | 1 | 2 | 4 | 8: GPU threads sharing a particle's pairs (default auto: the backend's "
      "choice)"},
@@ -111,6 +114,9 @@ int bench_run(const Args& args) {
   if (once != "auto" && once != "on" && once != "off")
     return usage_error("bench run", "--pairs-once must be auto, on or off");
   const int pairs_once = once == "auto" ? -1 : once == "on" ? 1 : 0;
+  const std::string simd = p->get("simd-pairs", "auto");
+  if (simd != "auto" && simd != "off")
+    return usage_error("bench run", "--simd-pairs must be auto or off");
   const std::string lanes_arg = p->get("lanes", "auto");
   if (lanes_arg != "auto" && lanes_arg != "1" && lanes_arg != "2" && lanes_arg != "4" &&
       lanes_arg != "8")
@@ -177,6 +183,7 @@ int bench_run(const Args& args) {
       cfg.material.rolling_friction = rolling;
       cfg.neighbour_skin = skin;
       cfg.pairs_once = pairs_once;
+      cfg.simd_pairs = simd == "off" ? 0 : -1;
       cfg.lanes = lanes;
       cfg.renumber_every = renumber_every;
       cfg.contact_model = model;

@@ -23,6 +23,8 @@ class CpuBackend {
   // Pair forces from a neighbour list are evaluated once per pair and gathered
   // (sim/dynamics_pipeline.h): the contact arithmetic is most of a step here.
   static constexpr bool kPairForcesOncePerPair = true;
+  // And, under the linear law, four at a time (sim/pair_batch.h).
+  static constexpr bool kPairRecordsInBatches = true;
   // The pool that runs this backend's loops (nullptr: default_pool()).
   void set_pool(ThreadPool* pool) { pool_ = pool ? pool : &default_pool(); }
 
@@ -44,6 +46,11 @@ class CpuBackend {
   template <class F>
   void parallel_for_heavy(size_t n, F f) {
     cpu_parallel_for(*pool_, n, f, kHeavyGrain);
+  }
+  // body(begin, end) over chunks of [0, n) of at least `grain` indices.
+  template <class F>
+  void parallel_chunks(size_t n, size_t grain, F body) {
+    if (n) pool_->run_chunks(n, grain, body);
   }
   // A tree walk: the GPU caps its registers; threads here.
   template <class F>

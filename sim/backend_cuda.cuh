@@ -94,6 +94,7 @@ class CudaBackend {
   // between two passes cost the GPU more memory traffic than the arithmetic
   // saves (H200, 10^6 particles with friction: 0.74 against 0.54 ms a step).
   static constexpr bool kPairForcesOncePerPair = false;
+  static constexpr bool kPairRecordsInBatches = false;  // a CPU's vectors (sim/pair_batch.h)
   // Device memory that grows but never shrinks, so frames reuse it.
   template <class T>
   class Buffer {

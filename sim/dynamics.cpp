@@ -287,6 +287,8 @@ Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const Particl
     return invalid_argument("renumber_every must be -1 (when scattered), 0 (never) or a count of builds");
   if (c.pairs_once < -1 || c.pairs_once > 1)
     return invalid_argument("pairs_once must be -1 (the backend's choice), 0 or 1");
+  if (c.simd_pairs < -1 || c.simd_pairs > 0)
+    return invalid_argument("simd_pairs must be -1 (where the CPU has AVX2) or 0");
   if (!(c.lanes == 0 || c.lanes == 1 || c.lanes == 2 || c.lanes == 4 ||
         c.lanes == 8))
     return invalid_argument("lanes must be 0 (the backend's choice), 1, 2, 4 or 8");

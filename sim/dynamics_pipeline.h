@@ -20,6 +20,7 @@
 #include "sim/cell_ranges.h"
 #include "sim/contact_force.h"
 #include "sim/dynamics.h"
+#include "sim/pair_batch.h"
 #include "sim/wall_index.h"
 
 namespace collido::sim {
@@ -1353,6 +1354,11 @@ class DynamicsPipeline final : public Simulation {
   // whether it touches and the contact's force, torque per metre and rolling
   // torque as the owner sees them; it keeps the pair's spring.
   void pair_records(double dt) {
+    if constexpr (B::kPairRecordsInBatches) {
+      if (cfg_.simd_pairs != 0 && pair_law_.model == ContactModel::kLinear &&
+          !(rotation_ && pair_law_.mu_roll > 0) && linear_pair_batch_supported())
+        return pair_records_in_batches(dt);
+    }
     const ParticleArrays P = arrays();
     const ContactLaw law = pair_law_;
     const bool rot = rotation_;
@@ -1396,6 +1402,105 @@ class DynamicsPipeline final : public Simulation {
       }
       if (friction && slots < uint32_t(kPairSlots)) new_slots[slots].key = kNoKey;
     });
+  }
+
+  // pair_records on the CPU under the linear law: a chunk of particles finds
+  // its touching pairs and their springs one at a time, in the order
+  // pair_records does, and computes their forces four at a time
+  // (linear_pair_batch); the records and the springs are the same bits.
+  void pair_records_in_batches(double dt) {
+    const ParticleArrays P = arrays();
+    const ContactLaw law = pair_law_;
+    const bool rot = rotation_;
+    const bool friction = law.mu > 0;
+    const FrictionSlot* hin = pair_hist_[hist_in_].data();
+    FrictionSlot* hout = pair_hist_[hist_in_ ^ 1].data();
+    const uint32_t* nl_start = nl_start_.data();
+    const uint32_t* nl = nl_list_.data();
+    Vec3d* rec_f = rec_f_.data();
+    Vec3d* rec_t = rec_torque_.data();
+    uint8_t* touched = rec_touched_.data();
+    backend_.parallel_chunks(live_, kHeavyGrain, [=](size_t begin, size_t end) {
+      thread_local LinearPairBatch b;
+      // kHeavyGrain particles a batch: about as many pairs, whose columns
+      // stay in the first-level cache (a whole chunk's did not, and its
+      // stores took longer than the scalar path's arithmetic).
+      for (size_t first = begin; first < end; first += kHeavyGrain) {
+        const uint32_t last = uint32_t(std::min(end, first + kHeavyGrain));
+        b.reset(nl_start[last] - nl_start[first]);
+        batch_touching_pairs(P, rot, friction, hin, hout, nl_start, nl, touched, uint32_t(first),
+                             last, b);
+        linear_pair_batch(law, rot, dt, b);
+        using C = LinearPairBatch;
+        const double *fx = b.col(C::kFx), *tx = b.col(C::kTx), *sx = b.col(C::kSxOut);
+        const size_t st = b.stride;
+        for (size_t c = 0; c < b.size; ++c) {
+          const uint32_t k = b.record[c];
+          rec_f[k] = Vec3d{fx[c], fx[c + st], fx[c + 2 * st]};
+          if (rot) rec_t[k] = Vec3d{tx[c], tx[c + st], tx[c + 2 * st]};
+          if (FrictionSlot* s = b.slot[c])
+            s->sx = float(sx[c]), s->sy = float(sx[c + st]), s->sz = float(sx[c + 2 * st]);
+        }
+      }
+    });
+  }
+
+  // pair_records_in_batches' first step: particles [first, last) file their
+  // touching pairs into b's input columns (and mark them touched), and their
+  // springs' keys into this step's slots, in pair_records' order.
+  static void batch_touching_pairs(const ParticleArrays& P, bool rot, bool friction,
+                                   const FrictionSlot* hin, FrictionSlot* hout,
+                                   const uint32_t* nl_start, const uint32_t* nl, uint8_t* touched,
+                                   uint32_t first, uint32_t last, LinearPairBatch& b) {
+    using C = LinearPairBatch;
+    double* col = b.data.data();
+    const size_t st = b.stride;
+    size_t c = 0;
+    for (uint32_t i = first; i < last; ++i) {
+      const uint32_t k0 = nl_start[i], k1 = nl_start[i + 1];
+      if (P.state[i] != kActive) {
+        for (uint32_t k = k0; k < k1; ++k) touched[k] = 0;
+        continue;
+      }
+      const Vec3d xi = P.x[i], vi = P.v[i];
+      const Vec3d wi = rot ? P.w[i] : Vec3d{0, 0, 0};
+      const double r = P.r[i], m = P.mass[i];
+      const FrictionSlot* old_slots = friction ? hin + size_t(i) * kPairSlots : nullptr;
+      FrictionSlot* new_slots = friction ? hout + size_t(i) * kPairSlots : nullptr;
+      uint32_t slots = 0;
+      for (uint32_t k = k0; k < k1; ++k) {
+        const uint32_t j = nl[k];
+        touched[k] = 0;
+        if (P.state[j] != kActive) continue;
+        const Vec3d d = xi - P.x[j];
+        const double rs = r + P.r[j];
+        const double dist2 = dot(d, d);
+        if (!(dist2 < rs * rs)) continue;
+        touched[k] = 1;
+        FrictionSlot* slot = nullptr;
+        if (friction && slots < uint32_t(kPairSlots)) {
+          slot = new_slots + slots++;
+          slot->key = j;
+        }
+        b.record[c] = k;
+        b.slot[c] = slot;
+        const Vec3d vj = P.v[j], wj = friction ? P.w[j] : Vec3d{0, 0, 0};  // as pair_contact reads
+        const Vec3d spring = friction ? find_spring(old_slots, kPairSlots, j) : Vec3d{0, 0, 0};
+        const auto put3 = [&](C::Column at, Vec3d v) {
+          col[at * st + c] = v.x, col[(at + 1) * st + c] = v.y, col[(at + 2) * st + c] = v.z;
+        };
+        put3(C::kDx, d);
+        col[C::kDist2 * st + c] = dist2;
+        col[C::kRi * st + c] = r, col[C::kRj * st + c] = P.r[j];
+        col[C::kMi * st + c] = m, col[C::kMj * st + c] = P.mass[j];
+        put3(C::kVix, vi), put3(C::kVjx, vj), put3(C::kWix, wi), put3(C::kWjx, wj);
+        put3(C::kSx, spring);
+        col[C::kCoincidentSign * st + c] = i < j ? 1.0 : -1.0;
+        ++c;
+      }
+      if (friction && slots < uint32_t(kPairSlots)) new_slots[slots].key = kNoKey;
+    }
+    b.size = c;
   }
 
   // Second pass: each particle sums its pairs' records with gravity, the lower

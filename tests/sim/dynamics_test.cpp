@@ -598,7 +598,9 @@ TEST(Dynamics, NeighbourListFindsEveryContactTheGridDoes) { neighbour_list_finds
 // (pairs_once 1) and evaluated by each of them (0) give the same trajectories
 // bit for bit: the pair's arithmetic is odd in its orientation, and both ways
 // sum a particle's pairs in the same order (on the CPU; the GPU's fused
-// multiply-adds may differ between kernels). Dense colliding scenes with
+// multiply-adds may differ between kernels). On the CPU the pairs evaluated
+// once run one at a time and, under the linear law, four at a time in AVX2
+// vectors (simd_pairs, where the CPU has them): all three agree. Dense colliding scenes with
 // friction, rolling resistance, both contact laws, mixed radii, particles
 // released while the list stands, particles numbered at random (renumbered by
 // cell, results in the caller's numbering), and two threads.
@@ -625,33 +627,41 @@ void pairs_once_or_from_both_sides_agree() {
     ThreadPool pool(2);
     cfg.pool = &pool;
     if (scene == 2) release_in_groups(wall, cfg, &p);
-    ParticleSet end[2];
-    std::vector<uint8_t> flags[2];
-    uint64_t contacts[2] = {0, 0}, overflow[2] = {0, 0};
-    for (int once = 0; once < 2; ++once) {
+    // 0: from both sides; 1: once, four at a time where the CPU can; 2: once, one at a time.
+    const int ways = backend_under_test() == Backend::kCpu ? 3 : 2;
+    ParticleSet end[3];
+    std::vector<uint8_t> flags[3];
+    uint64_t contacts[3] = {0, 0, 0}, overflow[3] = {0, 0, 0};
+    for (int way = 0; way < ways; ++way) {
+      const int once = way > 0;
       DynamicsConfig c = cfg;
       c.pairs_once = once;
+      c.simd_pairs = way == 2 ? 0 : -1;
       auto s = make_sim(wall, c, p);
       ASSERT_TRUE(s);
       ASSERT_GT(s->time_step_info().neighbour_skin, 0);
       for (int k = 0; k < 30; ++k) {
         ASSERT_TRUE(s->step(10, s->time_step_info().spring_step));
         const FrameStats now = measure(*s);
-        contacts[once] += now.particle_contacts;
-        overflow[once] += now.history_overflow;
+        contacts[way] += now.particle_contacts;
+        overflow[way] += now.history_overflow;
       }
-      ASSERT_TRUE(s->download(&end[once], &flags[once]));
+      ASSERT_TRUE(s->download(&end[way], &flags[way]));
     }
     EXPECT_GT(contacts[1], 5000u) << "scene " << scene;
     EXPECT_EQ(contacts[0], contacts[1]) << "scene " << scene;
     EXPECT_EQ(overflow[0], overflow[1]) << "scene " << scene;
     EXPECT_EQ(flags[0], flags[1]) << "scene " << scene;
     if (backend_under_test() == Backend::kCpu) {
-      EXPECT_EQ(end[0].x, end[1].x) << "scene " << scene;
-      EXPECT_EQ(end[0].y, end[1].y) << "scene " << scene;
-      EXPECT_EQ(end[0].z, end[1].z) << "scene " << scene;
-      EXPECT_EQ(end[0].vx, end[1].vx) << "scene " << scene;
-      EXPECT_EQ(end[0].vz, end[1].vz) << "scene " << scene;
+      for (int way = 1; way < ways; ++way) {
+        EXPECT_EQ(contacts[0], contacts[way]) << "scene " << scene << ", way " << way;
+        EXPECT_EQ(flags[0], flags[way]) << "scene " << scene << ", way " << way;
+        EXPECT_EQ(end[0].x, end[way].x) << "scene " << scene << ", way " << way;
+        EXPECT_EQ(end[0].y, end[way].y) << "scene " << scene << ", way " << way;
+        EXPECT_EQ(end[0].z, end[way].z) << "scene " << scene << ", way " << way;
+        EXPECT_EQ(end[0].vx, end[way].vx) << "scene " << scene << ", way " << way;
+        EXPECT_EQ(end[0].vz, end[way].vz) << "scene " << scene << ", way " << way;
+      }
       continue;
     }
     // nvcc fuses multiplies and adds as each kernel's code allows, so the two

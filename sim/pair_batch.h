@@ -1,0 +1,69 @@
+// The CPU's pair contacts of the linear law, four at a time (AVX2): the
+// touching pairs a chunk of particles owns are gathered into columns, their
+// forces computed across the vector's lanes, and the results handed back.
+//
+// The arithmetic is contact_force's (sim/contact_force.h) and pair_contact's
+// (sim/dynamics_pipeline.h) operation for operation, in the same order, with
+// no fused multiply-adds: IEEE rounds each lane as it rounds the scalar code,
+// so the records are the scalar path's bit for bit (test
+// PairsOnceOrFromBothSidesAgreeBitForBit compares them with the pairs
+// evaluated from both sides one at a time). One contact at a time, a contact's
+// three square roots and three divisions ran one after another, and the pair
+// pass was most of a step (docs/benchmarks.md).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "sim/contact_force.h"
+
+namespace collido::sim {
+
+// The touching pairs of a chunk, one column per input and output, in the
+// order they were found. The pair's particles are i (the owner) and j.
+struct LinearPairBatch {
+  // In: the centres' difference x_i - x_j and its squared length, the radii
+  // and masses, the velocities and spins, the spring as last step left it,
+  // and the normal's sign should the centres coincide (+1 when i < j).
+  enum Column {
+    kDx, kDy, kDz, kDist2, kRi, kRj, kMi, kMj,
+    kVix, kViy, kViz, kVjx, kVjy, kVjz,
+    kWix, kWiy, kWiz, kWjx, kWjy, kWjz,
+    kSx, kSy, kSz, kCoincidentSign,
+    // Out: the force on i, the torque per metre of lever on i, the spring.
+    kFx, kFy, kFz, kTx, kTy, kTz, kSxOut, kSyOut, kSzOut,
+    kColumns
+  };
+  size_t size = 0;
+  size_t stride = 0;          // column c holds data[c * stride, c * stride + size)
+  std::vector<double> data;
+  std::vector<uint32_t> record;     // the listed pair's record index
+  std::vector<FrictionSlot*> slot;  // where its spring goes (nullptr: past the slots)
+
+  // Empties the batch, with room for `pairs` (and the padding of a group of four).
+  void reset(size_t pairs) {
+    size = 0;
+    if (pairs + 3 > stride) {
+      // Whole cache lines, an odd number of them: columns a power of two
+      // apart share the cache's sets and the store buffer's 4 KiB aliasing.
+      stride = ((pairs + 3 + 7) & ~size_t(7)) | 8;
+      data.resize(stride * kColumns);
+      record.resize(stride);
+      slot.resize(stride);
+    }
+  }
+  double* col(Column c) { return data.data() + c * stride; }
+  const double* col(Column c) const { return data.data() + c * stride; }
+};
+
+// Whether this CPU runs linear_pair_batch (AVX2; false on other machines and
+// architectures, where the scalar path runs).
+bool linear_pair_batch_supported();
+
+// Fills the batch's output columns for pairs [0, size) under the linear law
+// (friction when law.mu > 0; spins read only when rot). Pads the last group of
+// four with copies of the last pair, whose results are the same bits.
+void linear_pair_batch(const ContactLaw& law, bool rot, double dt, LinearPairBatch& b);
+
+}  // namespace collido::sim
