@@ -1246,6 +1246,17 @@ class DynamicsPipeline final : public Simulation {
         });
       count[i] = c - s0;
     });
+    // A particle without candidates has no wall contact while the list
+    // stands: its spring lists are empty in both generations from now on, so
+    // wall_forces need not terminate them every step (a cache line a particle,
+    // most of that pass's time where few particles are near the wall).
+    if (wall_law_.mu > 0) {
+      FrictionSlot* h0 = wall_hist_[0].data();
+      FrictionSlot* h1 = wall_hist_[1].data();
+      backend_.parallel_for(n, [=] COLLIDO_HD(uint32_t i) {
+        if (count[i] == 0) h0[size_t(i) * kWallSlots].key = h1[size_t(i) * kWallSlots].key = kNoKey;
+      });
+    }
   }
 
   // The particle grid over the first n particles: the active ones, and with
@@ -1795,7 +1806,8 @@ class DynamicsPipeline final : public Simulation {
           if (rot) P.alpha[i] = Vec3d{0, 0, 0};
           P.flags[i] = uint8_t(kActive);
         }
-        if (friction) new_slots[0].key = kNoKey;
+        // With no candidates listed, both generations are already empty (build_wall_lists).
+        if (friction && !(listed && wl_count[i] == 0)) new_slots[0].key = kNoKey;
         return;
       }
       const double m = P.mass[i];
@@ -1843,7 +1855,20 @@ class DynamicsPipeline final : public Simulation {
         P.alpha[i] = add ? P.alpha[i] + al : al;
       }
     };
-    backend_.parallel_for_lanes(live_, lanes, particle);
+    // Most particles list no wall candidate: they skip the contact set's
+    // set-up (a call and its frame, most of this pass's time on the CPU).
+    const bool quick = listed && !part && !measure;
+    backend_.parallel_for_lanes(live_, lanes, [=] COLLIDO_HD(uint32_t i, LaneGroup g) {
+      if (quick && wl_count[i] == 0 && P.state[i] == kActive) {
+        if (g.lane == 0 && !add) {  // as particle() does for a particle that touches nothing
+          P.acc[i] = grav;
+          if (rot) P.alpha[i] = Vec3d{0, 0, 0};
+          P.flags[i] = uint8_t(kActive);
+        }
+        return;
+      }
+      particle(i, g);
+    });
   }
 
   // Kinetic and potential energy, speed and state counts for the measuring pass.
