@@ -825,13 +825,14 @@ class DynamicsPipeline final : public Simulation {
                                                         double* speed) {
     P.state[i] = kEscaped;
     P.flags[i] = kEscaped;
-    speed[i] = 0;
+    if (speed) speed[i] = 0;
     return kEscaped;
   }
 
   // The end of a step for active particle i: the closing kick (Verlet's second
   // half, or symplectic Euler's whole kick and drift), then the checks.
-  // Returns its state afterwards. speed: |v| written for the speed check.
+  // Returns its state afterwards. speed: |v| written for the speed check
+  // (nullptr: not written, see OpenStep).
   COLLIDO_HD static COLLIDO_FORCEINLINE uint8_t close_particle(const ParticleArrays& P, uint32_t i,
                                                                double dt, bool verlet, bool rot,
                                                                double* speed, Domain dom) {
@@ -851,12 +852,12 @@ class DynamicsPipeline final : public Simulation {
       P.state[i] = kInvalid;
       P.flags[i] = kInvalid;
       P.v[i] = Vec3d{0, 0, 0};
-      speed[i] = 0;
+      if (speed) speed[i] = 0;
       return kInvalid;
     }
     P.v[i] = vi;
     if (!verlet) P.x[i] = xi;  // Verlet moved it in the drift
-    speed[i] = sqrt(s2);
+    if (speed) speed[i] = sqrt(s2);
     return outside(xi, dom) ? escape(P, i, speed) : uint8_t(kActive);
   }
 
@@ -866,7 +867,6 @@ class DynamicsPipeline final : public Simulation {
     ParticleArrays P;
     bool rot, close, disp;
     double h, dt;  // the pending step's length, this step's
-    double* speed;
     Domain dom;  // where the pending step ended
     Domain next;  // where this step ends
     const Vec3d* ref;
@@ -878,11 +878,10 @@ class DynamicsPipeline final : public Simulation {
       if (close) {
         // A particle released here did not move in the pending step: no
         // closing kick for it (its acceleration is already gravity's, for its
-        // first kick below), only the checks.
-        if (st == kActive)
-          st = close_particle(P, i, moved ? h : 0.0, true, rot, speed, dom);
-        else
-          speed[i] = 0;
+        // first kick below), only the checks. No speeds: they are read only
+        // after close_pending_step, whose pass writes every one (a square
+        // root a particle a step saved).
+        if (st == kActive) st = close_particle(P, i, moved ? h : 0.0, true, rot, nullptr, dom);
       }
       if (st != kActive) return 0.0;
       const Vec3d v = P.v[i] + P.acc[i] * (0.5 * dt);
@@ -895,7 +894,7 @@ class DynamicsPipeline final : public Simulation {
       // would give its partners forces that one built after would not (the
       // forces would hang on when the lists were built).
       if (outside(x, next)) {
-        escape(P, i, speed);
+        escape(P, i, nullptr);
         return 0.0;
       }
       if (!disp) return 0.0;
@@ -913,7 +912,7 @@ class DynamicsPipeline final : public Simulation {
     const OpenStep op{arrays(),      rotation_,
                       close_pending_, disp,
                       pending_dt_,   dt,
-                      speed_.data(), domain_at(wall_pose(time_)),
+                      domain_at(wall_pose(time_)),
                       domain_at(wall_pose(time_ + dt)), x_ref_.data(), release_.data(),
                       free_release_time()};
     if (disp) {
