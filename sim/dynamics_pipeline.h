@@ -1359,6 +1359,46 @@ class DynamicsPipeline final : public Simulation {
     return out;
   }
 
+  // Particle i's upper list (the pairs it owns): marks each listed pair
+  // touched or not and calls f(k, j, d, dist2, rs, spring, slot) for each
+  // touching one, in list order, with d = x_i - x_j, its squared length
+  // dist2 < rs^2, the pair's spring as last step left it and where this
+  // step's goes (its key filed; nullptr past the slots, or without friction:
+  // hin and hout null). Terminates the new slots. An inactive i touches nothing.
+  template <class F>
+  COLLIDO_HD static COLLIDO_FORCEINLINE void for_each_owned_contact(
+      const ParticleArrays& P, uint32_t i, const uint32_t* nl_start, const uint32_t* nl,
+      uint8_t* touched, const FrictionSlot* hin, FrictionSlot* hout, F&& f) {
+    const uint32_t k0 = nl_start[i], k1 = nl_start[i + 1];
+    if (P.state[i] != kActive) {
+      for (uint32_t k = k0; k < k1; ++k) touched[k] = 0;
+      return;
+    }
+    const FrictionSlot* old_slots = hin ? hin + size_t(i) * kPairSlots : nullptr;
+    FrictionSlot* new_slots = hout ? hout + size_t(i) * kPairSlots : nullptr;
+    const Vec3d xi = P.x[i];
+    const double r = P.r[i];
+    uint32_t slots = 0;
+    for (uint32_t k = k0; k < k1; ++k) {
+      const uint32_t j = nl[k];
+      touched[k] = 0;
+      if (P.state[j] != kActive) continue;
+      const Vec3d d = xi - P.x[j];
+      const double rs = r + P.r[j];
+      const double dist2 = dot(d, d);
+      if (!(dist2 < rs * rs)) continue;
+      touched[k] = 1;
+      FrictionSlot* slot = nullptr;
+      if (new_slots && slots < uint32_t(kPairSlots)) {
+        slot = new_slots + slots++;
+        slot->key = j;
+      }
+      const Vec3d spring = old_slots ? find_spring(old_slots, kPairSlots, j) : Vec3d{0, 0, 0};
+      f(k, j, d, dist2, rs, spring, slot);
+    }
+    if (new_slots && slots < uint32_t(kPairSlots)) new_slots[slots].key = kNoKey;
+  }
+
   // Pair forces once per pair, first pass: each particle evaluates the pairs
   // of its upper list (the pairs it owns) and records, per listed pair,
   // whether it touches and the contact's force, torque per metre and rolling
@@ -1382,35 +1422,20 @@ class DynamicsPipeline final : public Simulation {
     Vec3d* rec_roll = rec_roll_.data();
     uint8_t* touched = rec_touched_.data();
     backend_.parallel_for_heavy(live_, [=] COLLIDO_HD(uint32_t i) {
-      const uint32_t k0 = nl_start[i], k1 = nl_start[i + 1];
-      if (P.state[i] != kActive) {
-        for (uint32_t k = k0; k < k1; ++k) touched[k] = 0;
-        return;
-      }
-      const Vec3d xi = P.x[i], vi = P.v[i];
+      const Vec3d vi = P.v[i];
       const Vec3d wi = rot ? P.w[i] : Vec3d{0, 0, 0};
       const double r = P.r[i], m = P.mass[i];
-      const FrictionSlot* old_slots = friction ? hin + size_t(i) * kPairSlots : nullptr;
-      FrictionSlot* new_slots = friction ? hout + size_t(i) * kPairSlots : nullptr;
-      uint32_t slots = 0;
-      for (uint32_t k = k0; k < k1; ++k) {
-        const uint32_t j = nl[k];
-        touched[k] = 0;
-        if (P.state[j] != kActive) continue;
-        const Vec3d d = xi - P.x[j];
-        const double rs = r + P.r[j];
-        const double dist2 = dot(d, d);
-        if (!(dist2 < rs * rs)) continue;
-        Vec3d spring = friction ? find_spring(old_slots, kPairSlots, j) : Vec3d{0, 0, 0};
-        const PairContact c = pair_contact(law, rot, P, i, j, vi, wi, r, m, d, dist2, rs, &spring, dt);
-        touched[k] = 1;
-        rec_f[k] = c.cf.f;
-        if (rot) rec_t[k] = c.cf.torque;
-        if (rolling) rec_roll[k] = c.roll;
-        if (friction && slots < uint32_t(kPairSlots))
-          new_slots[slots++] = FrictionSlot{j, float(spring.x), float(spring.y), float(spring.z)};
-      }
-      if (friction && slots < uint32_t(kPairSlots)) new_slots[slots].key = kNoKey;
+      for_each_owned_contact(
+          P, i, nl_start, nl, touched, friction ? hin : nullptr, friction ? hout : nullptr,
+          [&](uint32_t k, uint32_t j, Vec3d d, double dist2, double rs, Vec3d spring,
+              FrictionSlot* slot) {
+            const PairContact c =
+                pair_contact(law, rot, P, i, j, vi, wi, r, m, d, dist2, rs, &spring, dt);
+            rec_f[k] = c.cf.f;
+            if (rot) rec_t[k] = c.cf.torque;
+            if (rolling) rec_roll[k] = c.roll;
+            if (slot) slot->sx = float(spring.x), slot->sy = float(spring.y), slot->sz = float(spring.z);
+          });
     });
   }
 
@@ -1467,48 +1492,29 @@ class DynamicsPipeline final : public Simulation {
     const size_t st = b.stride;
     size_t c = 0;
     for (uint32_t i = first; i < last; ++i) {
-      const uint32_t k0 = nl_start[i], k1 = nl_start[i + 1];
-      if (P.state[i] != kActive) {
-        for (uint32_t k = k0; k < k1; ++k) touched[k] = 0;
-        continue;
-      }
-      const Vec3d xi = P.x[i], vi = P.v[i];
+      const Vec3d vi = P.v[i];
       const Vec3d wi = rot ? P.w[i] : Vec3d{0, 0, 0};
       const double r = P.r[i], m = P.mass[i];
-      const FrictionSlot* old_slots = friction ? hin + size_t(i) * kPairSlots : nullptr;
-      FrictionSlot* new_slots = friction ? hout + size_t(i) * kPairSlots : nullptr;
-      uint32_t slots = 0;
-      for (uint32_t k = k0; k < k1; ++k) {
-        const uint32_t j = nl[k];
-        touched[k] = 0;
-        if (P.state[j] != kActive) continue;
-        const Vec3d d = xi - P.x[j];
-        const double rs = r + P.r[j];
-        const double dist2 = dot(d, d);
-        if (!(dist2 < rs * rs)) continue;
-        touched[k] = 1;
-        FrictionSlot* slot = nullptr;
-        if (friction && slots < uint32_t(kPairSlots)) {
-          slot = new_slots + slots++;
-          slot->key = j;
-        }
-        b.record[c] = k;
-        b.slot[c] = slot;
-        const Vec3d vj = P.v[j], wj = friction ? P.w[j] : Vec3d{0, 0, 0};  // as pair_contact reads
-        const Vec3d spring = friction ? find_spring(old_slots, kPairSlots, j) : Vec3d{0, 0, 0};
-        const auto put3 = [&](C::Column at, Vec3d v) {
-          col[at * st + c] = v.x, col[(at + 1) * st + c] = v.y, col[(at + 2) * st + c] = v.z;
-        };
-        put3(C::kDx, d);
-        col[C::kDist2 * st + c] = dist2;
-        col[C::kRi * st + c] = r, col[C::kRj * st + c] = P.r[j];
-        col[C::kMi * st + c] = m, col[C::kMj * st + c] = P.mass[j];
-        put3(C::kVix, vi), put3(C::kVjx, vj), put3(C::kWix, wi), put3(C::kWjx, wj);
-        put3(C::kSx, spring);
-        col[C::kCoincidentSign * st + c] = i < j ? 1.0 : -1.0;
-        ++c;
-      }
-      if (friction && slots < uint32_t(kPairSlots)) new_slots[slots].key = kNoKey;
+      for_each_owned_contact(
+          P, i, nl_start, nl, touched, friction ? hin : nullptr, friction ? hout : nullptr,
+          [&](uint32_t k, uint32_t j, Vec3d d, double dist2, double, Vec3d spring,
+              FrictionSlot* slot) {
+            b.record[c] = k;
+            b.slot[c] = slot;
+            // As pair_contact reads them (a partner's spin only with friction).
+            const Vec3d vj = P.v[j], wj = friction ? P.w[j] : Vec3d{0, 0, 0};
+            const auto put3 = [&](C::Column at, Vec3d v) {
+              col[at * st + c] = v.x, col[(at + 1) * st + c] = v.y, col[(at + 2) * st + c] = v.z;
+            };
+            put3(C::kDx, d);
+            col[C::kDist2 * st + c] = dist2;
+            col[C::kRi * st + c] = r, col[C::kRj * st + c] = P.r[j];
+            col[C::kMi * st + c] = m, col[C::kMj * st + c] = P.mass[j];
+            put3(C::kVix, vi), put3(C::kVjx, vj), put3(C::kWix, wi), put3(C::kWjx, wj);
+            put3(C::kSx, spring);
+            col[C::kCoincidentSign * st + c] = i < j ? 1.0 : -1.0;
+            ++c;
+          });
     }
     b.size = c;
   }
