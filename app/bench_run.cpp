@@ -32,7 +32,7 @@ const std::vector<FlagSpec> kFlags = {
      "auto | on | off: a listed pair's force evaluated once, or by both particles (default auto: "
      "the backend's choice)"},
     {"simd-pairs", true,
-     "auto | off: CPU pairs evaluated once under the linear law four at a time in AVX2 vectors "
+     "auto | off: CPU pairs evaluated once four at a time in AVX2 vectors "
      "(default auto: where the CPU has AVX2)"},
     {"lanes", true,
      "auto | 1 | 2 | 4 | 8: GPU threads sharing a particle's pairs (default auto: the backend's "

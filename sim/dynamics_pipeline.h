@@ -1405,9 +1405,7 @@ class DynamicsPipeline final : public Simulation {
   // torque as the owner sees them; it keeps the pair's spring.
   void pair_records(double dt) {
     if constexpr (B::kPairRecordsInBatches) {
-      if (cfg_.simd_pairs != 0 && pair_law_.model == ContactModel::kLinear &&
-          !(rotation_ && pair_law_.mu_roll > 0) && linear_pair_batch_supported())
-        return pair_records_in_batches(dt);
+      if (cfg_.simd_pairs != 0 && pair_batch_supported()) return pair_records_in_batches(dt);
     }
     const ParticleArrays P = arrays();
     const ContactLaw law = pair_law_;
@@ -1439,10 +1437,10 @@ class DynamicsPipeline final : public Simulation {
     });
   }
 
-  // pair_records on the CPU under the linear law: a chunk of particles finds
-  // its touching pairs and their springs one at a time, in the order
-  // pair_records does, and computes their forces four at a time
-  // (linear_pair_batch); the records and the springs are the same bits.
+  // pair_records on the CPU: a chunk of particles finds its touching pairs
+  // and their springs one at a time, in the order pair_records does, and
+  // computes their forces four at a time (pair_batch_forces); the records and
+  // the springs are the same bits.
   void pair_records_in_batches(double dt) {
     const ParticleArrays P = arrays();
     const ContactLaw law = pair_law_;
@@ -1454,9 +1452,11 @@ class DynamicsPipeline final : public Simulation {
     const uint32_t* nl = nl_list_.data();
     Vec3d* rec_f = rec_f_.data();
     Vec3d* rec_t = rec_torque_.data();
+    Vec3d* rec_roll = rec_roll_.data();
+    const bool rolling = rot && law.mu_roll > 0;
     uint8_t* touched = rec_touched_.data();
     backend_.parallel_chunks(live_, kHeavyGrain, [=](size_t begin, size_t end) {
-      thread_local LinearPairBatch b;
+      thread_local PairBatch b;
       // kHeavyGrain particles a batch: about as many pairs, whose columns
       // stay in the first-level cache (a whole chunk's did not, and its
       // stores took longer than the scalar path's arithmetic).
@@ -1465,14 +1465,16 @@ class DynamicsPipeline final : public Simulation {
         b.reset(nl_start[last] - nl_start[first]);
         batch_touching_pairs(P, rot, friction, hin, hout, nl_start, nl, touched, uint32_t(first),
                              last, b);
-        linear_pair_batch(law, rot, dt, b);
-        using C = LinearPairBatch;
+        pair_batch_forces(law, rot, dt, b);
+        using C = PairBatch;
         const double *fx = b.col(C::kFx), *tx = b.col(C::kTx), *sx = b.col(C::kSxOut);
+        const double* rx = b.col(C::kRollX);
         const size_t st = b.stride;
         for (size_t c = 0; c < b.size; ++c) {
           const uint32_t k = b.record[c];
           rec_f[k] = Vec3d{fx[c], fx[c + st], fx[c + 2 * st]};
           if (rot) rec_t[k] = Vec3d{tx[c], tx[c + st], tx[c + 2 * st]};
+          if (rolling) rec_roll[k] = Vec3d{rx[c], rx[c + st], rx[c + 2 * st]};
           if (FrictionSlot* s = b.slot[c])
             s->sx = float(sx[c]), s->sy = float(sx[c + st]), s->sz = float(sx[c + 2 * st]);
         }
@@ -1486,8 +1488,8 @@ class DynamicsPipeline final : public Simulation {
   static void batch_touching_pairs(const ParticleArrays& P, bool rot, bool friction,
                                    const FrictionSlot* hin, FrictionSlot* hout,
                                    const uint32_t* nl_start, const uint32_t* nl, uint8_t* touched,
-                                   uint32_t first, uint32_t last, LinearPairBatch& b) {
-    using C = LinearPairBatch;
+                                   uint32_t first, uint32_t last, PairBatch& b) {
+    using C = PairBatch;
     double* col = b.data.data();
     const size_t st = b.stride;
     size_t c = 0;
@@ -1501,8 +1503,8 @@ class DynamicsPipeline final : public Simulation {
               FrictionSlot* slot) {
             b.record[c] = k;
             b.slot[c] = slot;
-            // As pair_contact reads them (a partner's spin only with friction).
-            const Vec3d vj = P.v[j], wj = friction ? P.w[j] : Vec3d{0, 0, 0};
+            // As pair_contact reads them (spins only where they are followed).
+            const Vec3d vj = P.v[j], wj = rot ? P.w[j] : Vec3d{0, 0, 0};
             const auto put3 = [&](C::Column at, Vec3d v) {
               col[at * st + c] = v.x, col[(at + 1) * st + c] = v.y, col[(at + 2) * st + c] = v.z;
             };

@@ -9,13 +9,13 @@ namespace collido::sim {
 
 #if COLLIDO_PAIR_BATCH_AVX2
 
-bool linear_pair_batch_supported() { return __builtin_cpu_supports("avx2"); }
+bool pair_batch_supported() { return __builtin_cpu_supports("avx2"); }
 
 namespace {
 
 // Four lanes of doubles and their comparison masks. Only this file's
 // target("avx2") functions touch them; every helper is inlined into
-// linear_pair_batch, so no other translation unit ever runs AVX2 code.
+// pair_batch_forces, so no other translation unit ever runs AVX2 code.
 typedef double V __attribute__((vector_size(32)));
 typedef long long M __attribute__((vector_size(32)));
 
@@ -44,31 +44,35 @@ COLLIDO_AVX2 V3 cross(V3 a, V3 b) {
   return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
 // Columns c, c + 1 and c + 2 (x, y and z).
-COLLIDO_AVX2 V3 load3(const LinearPairBatch& b, LinearPairBatch::Column c, size_t k) {
+COLLIDO_AVX2 V3 load3(const PairBatch& b, PairBatch::Column c, size_t k) {
   const double* p = b.col(c);
   return {load(p, k), load(p + b.stride, k), load(p + 2 * b.stride, k)};
 }
-COLLIDO_AVX2 void store3(LinearPairBatch& b, LinearPairBatch::Column c, size_t k, V3 v) {
+COLLIDO_AVX2 void store3(PairBatch& b, PairBatch::Column c, size_t k, V3 v) {
   double* p = b.col(c);
   store(p, k, v.x), store(p + b.stride, k, v.y), store(p + 2 * b.stride, k, v.z);
 }
 
 }  // namespace
 
-__attribute__((target("avx2"))) void linear_pair_batch(const ContactLaw& law, bool rot,
-                                                        double dt, LinearPairBatch& b) {
-  using C = LinearPairBatch;
+__attribute__((target("avx2"))) void pair_batch_forces(const ContactLaw& law, bool rot,
+                                                        double dt, PairBatch& b) {
+  using C = PairBatch;
   if (b.size == 0) return;
   for (size_t k = b.size; k % 4; ++k)
     for (int c = 0; c < C::kColumns; ++c) b.col(C::Column(c))[k] = b.col(C::Column(c))[b.size - 1];
-  const bool friction = law.mu > 0;
-  const V zero = splat(0), one = splat(1.0);
-  const V k_n = splat(law.k), two_zeta = splat(2.0 * law.zeta);
-  const V mu = splat(law.mu), vdt = splat(dt), minus_one = splat(-1.0);
-  const V minus_kt = splat(-law.kt), minus_inv_kt = splat(-1.0 / law.kt);
-  const V tiny = splat(1e-12);
+  const bool friction = law.mu > 0, hertz = law.model == ContactModel::kHertzMindlin;
+  const bool rolling = rot && law.mu_roll > 0;
+  const V zero = splat(0), one = splat(1.0), minus_one = splat(-1.0);
+  const V3 none{zero, zero, zero};
+  const V k_lin = splat(law.k), kt_lin = splat(law.kt), two_zeta = splat(2.0 * law.zeta);
+  const V two_e = splat(2.0 * law.e_star), eight_g = splat(8.0 * law.g_star);
+  const V two_thirds = splat(2.0 / 3.0), eta = splat(law.eta);
+  const V mu = splat(law.mu), mu_roll = splat(law.mu_roll), vdt = splat(dt);
+  const V tiny = splat(1e-12), two_fifths = splat(0.4);
   for (size_t k = 0; k < b.size; k += 4) {
-    // pair_contact: the normal, the surfaces' relative velocity, the reduced mass.
+    // pair_contact: the normal, the surfaces' relative velocity, the reduced
+    // mass and, for the laws that read it, the contact's radius.
     const V3 d = load3(b, C::kDx, k);
     const V dist2 = load(b.col(C::kDist2), k);
     const V r = load(b.col(C::kRi), k), rj = load(b.col(C::kRj), k);
@@ -78,19 +82,30 @@ __attribute__((target("avx2"))) void linear_pair_batch(const ContactLaw& law, bo
     const V3 along = mul(d, one / dist);
     const V3 apart{zero, zero, load(b.col(C::kCoincidentSign), k)};
     const V3 n = pick(dist > tiny * rs, along, apart);
+    const V3 wi = load3(b, C::kWix, k), wj = load3(b, C::kWjx, k);
     V3 vrel = sub(load3(b, C::kVix, k), load3(b, C::kVjx, k));
-    if (friction)
-      vrel = sub(vrel, add(cross(load3(b, C::kWix, k), mul(n, r)),
-                           cross(load3(b, C::kWjx, k), mul(n, rj))));
+    if (friction) vrel = sub(vrel, add(cross(wi, mul(n, r)), cross(wj, mul(n, rj))));
+    const V r_eff = hertz || rolling ? r * rj / rs : zero;
     const V m_eff = m * mj / (m + mj);
     const V overlap = rs - dist;
-    // contact_force, the linear law.
-    const V gamma = two_zeta * vsqrt(m_eff * k_n);
+    // contact_force: the law's stiffnesses and damping.
+    V kn, kt, gamma_n, gamma_t;
+    if (hertz) {
+      const V a = vsqrt(r_eff * overlap);
+      const V sn = two_e * a, st = eight_g * a;
+      kn = two_thirds * sn;
+      kt = st;
+      gamma_n = eta * vsqrt(m_eff * sn);
+      gamma_t = eta * vsqrt(m_eff * st);
+    } else {
+      kn = k_lin;
+      kt = kt_lin;
+      gamma_n = gamma_t = two_zeta * vsqrt(m_eff * k_lin);
+    }
     const V vn = dot(vrel, n);
-    const V fn = k_n * overlap - gamma * vn;
+    const V fn = kn * overlap - gamma_n * vn;
     V3 f = mul(n, fn);
-    V3 torque{zero, zero, zero};
-    V3 s{zero, zero, zero};
+    V3 torque = none, s = none;
     if (friction) {
       const V3 vt = sub(vrel, mul(n, vn));
       s = load3(b, C::kSx, k);
@@ -100,14 +115,13 @@ __attribute__((target("avx2"))) void linear_pair_batch(const ContactLaw& law, bo
       const V3 kept = pick(proj2 > zero, mul(proj, vsqrt(len2 / proj2)), proj);
       s = pick(len2 > zero, kept, s);
       s = add(s, mul(vt, vdt));
-      V3 ft = sub(mul(s, minus_kt), mul(vt, gamma));
+      V3 ft = sub(mul(s, -kt), mul(vt, gamma_t));
       const V ft2 = dot(ft, ft), limit = mu * pick(fn > zero, fn, zero);
       const M sliding = ft2 > limit * limit;
       if (!_mm256_testz_si256(__m256i(sliding), __m256i(sliding))) {
         const V ftn = vsqrt(ft2);
-        const V3 capped = pick(ftn > zero, mul(ft, limit / ftn), V3{zero, zero, zero});
-        const V3 reset = law.kt > 0 ? mul(add(capped, mul(vt, gamma)), minus_inv_kt)
-                                    : V3{zero, zero, zero};
+        const V3 capped = pick(ftn > zero, mul(ft, limit / ftn), none);
+        const V3 reset = pick(kt > zero, mul(add(capped, mul(vt, gamma_t)), minus_one / kt), none);
         ft = pick(sliding, capped, ft);
         s = pick(sliding, reset, s);
       }
@@ -117,13 +131,27 @@ __attribute__((target("avx2"))) void linear_pair_batch(const ContactLaw& law, bo
     store3(b, C::kFx, k, f);
     if (rot) store3(b, C::kTx, k, torque);
     if (friction) store3(b, C::kSxOut, k, s);
+    if (rolling && dt > 0) {
+      // rolling_torque: against the rolling spin, never more than stops it within the step.
+      const V ii = two_fifths * m * r * r, ij = two_fifths * mj * rj * rj;
+      const V i_eff = ii * ij / (ii + ij);
+      const V3 w_rel = sub(wi, wj);
+      const V3 w = sub(w_rel, mul(n, dot(w_rel, n)));
+      const V wl = vsqrt(dot(w, w));
+      const V most = mu_roll * fn * r_eff, stop = i_eff * wl / vdt;
+      const V t = pick(stop < most, stop, most);
+      const V3 roll = mul(w, -t / wl);
+      store3(b, C::kRollX, k, pick(fn > zero, pick(wl > zero, roll, none), none));
+    } else if (rolling) {
+      store3(b, C::kRollX, k, none);
+    }
   }
 }
 
 #else
 
-bool linear_pair_batch_supported() { return false; }
-void linear_pair_batch(const ContactLaw&, bool, double, LinearPairBatch&) {}
+bool pair_batch_supported() { return false; }
+void pair_batch_forces(const ContactLaw&, bool, double, PairBatch&) {}
 
 #endif
 

@@ -1,9 +1,10 @@
-// The CPU's pair contacts of the linear law, four at a time (AVX2): the
+// The CPU's pair contacts, four at a time (AVX2): the
 // touching pairs a chunk of particles owns are gathered into columns, their
 // forces computed across the vector's lanes, and the results handed back.
 //
-// The arithmetic is contact_force's (sim/contact_force.h) and pair_contact's
-// (sim/dynamics_pipeline.h) operation for operation, in the same order, with
+// The arithmetic is contact_force's and rolling_torque's (sim/contact_force.h)
+// and pair_contact's (sim/dynamics_pipeline.h), for both laws, operation for
+// operation, in the same order, with
 // no fused multiply-adds: IEEE rounds each lane as it rounds the scalar code,
 // so the records are the scalar path's bit for bit (test
 // PairsOnceOrFromBothSidesAgreeBitForBit compares them with the pairs
@@ -22,7 +23,7 @@ namespace collido::sim {
 
 // The touching pairs of a chunk, one column per input and output, in the
 // order they were found. The pair's particles are i (the owner) and j.
-struct LinearPairBatch {
+struct PairBatch {
   // In: the centres' difference x_i - x_j and its squared length, the radii
   // and masses, the velocities and spins, the spring as last step left it,
   // and the normal's sign should the centres coincide (+1 when i < j).
@@ -31,8 +32,9 @@ struct LinearPairBatch {
     kVix, kViy, kViz, kVjx, kVjy, kVjz,
     kWix, kWiy, kWiz, kWjx, kWjy, kWjz,
     kSx, kSy, kSz, kCoincidentSign,
-    // Out: the force on i, the torque per metre of lever on i, the spring.
-    kFx, kFy, kFz, kTx, kTy, kTz, kSxOut, kSyOut, kSzOut,
+    // Out: the force on i, the torque per metre of lever on i, the spring,
+    // the rolling torque on i.
+    kFx, kFy, kFz, kTx, kTy, kTz, kSxOut, kSyOut, kSzOut, kRollX, kRollY, kRollZ,
     kColumns
   };
   size_t size = 0;
@@ -57,13 +59,14 @@ struct LinearPairBatch {
   const double* col(Column c) const { return data.data() + c * stride; }
 };
 
-// Whether this CPU runs linear_pair_batch (AVX2; false on other machines and
+// Whether this CPU runs pair_batch_forces (AVX2; false on other machines and
 // architectures, where the scalar path runs).
-bool linear_pair_batch_supported();
+bool pair_batch_supported();
 
-// Fills the batch's output columns for pairs [0, size) under the linear law
-// (friction when law.mu > 0; spins read only when rot). Pads the last group of
-// four with copies of the last pair, whose results are the same bits.
-void linear_pair_batch(const ContactLaw& law, bool rot, double dt, LinearPairBatch& b);
+// Fills the batch's output columns for pairs [0, size) under either law
+// (friction when law.mu > 0, rolling resistance when rot and law.mu_roll > 0;
+// spins read only when rot). Pads the last group of four with copies of the
+// last pair, whose results are the same bits.
+void pair_batch_forces(const ContactLaw& law, bool rot, double dt, PairBatch& b);
 
 }  // namespace collido::sim

@@ -599,14 +599,15 @@ TEST(Dynamics, NeighbourListFindsEveryContactTheGridDoes) { neighbour_list_finds
 // bit for bit: the pair's arithmetic is odd in its orientation, and both ways
 // sum a particle's pairs in the same order (on the CPU; the GPU's fused
 // multiply-adds may differ between kernels). On the CPU the pairs evaluated
-// once run one at a time and, under the linear law, four at a time in AVX2
-// vectors (simd_pairs, where the CPU has them): all three agree. Dense colliding scenes with
+// once run one at a time and four at a time in AVX2 vectors (simd_pairs,
+// where the CPU has them): all three agree, for both laws, with and without
+// rolling resistance. Dense colliding scenes with
 // friction, rolling resistance, both contact laws, mixed radii, particles
 // released while the list stands, particles numbered at random (renumbered by
 // cell, results in the caller's numbering), and two threads.
 void pairs_once_or_from_both_sides_agree() {
   const TriangleMesh wall = make_cylinder(50, 100, 40);
-  for (int scene = 0; scene < 4; ++scene) {
+  for (int scene = 0; scene < 5; ++scene) {
     // 1.98 apart: pressed together; the pour 2.0002 apart (a release waits while its place is taken)
     ParticleSet p = lattice(10, scene == 2 ? 10.001 : 9.9, -0.05, 1, 5.0, 11);
     SplitMix64 rng(5);
@@ -621,7 +622,7 @@ void pairs_once_or_from_both_sides_agree() {
     DynamicsConfig cfg;
     cfg.particle_contacts = true;
     cfg.material.friction = scene == 2 ? 0 : 0.4;
-    cfg.material.rolling_friction = scene == 1 ? 0.05 : 0;
+    cfg.material.rolling_friction = scene == 1 || scene == 4 ? 0.05 : 0;  // Hertz, then linear
     cfg.material.restitution = 0.5;
     if (scene == 1) cfg.contact_model = ContactModel::kHertzMindlin;
     ThreadPool pool(2);
