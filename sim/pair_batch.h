@@ -1,16 +1,15 @@
-// The CPU's pair contacts, four at a time (AVX2): the
-// touching pairs a chunk of particles owns are gathered into columns, their
-// forces computed across the vector's lanes, and the results handed back.
+// The CPU's pair contacts, four at a time (AVX2): the touching pairs a chunk
+// of particles owns are gathered into columns, their forces computed across
+// the vector's lanes, and the results handed back.
 //
-// The arithmetic is contact_force's and rolling_torque's (sim/contact_force.h)
-// and pair_contact's (sim/dynamics_pipeline.h), for both laws, operation for
-// operation, in the same order, with
-// no fused multiply-adds: IEEE rounds each lane as it rounds the scalar code,
-// so the records are the scalar path's bit for bit (test
-// PairsOnceOrFromBothSidesAgreeBitForBit compares them with the pairs
-// evaluated from both sides one at a time). One contact at a time, a contact's
-// three square roots and three divisions ran one after another, and the pair
-// pass was most of a step (docs/benchmarks.md).
+// The arithmetic is that of pair_contact (sim/dynamics_pipeline.h),
+// contact_force and rolling_torque (sim/contact_force.h), for both laws,
+// operation for operation, in the same order, with no fused multiply-adds:
+// IEEE rounds each lane as it rounds the scalar code, so the records are the
+// scalar path's bit for bit (test PairsOnceOrFromBothSidesAgreeBitForBit
+// compares them with the pairs evaluated from both sides one at a time). One
+// contact at a time, a contact's three square roots and three divisions ran
+// one after another, and the pair pass was most of a step (docs/benchmarks.md).
 #pragma once
 
 #include <cstddef>
