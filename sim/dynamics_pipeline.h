@@ -1359,32 +1359,75 @@ class DynamicsPipeline final : public Simulation {
     return out;
   }
 
+  // A particle that owns pairs, as its pairs read it: velocity, spin (0 when
+  // spins are not followed), radius, mass.
+  struct Owner {
+    Vec3d v, w;
+    double r, m;
+  };
+  // A touching pair as its owner i sees it.
+  struct OwnedContact {
+    uint32_t k, j;       // the listed pair's record, the partner
+    Vec3d d;             // x_i - x_j
+    double dist2, rs;    // |d|^2 < rs^2, the radii's sum
+    Vec3d spring;        // the pair's spring as last step left it
+    FrictionSlot* slot;  // where this step's goes, its key filed (nullptr past the slots)
+  };
+  // What the passes that record the pairs once read and write.
+  struct RecordPass {
+    ParticleArrays P;
+    ContactLaw law;
+    bool rot, rolling;
+    const FrictionSlot* hin;  // last step's springs, this step's: null without friction
+    FrictionSlot* hout;
+    const uint32_t *nl_start, *nl;  // the upper lists
+    Vec3d *rec_f, *rec_t, *rec_roll;
+    uint8_t* touched;
+  };
+  RecordPass record_pass() {
+    const bool friction = pair_law_.mu > 0;
+    return {arrays(),
+            pair_law_,
+            rotation_,
+            rotation_ && pair_law_.mu_roll > 0,
+            friction ? pair_hist_[hist_in_].data() : nullptr,
+            friction ? pair_hist_[hist_in_ ^ 1].data() : nullptr,
+            nl_start_.data(),
+            nl_list_.data(),
+            rec_f_.data(),
+            rec_torque_.data(),
+            rec_roll_.data(),
+            rec_touched_.data()};
+  }
+
   // Particle i's upper list (the pairs it owns): marks each listed pair
-  // touched or not and calls f(k, j, d, dist2, rs, spring, slot) for each
-  // touching one, in list order, with d = x_i - x_j, its squared length
-  // dist2 < rs^2, the pair's spring as last step left it and where this
-  // step's goes (its key filed; nullptr past the slots, or without friction:
-  // hin and hout null). Terminates the new slots. An inactive i touches nothing.
+  // touched or not and calls f(owner, contact) for each touching one, in list
+  // order. Terminates the new slots. An inactive i touches nothing.
   template <class F>
-  COLLIDO_HD static COLLIDO_FORCEINLINE void for_each_owned_contact(
-      const ParticleArrays& P, uint32_t i, const uint32_t* nl_start, const uint32_t* nl,
-      uint8_t* touched, const FrictionSlot* hin, FrictionSlot* hout, F&& f) {
-    const uint32_t k0 = nl_start[i], k1 = nl_start[i + 1];
+  COLLIDO_HD static COLLIDO_FORCEINLINE void for_each_owned_contact(const RecordPass& R, uint32_t i,
+                                                                   F&& f) {
+    const ParticleArrays& P = R.P;
+    const uint32_t* nl = R.nl;
+    uint8_t* touched = R.touched;
+    const bool rot = R.rot;
+    const FrictionSlot* hin = R.hin;
+    FrictionSlot* hout = R.hout;
+    const uint32_t k0 = R.nl_start[i], k1 = R.nl_start[i + 1];
     if (P.state[i] != kActive) {
       for (uint32_t k = k0; k < k1; ++k) touched[k] = 0;
       return;
     }
+    const Owner owner{P.v[i], rot ? P.w[i] : Vec3d{0, 0, 0}, P.r[i], P.mass[i]};
     const FrictionSlot* old_slots = hin ? hin + size_t(i) * kPairSlots : nullptr;
     FrictionSlot* new_slots = hout ? hout + size_t(i) * kPairSlots : nullptr;
     const Vec3d xi = P.x[i];
-    const double r = P.r[i];
     uint32_t slots = 0;
     for (uint32_t k = k0; k < k1; ++k) {
       const uint32_t j = nl[k];
       touched[k] = 0;
       if (P.state[j] != kActive) continue;
       const Vec3d d = xi - P.x[j];
-      const double rs = r + P.r[j];
+      const double rs = owner.r + P.r[j];
       const double dist2 = dot(d, d);
       if (!(dist2 < rs * rs)) continue;
       touched[k] = 1;
@@ -1394,7 +1437,7 @@ class DynamicsPipeline final : public Simulation {
         slot->key = j;
       }
       const Vec3d spring = old_slots ? find_spring(old_slots, kPairSlots, j) : Vec3d{0, 0, 0};
-      f(k, j, d, dist2, rs, spring, slot);
+      f(owner, OwnedContact{k, j, d, dist2, rs, spring, slot});
     }
     if (new_slots && slots < uint32_t(kPairSlots)) new_slots[slots].key = kNoKey;
   }
@@ -1407,33 +1450,18 @@ class DynamicsPipeline final : public Simulation {
     if constexpr (B::kPairRecordsInBatches) {
       if (cfg_.simd_pairs != 0 && pair_batch_supported()) return pair_records_in_batches(dt);
     }
-    const ParticleArrays P = arrays();
-    const ContactLaw law = pair_law_;
-    const bool rot = rotation_;
-    const bool friction = law.mu > 0, rolling = rot && law.mu_roll > 0;
-    const FrictionSlot* hin = pair_hist_[hist_in_].data();
-    FrictionSlot* hout = pair_hist_[hist_in_ ^ 1].data();
-    const uint32_t* nl_start = nl_start_.data();
-    const uint32_t* nl = nl_list_.data();
-    Vec3d* rec_f = rec_f_.data();
-    Vec3d* rec_t = rec_torque_.data();
-    Vec3d* rec_roll = rec_roll_.data();
-    uint8_t* touched = rec_touched_.data();
+    const RecordPass R = record_pass();
     backend_.parallel_for_heavy(live_, [=] COLLIDO_HD(uint32_t i) {
-      const Vec3d vi = P.v[i];
-      const Vec3d wi = rot ? P.w[i] : Vec3d{0, 0, 0};
-      const double r = P.r[i], m = P.mass[i];
-      for_each_owned_contact(
-          P, i, nl_start, nl, touched, friction ? hin : nullptr, friction ? hout : nullptr,
-          [&](uint32_t k, uint32_t j, Vec3d d, double dist2, double rs, Vec3d spring,
-              FrictionSlot* slot) {
-            const PairContact c =
-                pair_contact(law, rot, P, i, j, vi, wi, r, m, d, dist2, rs, &spring, dt);
-            rec_f[k] = c.cf.f;
-            if (rot) rec_t[k] = c.cf.torque;
-            if (rolling) rec_roll[k] = c.roll;
-            if (slot) slot->sx = float(spring.x), slot->sy = float(spring.y), slot->sz = float(spring.z);
-          });
+      for_each_owned_contact(R, i, [&](const Owner& o, const OwnedContact& c) {
+        Vec3d spring = c.spring;
+        const PairContact pc = pair_contact(R.law, R.rot, R.P, i, c.j, o.v, o.w, o.r, o.m, c.d,
+                                            c.dist2, c.rs, &spring, dt);
+        R.rec_f[c.k] = pc.cf.f;
+        if (R.rot) R.rec_t[c.k] = pc.cf.torque;
+        if (R.rolling) R.rec_roll[c.k] = pc.roll;
+        if (c.slot)
+          c.slot->sx = float(spring.x), c.slot->sy = float(spring.y), c.slot->sz = float(spring.z);
+      });
     });
   }
 
@@ -1442,19 +1470,7 @@ class DynamicsPipeline final : public Simulation {
   // computes their forces four at a time (pair_batch_forces); the records and
   // the springs are the same bits.
   void pair_records_in_batches(double dt) {
-    const ParticleArrays P = arrays();
-    const ContactLaw law = pair_law_;
-    const bool rot = rotation_;
-    const bool friction = law.mu > 0;
-    const FrictionSlot* hin = pair_hist_[hist_in_].data();
-    FrictionSlot* hout = pair_hist_[hist_in_ ^ 1].data();
-    const uint32_t* nl_start = nl_start_.data();
-    const uint32_t* nl = nl_list_.data();
-    Vec3d* rec_f = rec_f_.data();
-    Vec3d* rec_t = rec_torque_.data();
-    Vec3d* rec_roll = rec_roll_.data();
-    const bool rolling = rot && law.mu_roll > 0;
-    uint8_t* touched = rec_touched_.data();
+    const RecordPass R = record_pass();
     backend_.parallel_chunks(live_, kHeavyGrain, [=](size_t begin, size_t end) {
       thread_local PairBatch b;
       // kHeavyGrain particles a batch: about as many pairs, whose columns
@@ -1462,19 +1478,18 @@ class DynamicsPipeline final : public Simulation {
       // stores took longer than the scalar path's arithmetic).
       for (size_t first = begin; first < end; first += kHeavyGrain) {
         const uint32_t last = uint32_t(std::min(end, first + kHeavyGrain));
-        b.reset(nl_start[last] - nl_start[first]);
-        batch_touching_pairs(P, rot, friction, hin, hout, nl_start, nl, touched, uint32_t(first),
-                             last, b);
-        pair_batch_forces(law, rot, dt, b);
+        b.reset(R.nl_start[last] - R.nl_start[first]);
+        batch_touching_pairs(R, uint32_t(first), last, b);
+        pair_batch_forces(R.law, R.rot, dt, b);
         using C = PairBatch;
         const double *fx = b.col(C::kFx), *tx = b.col(C::kTx), *sx = b.col(C::kSxOut);
         const double* rx = b.col(C::kRollX);
         const size_t st = b.stride;
         for (size_t c = 0; c < b.size; ++c) {
           const uint32_t k = b.record[c];
-          rec_f[k] = Vec3d{fx[c], fx[c + st], fx[c + 2 * st]};
-          if (rot) rec_t[k] = Vec3d{tx[c], tx[c + st], tx[c + 2 * st]};
-          if (rolling) rec_roll[k] = Vec3d{rx[c], rx[c + st], rx[c + 2 * st]};
+          R.rec_f[k] = Vec3d{fx[c], fx[c + st], fx[c + 2 * st]};
+          if (R.rot) R.rec_t[k] = Vec3d{tx[c], tx[c + st], tx[c + 2 * st]};
+          if (R.rolling) R.rec_roll[k] = Vec3d{rx[c], rx[c + st], rx[c + 2 * st]};
           if (FrictionSlot* s = b.slot[c])
             s->sx = float(sx[c]), s->sy = float(sx[c + st]), s->sz = float(sx[c + 2 * st]);
         }
@@ -1485,39 +1500,30 @@ class DynamicsPipeline final : public Simulation {
   // pair_records_in_batches' first step: particles [first, last) file their
   // touching pairs into b's input columns (and mark them touched), and their
   // springs' keys into this step's slots, in pair_records' order.
-  static void batch_touching_pairs(const ParticleArrays& P, bool rot, bool friction,
-                                   const FrictionSlot* hin, FrictionSlot* hout,
-                                   const uint32_t* nl_start, const uint32_t* nl, uint8_t* touched,
-                                   uint32_t first, uint32_t last, PairBatch& b) {
+  static void batch_touching_pairs(const RecordPass& R, uint32_t first, uint32_t last,
+                                   PairBatch& b) {
     using C = PairBatch;
     double* col = b.data.data();
     const size_t st = b.stride;
     size_t c = 0;
-    for (uint32_t i = first; i < last; ++i) {
-      const Vec3d vi = P.v[i];
-      const Vec3d wi = rot ? P.w[i] : Vec3d{0, 0, 0};
-      const double r = P.r[i], m = P.mass[i];
-      for_each_owned_contact(
-          P, i, nl_start, nl, touched, friction ? hin : nullptr, friction ? hout : nullptr,
-          [&](uint32_t k, uint32_t j, Vec3d d, double dist2, double, Vec3d spring,
-              FrictionSlot* slot) {
-            b.record[c] = k;
-            b.slot[c] = slot;
-            // As pair_contact reads them (spins only where they are followed).
-            const Vec3d vj = P.v[j], wj = rot ? P.w[j] : Vec3d{0, 0, 0};
-            const auto put3 = [&](C::Column at, Vec3d v) {
-              col[at * st + c] = v.x, col[(at + 1) * st + c] = v.y, col[(at + 2) * st + c] = v.z;
-            };
-            put3(C::kDx, d);
-            col[C::kDist2 * st + c] = dist2;
-            col[C::kRi * st + c] = r, col[C::kRj * st + c] = P.r[j];
-            col[C::kMi * st + c] = m, col[C::kMj * st + c] = P.mass[j];
-            put3(C::kVix, vi), put3(C::kVjx, vj), put3(C::kWix, wi), put3(C::kWjx, wj);
-            put3(C::kSx, spring);
-            col[C::kCoincidentSign * st + c] = i < j ? 1.0 : -1.0;
-            ++c;
-          });
-    }
+    for (uint32_t i = first; i < last; ++i)
+      for_each_owned_contact(R, i, [&](const Owner& o, const OwnedContact& p) {
+        b.record[c] = p.k;
+        b.slot[c] = p.slot;
+        // As pair_contact reads them (spins only where they are followed).
+        const Vec3d vj = R.P.v[p.j], wj = R.rot ? R.P.w[p.j] : Vec3d{0, 0, 0};
+        const auto put3 = [&](C::Column at, Vec3d v) {
+          col[at * st + c] = v.x, col[(at + 1) * st + c] = v.y, col[(at + 2) * st + c] = v.z;
+        };
+        put3(C::kDx, p.d);
+        col[C::kDist2 * st + c] = p.dist2;
+        col[C::kRi * st + c] = o.r, col[C::kRj * st + c] = R.P.r[p.j];
+        col[C::kMi * st + c] = o.m, col[C::kMj * st + c] = R.P.mass[p.j];
+        put3(C::kVix, o.v), put3(C::kVjx, vj), put3(C::kWix, o.w), put3(C::kWjx, wj);
+        put3(C::kSx, p.spring);
+        col[C::kCoincidentSign * st + c] = i < p.j ? 1.0 : -1.0;
+        ++c;
+      });
     b.size = c;
   }
 
@@ -1813,8 +1819,7 @@ class DynamicsPipeline final : public Simulation {
           if (rot) P.alpha[i] = Vec3d{0, 0, 0};
           P.flags[i] = uint8_t(kActive);
         }
-        // With no candidates listed, both generations are already empty (build_wall_lists).
-        if (friction && !(listed && wl_count[i] == 0)) new_slots[0].key = kNoKey;
+        if (friction) new_slots[0].key = kNoKey;
         return;
       }
       const double m = P.mass[i];
@@ -1863,8 +1868,10 @@ class DynamicsPipeline final : public Simulation {
       }
     };
     // Most particles list no wall candidate: they skip the contact set's
-    // set-up (a call and its frame, most of this pass's time on the CPU).
-    const bool quick = listed && !part && !measure;
+    // set-up (a call and its frame, most of this pass's time on the CPU), and
+    // their spring lists, emptied in both generations at the build, stay so.
+    // (A listed wall stands still: it has no moving part either.)
+    const bool quick = listed && !measure;
     backend_.parallel_for_lanes(live_, lanes, [=] COLLIDO_HD(uint32_t i, LaneGroup g) {
       if (quick && wl_count[i] == 0 && P.state[i] == kActive) {
         if (g.lane == 0 && !add) {  // as particle() does for a particle that touches nothing
