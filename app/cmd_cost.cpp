@@ -336,12 +336,17 @@ int gvm_replay(const Args& args) {
   }
   if (parsed->positional().size() != 1) return usage_error(cmd, "expects one JOBS.csv");
   if (!parsed->has("model")) return usage_error(cmd, "--model MODEL.json is required");
+  // A file that cannot be read, or a log the model prices none of, is a failure, not a usage error.
+  auto fail = [&](const std::string& why) {
+    std::fprintf(stderr, "collidoscope %s: %s\n", cmd, why.c_str());
+    return kExitFailure;
+  };
   auto model = job::JobCostModel::load(parsed->get("model"));
-  if (!model) return usage_error(cmd, model.status().message());
+  if (!model) return fail(model.status().message());
   auto rows = job::read_job_log(parsed->positional()[0]);
-  if (!rows) return usage_error(cmd, rows.status().message());
+  if (!rows) return fail(rows.status().message());
   const job::PaceReplay r = job::replay_with_pace(*model, *rows);
-  if (r.jobs == 0) return usage_error(cmd, "no job of the log could be priced by this model");
+  if (r.jobs == 0) return fail("no job of the log could be priced by this model");
   std::printf("%zu of %zu jobs priced; total time:\n", r.jobs, rows->size());
   std::printf("  model alone:        MAPE %5.1f %%, 10-90 %% interval holds %3.0f %%\n", r.mape,
               100 * r.holds);

@@ -1349,12 +1349,13 @@ Pace pace_of(const std::vector<double>& ratios) {
 }
 
 Pace pace_of(const JobCostModel& model, const std::vector<JobRecord>& newest_first) {
-  std::vector<double> ratios;  // pace_of(ratios) leaves out those that are not ratios
+  std::vector<double> ratios;
   for (const JobRecord& r : newest_first) {
     if (ratios.size() == kPaceWindow) break;
     double point[kJobOutputs];  // the median alone: no interval, no range check
     model.predict_point(r.inputs, point);
-    ratios.push_back(r.measure.total_s / point[kTotal]);
+    const double ratio = r.measure.total_s / point[kTotal];
+    if (ratio > 0 && std::isfinite(ratio)) ratios.push_back(ratio);  // else not priced: skipped
   }
   return pace_of(ratios);
 }

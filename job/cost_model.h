@@ -240,10 +240,10 @@ Expected<JobComparison> compare_job_models(const std::vector<JobRecord>& rows,
 // How fast the machine runs now against what a model prices: the median of measured
 // over predicted total time of its most recent jobs, where more of them ran slower
 // (or faster) than priced than chance would put on one side; 1 otherwise. A shared
-// machine's speed moves
-// (the 2-vCPU development VM ran the same 280 jobs 17 % slower a session after the
-// log's sweep; docs/gvm.md), which a model trained on earlier runs cannot see; the
-// service scales its time prices by the pace of the jobs it ran last.
+// machine's speed moves (the 2-vCPU development VM ran the same 280 jobs 17 % slower
+// a session after the log's sweep; docs/gvm.md), which a model trained on earlier
+// runs cannot see; the service scales its time prices by the pace of the jobs it ran
+// last.
 struct Pace {
   double factor = 1;  // measured over predicted total time, in [kPaceFastest, kPaceSlowest]
   size_t jobs = 0;    // the jobs it stands on (0: too few, factor 1)
@@ -256,7 +256,8 @@ inline constexpr double kPaceFastest = 0.5, kPaceSlowest = 2.0;
 // From the ratios measured / predicted of the most recent jobs, newest first (the
 // first kPaceWindow count).
 Pace pace_of(const std::vector<double>& ratios);
-// The model's pace on finished jobs, newest first; a job it cannot price is skipped.
+// The model's pace on finished jobs, newest first: the first kPaceWindow it can
+// price count (one it cannot, a zero or non-finite ratio, is skipped).
 Pace pace_of(const JobCostModel& model, const std::vector<JobRecord>& newest_first);
 // A time interval scaled by the pace.
 CostInterval paced(const CostInterval& t, const Pace& pace);

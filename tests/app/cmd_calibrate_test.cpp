@@ -199,6 +199,18 @@ TEST(CmdCalibrate, JobSweepTrainAndPredictAScene) {
                      "--out", model, "--ensemble", "3"}),
             kExitUsage);
 
+  // The model replayed on its log in the log's order, alone and at the machine's pace.
+  const std::string jobs_log = std::string(COLLIDO_SOURCE_DIR) + "/bench/data/jobs_cpu.csv";
+  testing::internal::CaptureStdout();
+  ASSERT_EQ(cmd_gvm({"replay", jobs_log, "--model", model}), kExitOk);
+  const std::string replay = testing::internal::GetCapturedStdout();
+  for (const char* s : {" jobs priced; total time:", "model alone:", "scaled by the pace:", "MAPE"})
+    EXPECT_NE(replay.find(s), std::string::npos) << s << "\n" << replay;
+  EXPECT_EQ(cmd_gvm({"replay", jobs_log}), kExitUsage);                         // no --model
+  EXPECT_EQ(cmd_gvm({"replay", "--model", model}), kExitUsage);                 // no log
+  EXPECT_EQ(cmd_gvm({"replay", tmp("absent.csv"), "--model", model}), kExitFailure);
+  EXPECT_EQ(cmd_gvm({"replay", jobs_log, "--model", tmp("absent.json")}), kExitFailure);
+
   std::ofstream(scene) << R"({"wall": "wall1", "particles": {"count": 500, "radius": 1},
                               "placement": {"kind": "pour", "rate": 500}, "duration": 1,
                               "fps": 10, "backend": "cpu"})";
