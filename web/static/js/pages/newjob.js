@@ -231,12 +231,24 @@ export async function render(main, ctx, modelParam) {
   const startCaption = h('p', { class: 'status', 'aria-live': 'polite' }, 'Shown once the form is complete.');
   const startViewer = createViewer(startBox, 'The vessel, and where the particles start');
   let wallShown = null;  // the model whose wall the view shows
-  // Each wall's file, fetched once for the view and the radius alike; each use
-  // parses its own mesh (the view disposes the one it drops).
-  const files = new Map();
+  // Each wall's file, fetched and parsed once for its size (the radius) and its
+  // first showing; a later showing parses the bytes again, since the view
+  // disposes the mesh it drops.
+  const walls = new Map();  // model id -> Promise<{ buffer, largestSide, unshown }>
+  function wallFile(m) {
+    if (!walls.has(m.id)) {
+      walls.set(m.id, fetchStl(m.stl).then((buffer) => {
+        const mesh = stlObjectFromBuffer(buffer);
+        return { buffer, largestSide: mesh.largestSide, unshown: mesh };
+      }).catch((e) => { walls.delete(m.id); throw e; }));
+    }
+    return walls.get(m.id);
+  }
   async function wallMesh(m) {
-    if (!files.has(m.id)) files.set(m.id, fetchStl(m.stl).catch((e) => { files.delete(m.id); throw e; }));
-    return stlObjectFromBuffer(await files.get(m.id));
+    const w = await wallFile(m);
+    const mesh = w.unshown ?? stlObjectFromBuffer(w.buffer);
+    w.unshown = null;
+    return mesh;
   }
   async function showStart(b, signal) {
     const m = usable.find((x) => String(x.id) === model.value);
@@ -281,7 +293,7 @@ export async function render(main, ctx, modelParam) {
     if (!m || radiusTyped || fittedFor === m.id) return;
     fittedFor = m.id;
     try {
-      const { largestSide } = await wallMesh(m);
+      const { largestSide } = await wallFile(m);
       const fitting = String(Number((largestSide / 100).toPrecision(2)));
       if (radiusTyped || String(m.id) !== model.value || !(largestSide > 0) || fitting === radius.value) return;
       radius.value = fitting;
