@@ -22,12 +22,17 @@ namespace {
 // force on the CPU (1 + 24, 24 more for the torque with friction, 24 for
 // rolling resistance). Measured (bench run, a lattice of 6 neighbours, CPU):
 // 506 bytes of engine arrays without friction, 1026 with; this gives 614 and 1190.
+// A still wall's lists (with particle contacts or without): a start and a count,
+// and a few triangles a particle near the wall (8 of 4 bytes, room for a
+// quarter more); without particle contacts the positions they were built at too.
 double bytes_per_particle(const sim::DynamicsConfig& c) {
   double b = 2 * 64 + 110 + 128 + 29;
   const bool friction = c.material.friction > 0;
   if (friction) b += 48 + 2 * 16 * 4 + (c.particle_contacts ? 2 * 16 * 8 : 0);
   if (c.particle_contacts)
     b += 130 + 12 * 8 + 6 * (25 + (friction ? 24 : 0) + (c.material.rolling_friction > 0 ? 24 : 0));
+  if ((c.particle_contacts || c.wall_lists) && !c.wall_motion.moving())
+    b += 8 + 8 * 4 * 1.25 + (c.particle_contacts ? 0 : 24);
   return b;
 }
 

@@ -464,7 +464,7 @@ TimeStepInfo contact_time_step(const DynamicsConfig& c, double r_min, double r_m
   ts.beyond_stable = c.time_step > ts.critical_step;
   ts.speed_bound = speed_bound(c, v_max, wall_box);
   ts.particle_contacts = c.particle_contacts;
-  if (c.particle_contacts) {
+  if (c.particle_contacts || (c.wall_lists && !c.wall_motion.moving())) {
     // A rebuild every ~10 steps at the fastest expected speed, within bounds
     // that keep the lists short (large) and the rebuilds rare (small).
     const double step = c.time_step > 0 ? c.time_step : ts.spring_step;

@@ -155,6 +155,9 @@ struct DynamicsConfig {
   // the numbering has scattered (kScatteredCells); 0 never; N at the first
   // list build and every N-th after (counted from the start, a resume included).
   int renumber_every = -1;
+  // Without particle contacts, whether the still wall's candidates are kept in
+  // lists with the skin too (with them they always are), or searched every step.
+  bool wall_lists = true;
   double domain_margin = -1;  // escape distance outside the wall's box, m; < 0 = automatic
   uint64_t max_dense_cells = 1ull << 24;
   // Threads of the CPU backend, owned by the caller; nullptr = default_pool().

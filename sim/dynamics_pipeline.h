@@ -352,16 +352,15 @@ class DynamicsPipeline final : public Simulation {
         backend_.fill(pair_hist_[k].data(), n_ * kPairSlots, FrictionSlot{kNoKey, 0, 0, 0});
       }
     }
-    // Candidates kept in lists with a skin: the particle pairs, and with them
-    // the wall's triangles (a moving wall moves under particles that stand
-    // still, so its candidates are searched every step). Without particle
-    // contacts the wall is searched every step: particles in flight, the
-    // usual case there, would rebuild a wall list every few steps (a pour of
-    // 7,000 onto the 83,750-triangle counter mesh: 1.98 s with one, 1.27 s without).
+    // Candidates kept in lists with a skin: the particle pairs, and the
+    // wall's triangles where the wall stands still (a moving wall moves under
+    // particles that stand still, so its candidates are searched every step).
     skin_ = ts_.neighbour_skin;
+    wall_list_ = skin_ > 0 && !cfg_.wall_motion.moving() &&
+                 (cfg_.particle_contacts || cfg_.wall_lists);
     nlist_ = cfg_.particle_contacts && skin_ > 0;
-    wall_list_ = nlist_ && !cfg_.wall_motion.moving();
-    if (nlist_) backend_.resize(x_ref_, std::max<size_t>(n_, 1));
+    lists_ = nlist_ || wall_list_;
+    if (lists_) backend_.resize(x_ref_, std::max<size_t>(n_, 1));
     if (wall_list_) {
       backend_.resize(wl_start_, n_ + 1);
       backend_.resize(wl_count_, std::max<size_t>(n_, 1));
@@ -422,7 +421,7 @@ class DynamicsPipeline final : public Simulation {
     if (!(skin_ < cap)) return;
     skin_ = std::min(2 * skin_, cap);
     ts_.neighbour_skin = skin_;
-    make_particle_grid();
+    if (cfg_.particle_contacts) make_particle_grid();
   }
 
   // Calls f(buffer, element count) for every buffer of the changing state, in
@@ -450,8 +449,9 @@ class DynamicsPipeline final : public Simulation {
   template <class F>
   bool list_arrays(const ListScalars& s, uint64_t up, uint64_t lo, uint64_t wall, F&& f) {
     const size_t c = size_t(s.cover);
-    bool ok = f(nl_start_, c + 1) && f(nl_list_, up) && f(lo_start_, c + 1) && f(lo_j_, lo) &&
-              (!once_ || f(lo_rec_, lo)) && f(x_ref_, c);
+    bool ok = !nlist_ || (f(nl_start_, c + 1) && f(nl_list_, up) && f(lo_start_, c + 1) &&
+                          f(lo_j_, lo) && (!once_ || f(lo_rec_, lo)));
+    ok = ok && f(x_ref_, c);
     if (ok && wall_list_) ok = f(wl_start_, c + 1) && f(wl_count_, c) && f(wl_list_, wall);
     return ok;
   }
@@ -460,7 +460,7 @@ class DynamicsPipeline final : public Simulation {
   // they are not built), the entry counts first.
   void save_lists(std::vector<std::vector<uint8_t>>* out) {
     out->clear();
-    if (!nlist_) return;
+    if (!lists_) return;
     const ListScalars s{nl_valid_,        nl_cover_,        nl_built_step_,
                         pair_builds_,     skin_,            nl_per_particle_,
                         wl_per_particle_, nl_built_at_,     nl_life_};
@@ -476,7 +476,7 @@ class DynamicsPipeline final : public Simulation {
       backend_.to_host(&t, start.data() + nl_cover_, sizeof t);
       return uint64_t(t);
     };
-    const uint64_t counts[3] = {total(nl_start_), total(lo_start_),
+    const uint64_t counts[3] = {nlist_ ? total(nl_start_) : 0, nlist_ ? total(lo_start_) : 0,
                                 wall_list_ ? total(wl_start_) : 0};
     out->push_back(bytes_of(counts, sizeof counts));
     list_arrays(s, counts[0], counts[1], counts[2], [&](auto& buf, size_t count) {
@@ -492,7 +492,7 @@ class DynamicsPipeline final : public Simulation {
   // pair's record place, the GPU none), a build at the next step.
   void restore_lists(const std::vector<std::vector<uint8_t>>& in) {
     nl_valid_ = false;
-    if (in.empty() || !nlist_) return;
+    if (in.empty() || !lists_) return;
     ListScalars s{};
     if (in[0].size() != sizeof s) return;
     std::memcpy(&s, in[0].data(), sizeof s);
@@ -500,7 +500,7 @@ class DynamicsPipeline final : public Simulation {
     if (s.skin != skin_) {  // it grew in the saved run: the grid's cells with it
       skin_ = s.skin;
       ts_.neighbour_skin = skin_;
-      make_particle_grid();
+      if (cfg_.particle_contacts) make_particle_grid();
     }
     nl_built_step_ = s.built_step, pair_builds_ = s.pair_builds;
     nl_per_particle_ = s.per_particle, wl_per_particle_ = s.wall_per_particle;
@@ -659,7 +659,7 @@ class DynamicsPipeline final : public Simulation {
     if (verlet) open_step(dt);
     if (releasing && !cfg_.particle_contacts) all_released_ = time_ >= last_release_;
     lap(times_.drift_ms);
-    if (cfg_.particle_contacts) {
+    if (lists_ || cfg_.particle_contacts) {
       update_candidates();
       lap(times_.grid_ms);
     }
@@ -908,7 +908,7 @@ class DynamicsPipeline final : public Simulation {
   // half kick and drift; with lists, the largest squared move since they were
   // built, for the check that follows.
   void open_step(double dt) {
-    const bool disp = nlist_ && nl_valid_;
+    const bool disp = lists_ && nl_valid_;
     const OpenStep op{arrays(),      rotation_,
                       close_pending_, disp,
                       pending_dt_,   dt,
@@ -984,16 +984,16 @@ class DynamicsPipeline final : public Simulation {
   }
 
   // The candidates for this step: the particle grid rebuilt (particle
-  // contacts without a list), and the lists, rebuilt only when a particle was
+  // contacts without a list), and the lists (the pairs' and the still wall's,
+  // or the wall's alone without particle contacts), rebuilt only when a particle was
   // released that they do not cover or one has moved half the skin (then
   // every pair now touching was within r_i + r_j + skin at the build, and
   // every wall triangle touching a particle within r + skin/2 of it, so they
   // are listed).
   void update_candidates() {
-    if (!cfg_.particle_contacts) return;
-    if (!nlist_) {
+    if (!lists_) {
       // With the particles waiting for their place, which takes_place looks up.
-      build_particle_grid(live_, /*with_waiting=*/!all_released_);
+      if (cfg_.particle_contacts) build_particle_grid(live_, /*with_waiting=*/!all_released_);
       return;
     }
     bool rebuild = !nl_valid_ || live_ > nl_cover_;
@@ -1058,7 +1058,10 @@ class DynamicsPipeline final : public Simulation {
     }
     nl_built_at_ = time_;
     nl_built_step_ = steps_;
-    build_pair_lists();  // sets nl_cover_
+    if (nlist_)
+      build_pair_lists();  // sets nl_cover_
+    else
+      nl_cover_ = list_cover();
     if (wall_list_) build_wall_lists();
     backend_.copy(x_ref_.data(), pos_.data(), nl_cover_ * sizeof(Vec3d));
     nl_valid_ = true;
@@ -1958,9 +1961,10 @@ class DynamicsPipeline final : public Simulation {
   int hist_in_ = 0;
   Buf<uint32_t> p_key_, p_idx_, p_key_sorted_, p_idx_sorted_, cell_start_, cell_end_;
   Buf<PackedParticle> sorted_;  // float copies in cell order, for the pair loop's first test
-  // The neighbour lists (nlist_; with them the wall's, wall_list_): per particle
-  // [nl_start_[i], nl_start_[i + 1]) of nl_list_, built at the positions x_ref_.
-  bool nlist_ = false, nl_valid_ = false;
+  // The lists (lists_): the particle pairs' (nlist_, with particle contacts)
+  // and the wall's (wall_list_), built together at the positions x_ref_;
+  // per particle [nl_start_[i], nl_start_[i + 1]) of nl_list_.
+  bool lists_ = false, nlist_ = false, nl_valid_ = false;
   double skin_ = 0;
   size_t nl_cover_ = 0;  // the lists hold the particles before this place (list_cover)
   double nl_per_particle_ = 0;  // candidates a particle in the lists (both sides), on average
@@ -1980,8 +1984,8 @@ class DynamicsPipeline final : public Simulation {
   bool once_ = false;
   Buf<Vec3d> rec_f_, rec_torque_, rec_roll_;
   Buf<uint8_t> rec_touched_;
-  // The wall's candidates per particle (wall_list_, with the neighbour list on a
-  // still wall): wl_count_[i] triangles or pieces from wl_list_[wl_start_[i]].
+  // The wall's candidates per particle (wall_list_, on a still wall):
+  // wl_count_[i] triangles or pieces from wl_list_[wl_start_[i]].
   bool wall_list_ = false;
   Buf<uint32_t> wl_start_, wl_count_, wl_list_;
   Buf<Vec3d> x_ref_;
