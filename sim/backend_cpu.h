@@ -25,6 +25,8 @@ class CpuBackend {
   static constexpr bool kPairForcesOncePerPair = true;
   // And, under the linear law, four at a time (sim/pair_batch.h).
   static constexpr bool kPairRecordsInBatches = true;
+  // Its loops run on host threads (a pool), which a small scene may leave idle.
+  static constexpr bool kHostThreads = true;
   // The pool that runs this backend's loops (nullptr: default_pool()).
   void set_pool(ThreadPool* pool) { pool_ = pool ? pool : &default_pool(); }
 

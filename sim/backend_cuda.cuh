@@ -114,6 +114,7 @@ class CudaBackend {
     size_t size_ = 0, capacity_ = 0;
   };
 
+  static constexpr bool kHostThreads = false;
   void set_pool(ThreadPool*) {}  // the GPU needs no host threads
 
   ~CudaBackend() {
