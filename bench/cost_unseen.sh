@@ -5,7 +5,8 @@
 # inside the 10-90 % range or not, and the median's ratio to the measure.
 # Scenes named *_video also render (MP4, 320x180) unless VIDEO=0 (a build without
 # the renderer). Prints a Markdown table for docs/gvm.md. Bounded: every scene runs
-# under a time limit (LIMIT_S, default 600).
+# under a time limit (LIMIT_S, default 600). MODEL=FILE prices with that job cost
+# model instead of the committed one for the backend.
 #
 #   bash bench/cost_unseen.sh [BUILD_DIR] [BACKEND] [THREADS]
 set -euo pipefail
@@ -28,7 +29,9 @@ for scene in "$here"/unseen/*.json; do
   if [ "$video" = 1 ]; then
     case "$name" in *_video) flags+=(--video --formats mp4 --width 320 --height 180) ;; esac
   fi
-  "$bin" predict "$scene" --json "${flags[@]}" > "$work/$name.predicted.json"
+  model=()
+  [ -n "${MODEL:-}" ] && model=(--model "$MODEL")
+  "$bin" predict "$scene" --json "${flags[@]}" "${model[@]}" > "$work/$name.predicted.json"
   if ! timeout "$limit" "$bin" run "$scene" --out "$work/$name" --force --quiet "${flags[@]}" \
       > "$work/$name.log" 2>&1; then
     echo "| $name | (the run failed or passed ${limit} s: $(tail -1 "$work/$name.log")) |"
