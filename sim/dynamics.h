@@ -160,6 +160,10 @@ struct DynamicsConfig {
   bool wall_lists = true;
   double domain_margin = -1;  // escape distance outside the wall's box, m; < 0 = automatic
   uint64_t max_dense_cells = 1ull << 24;
+  // A CPU scene of fewer particles steps on the calling thread alone, its wall
+  // prepared on the pool's threads: a small step's passes are too short to
+  // share (docs/dynamics.md). 0: every pass on the pool's threads.
+  uint64_t one_thread_below = 1500;
   // Threads of the CPU backend, owned by the caller; nullptr = default_pool().
   ThreadPool* pool = nullptr;
 };

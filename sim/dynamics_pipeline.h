@@ -34,8 +34,6 @@ inline constexpr int kWallSlots = kMaxWallContacts;
 inline constexpr int kPairSlots = 8;
 // Waiting particles the neighbour lists hold at least, past the live ones (see list_cover).
 inline constexpr size_t kCoverAhead = 64;
-// A CPU scene of fewer particles steps on the calling thread alone (see init).
-inline constexpr size_t kOneThreadBelow = 1500;
 // An automatic skin grows when a list lived fewer steps than this, up to this
 // share of the smallest radius (the bound of the automatic choice; grow_skin_after).
 inline constexpr uint64_t kShortListSteps = 3;
@@ -308,7 +306,7 @@ class DynamicsPipeline final : public Simulation {
     // second core is busy with another process every pass waits for it (a pour
     // of 323: 1.67 s on one thread, 2.6-3.3 s on two). The wall's preparation
     // above keeps the caller's threads.
-    if (B::kHostThreads && n_ < kOneThreadBelow) {
+    if (B::kHostThreads && n_ < cfg_.one_thread_below) {
       one_thread_ = std::make_unique<ThreadPool>(1);
       backend_.set_pool(one_thread_.get());
     }

@@ -386,6 +386,7 @@ void friction_history_overflow_is_counted() {
 
 TEST(Dynamics, FrictionHistoryOverflowIsCounted) { friction_history_overflow_is_counted(); }
 
+
 // A state saved at a frame and restored into a new Simulation of the same
 // scene continues bit for bit as the original (what a checkpoint relies on):
 // friction springs, spins, pair contacts and Verlet's accelerations included.
@@ -397,6 +398,7 @@ void saved_state_continues_exactly() {
   cfg.material.friction = 0.4;
   ThreadPool pool(2);
   cfg.pool = &pool;
+  cfg.one_thread_below = 0;  // 512 particles, on both threads
   auto a = make_sim(wall, cfg, p);
   ASSERT_TRUE(a);
   FrameStats st;
@@ -606,6 +608,43 @@ void neighbour_list_finds_every_contact() {
 }
 TEST(Dynamics, NeighbourListFindsEveryContactTheGridDoes) { neighbour_list_finds_every_contact(); }
 
+// A small CPU scene steps on the calling thread alone (one_thread_below), and
+// the same scene on two threads gives the same bits: every pass writes each
+// particle's values from its own reads, whichever thread runs it. With pairs
+// and friction, and without pairs (the wall's lists alone), over a pour.
+TEST(Dynamics, OneThreadOrTwoGiveTheSameBits) {
+  const TriangleMesh wall = make_cylinder(50, 100, 40);
+  for (bool pairs : {true, false}) {
+    ParticleSet p = lattice(8, 8.2, 0.0, 1, 5.0, 5);  // 512 particles, just over the floor
+    DynamicsConfig cfg;
+    cfg.particle_contacts = pairs;
+    cfg.material.friction = 0.4;
+    cfg.material.restitution = 0.1;  // the floor's layer stays on it
+    release_in_groups(wall, cfg, &p, 8);
+    ThreadPool two(2);
+    cfg.pool = &two;
+    DynamicsConfig shared = cfg;
+    shared.one_thread_below = 0;
+    ParticleSet end[2];
+    for (int k = 0; k < 2; ++k) {
+      auto s = make_sim(wall, k ? shared : cfg, p);
+      ASSERT_TRUE(s);
+      uint64_t contacts = 0;
+      for (int f = 0; f < 40; ++f) {
+        FrameStats st;
+        ASSERT_TRUE(s->advance(0.005, &st));
+        st = measure(*s);
+        contacts += pairs ? st.particle_contacts : st.wall_contacts;
+      }
+      ASSERT_TRUE(s->download(&end[k], nullptr));
+      EXPECT_GT(contacts, 0u) << "pairs " << pairs;
+    }
+    EXPECT_EQ(end[0].x, end[1].x) << "pairs " << pairs;
+    EXPECT_EQ(end[0].z, end[1].z) << "pairs " << pairs;
+    EXPECT_EQ(end[0].vy, end[1].vy) << "pairs " << pairs;
+  }
+}
+
 // A listed pair's force evaluated once and gathered by both particles
 // (pairs_once 1) and evaluated by each of them (0) give the same trajectories
 // bit for bit: the pair's arithmetic is odd in its orientation, and both ways
@@ -639,6 +678,7 @@ void pairs_once_or_from_both_sides_agree() {
     if (scene == 1) cfg.contact_model = ContactModel::kHertzMindlin;
     ThreadPool pool(2);
     cfg.pool = &pool;
+    cfg.one_thread_below = 0;  // 512 particles, on both threads
     if (scene == 2) release_in_groups(wall, cfg, &p);
     // 0: from both sides; 1: once, four at a time where the CPU can; 2: once, one at a time.
     const int ways = backend_under_test() == Backend::kCpu ? 3 : 2;
