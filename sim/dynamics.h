@@ -128,11 +128,12 @@ struct DynamicsConfig {
   double impact_speed = 0;
   double grid_length = 0;     // wall cells, m; 0 = 2 r_max
   // Particle-particle candidates are kept in a neighbour list of every pair
-  // within r_i + r_j + skin, rebuilt only when some particle has moved half the
-  // skin since the last build (or a particle they do not hold was released).
-  // m; < 0 = automatic (from the fastest expected speed and the step, within
-  // 0.1-0.5 r_min, doubled up to 0.5 r_min while lists last under 3 steps);
-  // 0 = search the grid every step.
+  // within r_i + r_j + skin, and a still wall's in a list of the triangles
+  // within r + skin / 2 (see wall_lists), rebuilt only when some particle has
+  // moved half the skin since the last build (or a particle they do not hold
+  // was released). m; < 0 = automatic (from the fastest expected speed and the
+  // step, within 0.1-0.5 r_min, doubled up to 0.5 r_min while lists last under
+  // 3 steps); 0 = search the grids every step.
   double neighbour_skin = -1;
   // With a neighbour list, how a pair's force is evaluated: once per pair, its
   // result then gathered by both particles (Newton's third law: half the
