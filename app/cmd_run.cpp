@@ -187,12 +187,20 @@ int cmd_run(const Args& args) {
   }
   if (!quiet) {
     const sim::TimeStepInfo& ts = r.time_step;
+    // A small CPU scene steps on one thread whatever the pool (sim::DynamicsConfig).
+    const uint64_t one_below = sim::DynamicsConfig{}.one_thread_below;
+    const std::string threads =
+        std::to_string(r.threads) + (r.threads == 1 ? " thread" : " threads") +
+        (r.backend == "cpu" && r.threads > 1 && r.particles < one_below
+             ? "; the steps on one, as for any scene under " + std::to_string(one_below) +
+                   " particles"
+             : "");
     std::fprintf(stderr,
-                 "run: %llu particles, wall %llu triangles, on the %s (%d threads): %llu steps in "
+                 "run: %llu particles, wall %llu triangles, on the %s (%s): %llu steps in "
                  "%.1f s (%.3g ms per step); results in %s\n"
                  "run: stiffness %.4g N/m, damping ratio %.3g, critical step %.3g s, %s step %.3g s\n",
                  (unsigned long long)r.particles, (unsigned long long)r.triangles,
-                 r.backend.c_str(), r.threads, (unsigned long long)r.cost.steps,
+                 r.backend.c_str(), threads.c_str(), (unsigned long long)r.cost.steps,
                  r.cost.simulate_s,
                  r.cost.steps ? 1e3 * r.cost.simulate_s / double(r.cost.steps) : 0.0,
                  r.out_dir.c_str(), ts.stiffness, ts.damping_ratio, ts.critical_step,
