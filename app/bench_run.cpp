@@ -35,8 +35,8 @@ const std::vector<FlagSpec> kFlags = {
      "auto | off: CPU pairs evaluated once four at a time in AVX2 vectors "
      "(default auto: where the CPU has AVX2)"},
     {"wall-lists", true,
-     "on | off: without pair contacts, the still wall's candidates kept in lists with the skin, "
-     "or searched every step (default on)"},
+     "auto | on | off: without pair contacts, the still wall's candidates kept in lists with the "
+     "skin, or searched every step (default auto: the CPU lists, the GPU searches)"},
     {"lanes", true,
      "auto | 1 | 2 | 4 | 8: GPU threads sharing a particle's pairs (default auto: the backend's "
      "choice)"},
@@ -120,9 +120,9 @@ int bench_run(const Args& args) {
   const std::string simd = p->get("simd-pairs", "auto");
   if (simd != "auto" && simd != "off")
     return usage_error("bench run", "--simd-pairs must be auto or off");
-  const std::string wall_lists = p->get("wall-lists", "on");
-  if (wall_lists != "on" && wall_lists != "off")
-    return usage_error("bench run", "--wall-lists must be on or off");
+  const std::string wall_lists = p->get("wall-lists", "auto");
+  if (wall_lists != "auto" && wall_lists != "on" && wall_lists != "off")
+    return usage_error("bench run", "--wall-lists must be auto, on or off");
   const std::string lanes_arg = p->get("lanes", "auto");
   if (lanes_arg != "auto" && lanes_arg != "1" && lanes_arg != "2" && lanes_arg != "4" &&
       lanes_arg != "8")
@@ -191,7 +191,7 @@ int bench_run(const Args& args) {
       cfg.pairs_once = pairs_once;
       cfg.simd_pairs = simd == "off" ? 0 : -1;
       cfg.lanes = lanes;
-      cfg.wall_lists = wall_lists == "on";
+      cfg.wall_lists = wall_lists == "auto" ? -1 : wall_lists == "on" ? 1 : 0;
       cfg.renumber_every = renumber_every;
       cfg.contact_model = model;
       // The linear spring of the earlier benchmarks; Hertz sizes its modulus itself.

@@ -31,7 +31,7 @@ double bytes_per_particle(const sim::DynamicsConfig& c) {
   if (friction) b += 48 + 2 * 16 * 4 + (c.particle_contacts ? 2 * 16 * 8 : 0);
   if (c.particle_contacts)
     b += 130 + 12 * 8 + 6 * (25 + (friction ? 24 : 0) + (c.material.rolling_friction > 0 ? 24 : 0));
-  if ((c.particle_contacts || c.wall_lists) && !c.wall_motion.moving())
+  if ((c.particle_contacts || sim::wall_lists_without_pairs(c)) && !c.wall_motion.moving())
     b += 8 + 8 * 4 * 1.25 + (c.particle_contacts ? 0 : 24);
   return b;
 }

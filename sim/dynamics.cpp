@@ -289,6 +289,8 @@ Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const Particl
     return invalid_argument("pairs_once must be -1 (the backend's choice), 0 or 1");
   if (c.simd_pairs < -1 || c.simd_pairs > 0)
     return invalid_argument("simd_pairs must be -1 (where the CPU has AVX2) or 0");
+  if (c.wall_lists < -1 || c.wall_lists > 1)
+    return invalid_argument("wall_lists must be -1 (the backend's choice), 0 or 1");
   if (!(c.lanes == 0 || c.lanes == 1 || c.lanes == 2 || c.lanes == 4 ||
         c.lanes == 8))
     return invalid_argument("lanes must be 0 (the backend's choice), 1, 2, 4 or 8");
@@ -387,6 +389,10 @@ Expected<std::unique_ptr<Simulation>> Simulation::create(const TriangleMesh& wal
                                             box.hi + pad);
 }
 
+bool wall_lists_without_pairs(const DynamicsConfig& c) {
+  return c.wall_lists > 0 || (c.wall_lists < 0 && c.backend == Backend::kCpu);
+}
+
 TimeStepInfo contact_time_step(const DynamicsConfig& c, double r_min, double r_max, double r_mean,
                                double v_max, const Bounds3d& wall_box) {
   TimeStepInfo ts;
@@ -464,7 +470,7 @@ TimeStepInfo contact_time_step(const DynamicsConfig& c, double r_min, double r_m
   ts.beyond_stable = c.time_step > ts.critical_step;
   ts.speed_bound = speed_bound(c, v_max, wall_box);
   ts.particle_contacts = c.particle_contacts;
-  if (c.particle_contacts || (c.wall_lists && !c.wall_motion.moving())) {
+  if (c.particle_contacts || (wall_lists_without_pairs(c) && !c.wall_motion.moving())) {
     // A rebuild every ~10 steps at the fastest expected speed, within bounds
     // that keep the lists short (large) and the rebuilds rare (small).
     const double step = c.time_step > 0 ? c.time_step : ts.spring_step;

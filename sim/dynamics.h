@@ -157,8 +157,9 @@ struct DynamicsConfig {
   // list build and every N-th after (counted from the start, a resume included).
   int renumber_every = -1;
   // Without particle contacts, whether the still wall's candidates are kept in
-  // lists with the skin too (with them they always are), or searched every step.
-  bool wall_lists = true;
+  // lists with the skin too (with them they always are), or searched every
+  // step. -1: the backend's choice (wall_lists_without_pairs); 0 searched; 1 listed.
+  int wall_lists = -1;
   double domain_margin = -1;  // escape distance outside the wall's box, m; < 0 = automatic
   uint64_t max_dense_cells = 1ull << 24;
   // A CPU scene of fewer particles steps on the calling thread alone, its wall
@@ -349,6 +350,12 @@ inline constexpr double kScatteredCells = 4;
 // particle radii (m; r_mean sizes a stiffness from youngs_modulus), the fastest
 // initial speed v_max (m/s) and the wall's bounding box at time 0 (m; the
 // longest fall along gravity and the wall's own speed size the automatic stiffness).
+// Whether a scene without particle contacts keeps its still wall's candidates
+// in lists (DynamicsConfig::wall_lists): the CPU does by default; the GPU
+// searches every step, since its lists' check waits on the host every step and
+// a GPU job without pairs had no such wait (the H200 log's jobs without pairs
+// ran a median 2.0 times as long with lists; docs/dynamics.md).
+bool wall_lists_without_pairs(const DynamicsConfig& config);
 TimeStepInfo contact_time_step(const DynamicsConfig& config, double r_min, double r_max,
                                double r_mean, double v_max, const Bounds3d& wall_box);
 

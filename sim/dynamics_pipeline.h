@@ -369,7 +369,7 @@ class DynamicsPipeline final : public Simulation {
     // particles that stand still, so its candidates are searched every step).
     skin_ = ts_.neighbour_skin;
     wall_list_ = skin_ > 0 && !cfg_.wall_motion.moving() &&
-                 (cfg_.particle_contacts || cfg_.wall_lists);
+                 (cfg_.particle_contacts || wall_lists_without_pairs(cfg_));
     nlist_ = cfg_.particle_contacts && skin_ > 0;
     lists_ = nlist_ || wall_list_;
     if (lists_) backend_.resize(x_ref_, std::max<size_t>(n_, 1));

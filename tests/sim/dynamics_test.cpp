@@ -446,6 +446,7 @@ void restored_state_continues_exactly_at_every_frame(bool pairs) {
   const ParticleSet p = lattice(10, 9.0, 0, 1, pairs ? 1.0 : 30.0, 7);  // 1.8 apart
   DynamicsConfig cfg;
   cfg.particle_contacts = pairs;
+  cfg.wall_lists = 1;  // without pairs, on the GPU too (its default searches)
   cfg.material.friction = 0.4;
   cfg.material.restitution = 0.9;
   cfg.renumber_every = 1;
@@ -558,6 +559,7 @@ void neighbour_list_finds_every_contact() {
     }
     DynamicsConfig cfg;
     cfg.particle_contacts = pairs;
+    cfg.wall_lists = 1;  // without pairs, on the GPU too (its default searches)
     cfg.material.friction = 0.4;
     cfg.material.restitution = 0.5;
     if (scene == 3) cfg.method = Method::kCircumcircle;
@@ -607,6 +609,24 @@ void neighbour_list_finds_every_contact() {
   }
 }
 TEST(Dynamics, NeighbourListFindsEveryContactTheGridDoes) { neighbour_list_finds_every_contact(); }
+
+// Without particle contacts the CPU lists the wall's candidates and the GPU
+// searches them every step (its lists' check waits on the host each step),
+// unless the scene says otherwise.
+TEST(Dynamics, WallListsWithoutPairsAreTheBackendsChoice) {
+  DynamicsConfig c;
+  c.backend = Backend::kCpu;
+  EXPECT_TRUE(wall_lists_without_pairs(c));
+  c.backend = Backend::kCuda;
+  EXPECT_FALSE(wall_lists_without_pairs(c));
+  c.wall_lists = 1;
+  EXPECT_TRUE(wall_lists_without_pairs(c));
+  c.backend = Backend::kCpu;
+  c.wall_lists = 0;
+  EXPECT_FALSE(wall_lists_without_pairs(c));
+  c.wall_lists = 2;
+  EXPECT_FALSE(Simulation::create(make_box(2, 2, 2), c, particles_at({{0, 0, 1}}, {{0, 0, 0}}, 0.1)));
+}
 
 // A small CPU scene steps on the calling thread alone (one_thread_below), and
 // the same scene on two threads gives the same bits: every pass writes each
