@@ -187,13 +187,11 @@ int cmd_run(const Args& args) {
   }
   if (!quiet) {
     const sim::TimeStepInfo& ts = r.time_step;
-    // A small CPU scene steps on one thread whatever the pool (sim::DynamicsConfig).
-    const uint64_t one_below = sim::DynamicsConfig{}.one_thread_below;
+    // A small CPU scene steps on fewer threads than its pool has (sim::DynamicsConfig).
     const std::string threads =
         std::to_string(r.threads) + (r.threads == 1 ? " thread" : " threads") +
-        (r.backend == "cpu" && r.threads > 1 && r.particles < one_below
-             ? "; the steps on one, as for any scene under " + std::to_string(one_below) +
-                   " particles"
+        (r.backend == "cpu" && r.step_threads < r.threads
+             ? "; the steps on " + std::to_string(r.step_threads) + ", as for any small scene"
              : "");
     std::fprintf(stderr,
                  "run: %llu particles, wall %llu triangles, on the %s (%s): %llu steps in "

@@ -113,6 +113,7 @@ json manifest(const JobResult& r, const scene::Scene* scene) {
   if (scene) j["scene_length_unit"] = scene->length_unit;
   j["backend"] = r.backend;
   j["threads"] = r.threads;
+  j["step_threads"] = r.step_threads;
   j["particles"] = r.particles;
   j["triangles"] = r.triangles;
   if (scene) {
@@ -198,6 +199,7 @@ class JobRunner {
     try {
       result_.backend = m.value("backend", "");
       result_.threads = m.value("threads", 0);
+      result_.step_threads = m.value("step_threads", result_.threads);
       result_.particles = m.value("particles", uint64_t(0));
       result_.triangles = m.value("triangles", uint64_t(0));
       result_.escaped = m.value("escaped", uint64_t(0));
@@ -293,6 +295,7 @@ class JobRunner {
     if (!sim_or) return sim_or.status();
     sim_ = std::move(*sim_or);
     result_.grid_length = sim_->wall_info().grid_length;  // as the engine prepared it
+    result_.step_threads = sim_->step_threads();
     particles->resize(0);
     const sim::TimeStepInfo& ts = sim_->time_step_info();
     result_.time_step = ts;

@@ -118,7 +118,8 @@ struct JobResult {
   std::vector<std::string> notes;
   Cost cost;
   std::string backend;  // "cpu" or "cuda", as run
-  int threads = 0;
+  int threads = 0;       // the job's pool
+  int step_threads = 0;  // those the steps ran on (1 for a small CPU scene, 0 on the GPU)
   uint64_t particles = 0, triangles = 0;
   uint64_t escaped = 0, invalid = 0;  // at the last frame
   // Frames whose steps showed a failing setting (sim::frame_warnings).

@@ -29,6 +29,7 @@ class CpuBackend {
   static constexpr bool kHostThreads = true;
   // The pool that runs this backend's loops (nullptr: default_pool()).
   void set_pool(ThreadPool* pool) { pool_ = pool ? pool : &default_pool(); }
+  int threads() const { return pool_->size(); }
 
   template <class T>
   using Buffer = std::vector<T>;

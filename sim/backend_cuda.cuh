@@ -116,6 +116,7 @@ class CudaBackend {
 
   static constexpr bool kHostThreads = false;
   void set_pool(ThreadPool*) {}  // the GPU needs no host threads
+  int threads() const { return 0; }
 
   ~CudaBackend() {
     if (temp_) cudaFree(temp_);

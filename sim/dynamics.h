@@ -299,6 +299,9 @@ class Simulation {
   virtual double time() const = 0;  // s
   virtual uint64_t steps_taken() const = 0;
   virtual uint64_t device_bytes() const = 0;  // memory held by the backend
+  // Host threads the steps run on: the pool's, 1 for a small CPU scene
+  // (DynamicsConfig::one_thread_below), 0 on the GPU.
+  virtual int step_threads() const = 0;
 };
 
 // The materials, the contact model and the wall's motion checked together (what
@@ -346,16 +349,17 @@ inline constexpr int kSpeedCheckInterval = 8;
 // cells apart (each distance counted up to 64 cells).
 inline constexpr double kScatteredCells = 4;
 
-// The contact laws and the critical step they allow, from the material, the
-// particle radii (m; r_mean sizes a stiffness from youngs_modulus), the fastest
-// initial speed v_max (m/s) and the wall's bounding box at time 0 (m; the
-// longest fall along gravity and the wall's own speed size the automatic stiffness).
 // Whether a scene without particle contacts keeps its still wall's candidates
 // in lists (DynamicsConfig::wall_lists): the CPU does by default; the GPU
 // searches every step, since its lists' check waits on the host every step and
 // a GPU job without pairs had no such wait (the H200 log's jobs without pairs
 // ran a median 2.0 times as long with lists; docs/dynamics.md).
 bool wall_lists_without_pairs(const DynamicsConfig& config);
+
+// The contact laws and the critical step they allow, from the material, the
+// particle radii (m; r_mean sizes a stiffness from youngs_modulus), the fastest
+// initial speed v_max (m/s) and the wall's bounding box at time 0 (m; the
+// longest fall along gravity and the wall's own speed size the automatic stiffness).
 TimeStepInfo contact_time_step(const DynamicsConfig& config, double r_min, double r_max,
                                double r_mean, double v_max, const Bounds3d& wall_box);
 

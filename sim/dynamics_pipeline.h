@@ -93,6 +93,7 @@ class DynamicsPipeline final : public Simulation {
   double time() const override { return time_; }
   uint64_t steps_taken() const override { return steps_; }
   uint64_t device_bytes() const override { return backend_.bytes_held(); }
+  int step_threads() const override { return backend_.threads(); }
 
   Status step(uint64_t steps, double dt) override {
     if (!(dt > 0) || !std::isfinite(dt))
@@ -406,8 +407,9 @@ class DynamicsPipeline final : public Simulation {
   }
 
   // The particle grid for cells of 2 r_max + the skin: its buckets, their ranges'
-  // buffers and the radix sort's key bits.
+  // buffers and the radix sort's key bits. Only particle contacts have one.
   void make_particle_grid() {
+    if (!cfg_.particle_contacts) return;
     uint64_t cells = 0;
     // A dense table up to a few cells per particle: hashed buckets cost a filter on every read.
     pgrid_ = make_grid(lo_, hi_, 2 * ts_.r_max + skin_,
@@ -433,7 +435,7 @@ class DynamicsPipeline final : public Simulation {
     if (!(skin_ < cap)) return;
     skin_ = std::min(2 * skin_, cap);
     ts_.neighbour_skin = skin_;
-    if (cfg_.particle_contacts) make_particle_grid();
+    make_particle_grid();
   }
 
   // Calls f(buffer, element count) for every buffer of the changing state, in
@@ -512,7 +514,7 @@ class DynamicsPipeline final : public Simulation {
     if (s.skin != skin_) {  // it grew in the saved run: the grid's cells with it
       skin_ = s.skin;
       ts_.neighbour_skin = skin_;
-      if (cfg_.particle_contacts) make_particle_grid();
+      make_particle_grid();
     }
     nl_built_step_ = s.built_step, pair_builds_ = s.pair_builds;
     nl_per_particle_ = s.per_particle, wl_per_particle_ = s.wall_per_particle;
@@ -671,10 +673,8 @@ class DynamicsPipeline final : public Simulation {
     if (verlet) open_step(dt);
     if (releasing && !cfg_.particle_contacts) all_released_ = time_ >= last_release_;
     lap(times_.drift_ms);
-    if (lists_ || cfg_.particle_contacts) {
-      update_candidates();
-      lap(times_.grid_ms);
-    }
+    update_candidates();  // nothing to do without lists or particle contacts
+    lap(times_.grid_ms);
     // Forces where the positions now are: after Verlet's drift, at the step's end.
     forces(dt, false, release_at, releasing);
     if (releasing) released_to_ = release_at;

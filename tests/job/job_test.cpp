@@ -173,6 +173,8 @@ TEST(Job, TwoJobsAtOnceGiveWhatEachGivesAlone) {
   ASSERT_TRUE(ra.status && rb.status);
   EXPECT_EQ(ra.threads, 2);
   EXPECT_EQ(rb.threads, 1);
+  EXPECT_EQ(ra.step_threads, 1);  // 64 particles: a small scene steps on one of its two
+  EXPECT_EQ(rb.step_threads, 1);
   EXPECT_EQ(stats_rows(a), stats_rows(a2));
   EXPECT_EQ(stats_rows(b), stats_rows(b2));
   EXPECT_EQ(read_file(sim::snapshot_path(a, 12)), read_file(sim::snapshot_path(a2, 12)));

@@ -649,6 +649,7 @@ TEST(Dynamics, OneThreadOrTwoGiveTheSameBits) {
     for (int k = 0; k < 2; ++k) {
       auto s = make_sim(wall, k ? shared : cfg, p);
       ASSERT_TRUE(s);
+      EXPECT_EQ(s->step_threads(), k ? 2 : 1);  // 512 particles: under one_thread_below
       uint64_t contacts = 0;
       for (int f = 0; f < 40; ++f) {
         FrameStats st;
