@@ -31,6 +31,7 @@ RequestHead parse_request_head(const std::string& head) {
       first = false;
       const auto a = line.find(' ');
       const auto b = a == std::string::npos ? a : line.find(' ', a + 1);
+      h.method = line.substr(0, a);
       if (a != std::string::npos) h.target = line.substr(a + 1, b == std::string::npos ? b : b - a - 1);
       continue;
     }
@@ -48,6 +49,10 @@ RequestHead parse_request_head(const std::string& head) {
       }
       h.content_length = std::stoull(value);
       seen_length = true;
+    } else if (key == "authorization") {
+      if (value.compare(0, 7, "Bearer ") == 0) h.bearer = value.substr(7);
+    } else if (key == "cookie") {
+      h.cookies = value;
     } else if (key == "transfer-encoding") {
       for (char& c : value) c = char(std::tolower((unsigned char)c));
       if (value.find("chunked") != std::string::npos) h.chunked = true;

@@ -14,7 +14,10 @@ namespace collido::service {
 
 // What the guard needs of a request head (the bytes before the blank line).
 struct RequestHead {
+  std::string method;           // the request line's method: "PUT"
   std::string target;           // the request line's target: "/api/v1/jobs?x=1"
+  std::string bearer;           // an Authorization header's Bearer token
+  std::string cookies;          // the Cookie header's value
   uint64_t content_length = 0;  // 0 when absent
   bool chunked = false;         // Transfer-Encoding names chunked
   // A Content-Length that is not a plain number, two that disagree, or a bare

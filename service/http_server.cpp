@@ -97,11 +97,15 @@ Response file_response(const std::string& path, const Http::Request& req) {
       return out;
     }
     if (range) {
+      // A part at most kMaxRangeBytes long: a player asks "bytes=0-" (the
+      // whole file) and asks again from where a shorter answer ends, and the
+      // reactor thread reads the file while every other connection waits.
+      constexpr uint64_t kMaxRangeBytes = 8ull << 20;
       first = range->first;
-      count = range->second - range->first + 1;
+      count = std::min<uint64_t>(range->second - range->first + 1, kMaxRangeBytes);
       out.status = 206;
-      out.headers.emplace_back("Content-Range", "bytes " + std::to_string(range->first) + "-" +
-                                                    std::to_string(range->second) + "/" +
+      out.headers.emplace_back("Content-Range", "bytes " + std::to_string(first) + "-" +
+                                                    std::to_string(first + count - 1) + "/" +
                                                     std::to_string(size));
     }
   }
@@ -161,10 +165,40 @@ std::optional<int64_t> id_param(const Request& req, const char* name) {
   return std::stoll(s);
 }
 
+// Whether a JSON text nests arrays and objects deeper than `limit` (brackets
+// inside strings do not count). nlohmann parses any depth without recursion,
+// but copying or printing a value recurses: a body a few hundred thousand
+// levels deep, well within the size limit, would overflow a thread's stack.
+bool nests_deeper_than(const std::string& text, int limit) {
+  int depth = 0;
+  bool in_string = false, escaped = false;
+  for (const char c : text) {
+    if (in_string) {
+      if (escaped) escaped = false;
+      else if (c == '\\') escaped = true;
+      else if (c == '"') in_string = false;
+    } else if (c == '"') {
+      in_string = true;
+    } else if (c == '[' || c == '{') {
+      if (++depth > limit) return true;
+    } else if (c == ']' || c == '}') {
+      --depth;
+    }
+  }
+  return false;
+}
+
 // The body as JSON, or the 400 that says why not.
 std::optional<json> json_body(const Request& req, Response* error, bool allow_empty = false) {
   const std::string& body = req.http->body();
   if (body.empty() && allow_empty) return json(nullptr);
+  // No document of this API nests past a handful of levels.
+  constexpr int kMaxDepth = 64;
+  if (nests_deeper_than(body, kMaxDepth)) {
+    *error = error_response(400, "the body nests arrays and objects more than " +
+                                     std::to_string(kMaxDepth) + " levels deep");
+    return std::nullopt;
+  }
   json j = json::parse(body, nullptr, false);
   if (j.is_discarded()) {
     *error = error_response(400, body.empty() ? "the request has no JSON body"
@@ -221,6 +255,13 @@ std::string share_page(const std::string& token, const Reply& info, bool embed) 
   return h.str();
 }
 
+// The session cookie's attributes: never read by scripts, never sent from
+// another site, and over HTTPS only where the service is published on it.
+std::string cookie_attributes(const JobService& svc) {
+  const bool https = svc.public_url().compare(0, 8, "https://") == 0;
+  return std::string("; Path=/; HttpOnly; SameSite=Strict") + (https ? "; Secure" : "");
+}
+
 std::vector<Route> make_routes(JobService* svc, const ServerOptions& opt) {
   std::vector<Route> r;
   auto add = [&](const char* m, const char* p, Auth a, std::function<Response(Request&)> h) {
@@ -253,15 +294,14 @@ std::vector<Route> make_routes(JobService* svc, const ServerOptions& opt) {
     Response out = reply(svc->create_session(*b, unix_now(), &token));
     if (!token.empty())
       out.headers.emplace_back(
-          "Set-Cookie", std::string(kSessionCookie) + "=" + token +
-                            "; Path=/; HttpOnly; SameSite=Strict; Max-Age=" +
-                            std::to_string(int64_t(svc->config().session_ttl_s)));
+          "Set-Cookie", std::string(kSessionCookie) + "=" + token + cookie_attributes(*svc) +
+                            "; Max-Age=" + std::to_string(int64_t(svc->config().session_ttl_s)));
     return out;
   });
   add("DELETE", "/api/v1/sessions", Auth::kUser, [=](Request& q) {
     Response out = reply(svc->delete_session(q.token));
-    out.headers.emplace_back("Set-Cookie", std::string(kSessionCookie) +
-                                               "=; Path=/; HttpOnly; SameSite=Strict; Max-Age=0");
+    out.headers.emplace_back("Set-Cookie", std::string(kSessionCookie) + "=" +
+                                               cookie_attributes(*svc) + "; Max-Age=0");
     return out;
   });
   add("GET", "/api/v1/me", Auth::kUser, [](Request& q) {
@@ -615,7 +655,7 @@ class Handler : public Http::Handler {
       if (h.bad_length) return refuse(g, peer, 400, "Bad Request", "a malformed Content-Length");
       if (h.chunked)
         return refuse(g, peer, 411, "Length Required", "send the body with a Content-Length");
-      const uint64_t limit = limit_for(h.target);
+      const uint64_t limit = limit_for(h);
       if (h.content_length > limit)
         return refuse(g, peer, 413, "Payload Too Large",
                       "the body is " + std::to_string(h.content_length) +
@@ -627,14 +667,31 @@ class Handler : public Http::Handler {
     return true;
   }
 
-  // The largest body a path may carry: an STL upload, else a JSON document.
-  uint64_t limit_for(const std::string& path) const {
-    const auto q = path.find('?');
-    const auto parts = split_path(path.substr(0, q));
-    if (parts.size() == 5 && parts[0] == "api" && parts[1] == "v1" && parts[2] == "models" &&
-        parts[4] == "stl")
+  // The largest body a request may carry: an STL upload's from a signed-in
+  // user (checked here, before the body is buffered: anyone else would make
+  // the server hold the upload limit a connection), else a JSON document's.
+  uint64_t limit_for(const RequestHead& h) const {
+    const auto q = h.target.find('?');
+    const auto parts = split_path(h.target.substr(0, q));
+    if (h.method == "PUT" && parts.size() == 5 && parts[0] == "api" && parts[1] == "v1" &&
+        parts[2] == "models" && parts[4] == "stl" && shared_->service->authenticate(token_of(h)))
       return shared_->max_upload;
     return shared_->options.max_json_bytes;
+  }
+  // The session a request head names: its Bearer token, else its session cookie.
+  static std::string token_of(const RequestHead& h) {
+    if (!h.bearer.empty()) return h.bearer;
+    const std::string key = std::string(kSessionCookie) + "=";
+    size_t at = 0;
+    while (at < h.cookies.size()) {
+      size_t end = h.cookies.find(';', at);
+      if (end == std::string::npos) end = h.cookies.size();
+      std::string pair = h.cookies.substr(at, end - at);
+      pair.erase(0, pair.find_first_not_of(' '));
+      if (pair.compare(0, key.size(), key) == 0) return pair.substr(key.size());
+      at = end + 1;
+    }
+    return {};
   }
 
   bool refuse(PeerGuard& g, const std::shared_ptr<Tcp::Peer>& peer, int code, const char* reason,

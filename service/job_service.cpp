@@ -433,6 +433,8 @@ Reply JobService::create_model(const User& u, const json& body) {
   m.owner_id = u.id;
   m.name = *name;
   m.params_json = "{}";
+  if (body.contains("kind") && !body["kind"].is_string())
+    return error_reply(400, "kind: expected \"stl\" or \"parametric\"");
   const std::string kind = body.value("kind", std::string(body.contains("parts") || body.contains("spec") ? "parametric" : "stl"));
   if (kind == "stl") {
     m.kind = "stl";  // the bytes come with PUT /models/{id}/stl
@@ -558,6 +560,7 @@ Expected<JobService::PreparedJob> JobService::prepare(const User& u, const json&
                                          (std::to_string(id) + ".stl"))
                                 .string()}};
       wall_identity = "stl:" + m->stl_sha256;
+      p.model_sha256 = m->stl_sha256;
     } else {
       *wall = m->spec;
       wall_identity = "shape:" + m->spec;
@@ -786,6 +789,8 @@ json JobService::job_json(const Job& j) {
 }
 
 Reply JobService::submit(const User& u, const json& body) {
+  if (body.is_object() && body.contains("fresh") && !body["fresh"].is_boolean())
+    return error_reply(400, "fresh: expected true or false");
   auto p = prepare(u, body);
   if (!p) return status_reply(p.status());
   const bool fresh = body.value("fresh", false);
@@ -801,7 +806,11 @@ Reply JobService::submit(const User& u, const json& body) {
   if (!fresh) {
     auto earlier = store_->done_job_with_key(p->key);
     if (!earlier) return status_reply(earlier.status());
-    if (*earlier && fs::exists(fs::path((*earlier)->run_dir) / "result.json")) {
+    // An uploaded mesh's result goes only to its owner: an instant result
+    // would tell anyone else that someone uploaded the same mesh, and the
+    // reused files name the other job's copy of it.
+    const bool shareable = *earlier && (p->model_sha256.empty() || (*earlier)->owner_id == u.id);
+    if (shareable && fs::exists(fs::path((*earlier)->run_dir) / "result.json")) {
       // The same scene ran before: its result, at once.
       j.state = "done";
       j.stage = "done";
@@ -817,6 +826,18 @@ Reply JobService::submit(const User& u, const json& body) {
       return r;
     }
   }
+  // Admitted by its predicted memory's high end, which the engine's own
+  // estimate (checked when it was prepared) may stay under: a job whose figure
+  // is more than the jobs may ever use would wait for ever.
+  const uint64_t total = config_.host_bytes ? config_.host_bytes : job::machine_memory_bytes();
+  if (p->host_bytes > total) {
+    char text[160];
+    std::snprintf(text, sizeof text,
+                  "the job is admitted by its predicted peak memory, %.2f GiB, more than the %.2f "
+                  "GiB jobs may use here; use fewer particles",
+                  double(p->host_bytes) / double(1 << 30), double(total) / double(1 << 30));
+    return error_reply(409, text);
+  }
   auto queued = store_->count_jobs(u.id, "queued");
   if (!queued) return status_reply(queued.status());
   if (*queued >= uint64_t(config_.max_queued_per_user))
@@ -828,6 +849,12 @@ Reply JobService::submit(const User& u, const json& body) {
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) return error_reply(500, dir + ": " + ec.message());
+  auto pinned = pin_model_wall(&*p, dir);
+  if (!pinned || !*pinned) {
+    fs::remove_all(dir, ec);
+    if (!pinned) return status_reply(pinned.status());
+    return error_reply(409, "the model's STL changed or went while the job was submitted: submit it again");
+  }
   if (Status st = write_file_atomic((fs::path(dir) / "spec.json").string(),
                                     job::spec_to_json(p->spec) + "\n");
       !st)
@@ -839,6 +866,22 @@ Reply JobService::submit(const User& u, const json& body) {
   r.body = job_json(j);
   r.headers.emplace_back("Location", "/api/v1/jobs/" + j.id);
   return r;
+}
+
+Expected<bool> JobService::pin_model_wall(PreparedJob* p, const std::string& job_dir) {
+  if (p->model_sha256.empty()) return true;
+  json scene = json::parse(p->spec.scene_json);
+  const std::string source = scene["wall"]["file"].get<std::string>();
+  const std::string pinned = fs::absolute(fs::path(job_dir) / "model.stl").string();
+  std::ifstream in(source, std::ios::binary);
+  std::stringstream bytes;
+  bytes << in.rdbuf();
+  // The upload between pricing and here would change what the result's key says.
+  if (!in || sha256_hex(bytes.str()) != p->model_sha256) return false;
+  if (Status st = write_file_atomic(pinned, bytes.str()); !st) return st;
+  scene["wall"]["file"] = pinned;
+  p->spec.scene_json = scene.dump();
+  return true;
 }
 
 Expected<Job> JobService::own_job(const User& u, const std::string& id) {
@@ -921,16 +964,23 @@ Reply JobService::get_job(const User& u, const std::string& id) {
 Reply JobService::cancel_job(const User& u, const std::string& id) {
   auto j = own_job(u, id);
   if (!j) return status_reply(j.status());
+  bool cancelled = false;
   if (j->state == "queued") {
     auto was = store_->cancel_queued_job(id, unix_now());
     if (!was) return status_reply(was.status());
-  } else if (j->state == "running") {
+    cancelled = *was;
+    // Else a worker claimed it between the look above and the update: cancel the run.
+    if (!cancelled) {
+      j = store_->job_by_id(id);
+      if (!j) return status_reply(j.status());
+    }
+  }
+  if (!cancelled) {
+    if (j->state != "running") return error_reply(409, "job '" + id + "' has ended (" + j->state + ")");
     if (workers_)
       workers_->cancel(*j);
     else
       cancel_flag(id)->store(true);  // no executor now: its next start sees the flag
-  } else {
-    return error_reply(409, "job '" + id + "' has ended (" + j->state + ")");
   }
   auto now = store_->job_by_id(id);
   if (!now) return status_reply(now.status());
@@ -943,12 +993,19 @@ Reply JobService::cancel_job(const User& u, const std::string& id) {
 Reply JobService::delete_job(const User& u, const std::string& id) {
   auto j = own_job(u, id);
   if (!j) return status_reply(j.status());
-  if (j->state == "running") return error_reply(409, "job '" + id + "' is running: cancel it first");
-  if (Status st = store_->delete_job(id); !st) return status_reply(st);
-  // Its files go unless another job's reused result is the same files.
+  const Reply running = error_reply(409, "job '" + id + "' is running: cancel it first");
+  if (j->state == "running") return running;
+  auto deleted = store_->delete_job(id);
+  if (!deleted) return status_reply(deleted.status());
+  if (!*deleted) return running;  // a worker claimed it since the look above
+  // Its files go once no job is left whose result they are: a job that
+  // reused another's result names that job's folder, which goes with the last
+  // of the jobs that name it, the original or one that reused it.
   auto sharing = store_->count_jobs_in_dir(j->run_dir, id);
   std::error_code ec;
-  if (sharing && *sharing == 0 && j->reused_from.empty()) fs::remove_all(job_dir(id), ec);
+  const fs::path folder = fs::path(j->run_dir).parent_path();
+  if (sharing && *sharing == 0 && folder.parent_path() == fs::path(job_dir(id)).parent_path())
+    fs::remove_all(folder, ec);
   Reply r;
   r.status = 204;
   r.body = nullptr;

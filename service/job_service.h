@@ -203,7 +203,12 @@ class JobService {
     json prediction;       // its cost, as the predict route answers
     uint64_t host_bytes = 0;  // the memory the job is admitted by (waits and fits)
     job::JobAssessment assessed;  // with its wall loaded: a start preview places on it
+    std::string model_sha256;     // an uploaded model's wall: the STL the key names
   };
+  // Gives a submitted job its own copy of an uploaded model's STL (its owner
+  // may upload again or delete the model while the job waits) and points the
+  // spec at it; false when the file no longer holds the STL the job was priced on.
+  Expected<bool> pin_model_wall(PreparedJob* p, const std::string& job_dir);
   Expected<PreparedJob> prepare(const User& u, const json& body);
   // The predicted cost of an assessed job; *admit_bytes: the memory it is admitted by.
   json price(const job::JobAssessment& a, const json& assessment, uint64_t* admit_bytes) const;

@@ -342,7 +342,11 @@ void SlurmExecutor::follow() {
         service_->store().set_job_executor_ref(j.id, it->second.id);
         j.executor_ref = it->second.id;
       } else {
-        if (unix_now() - j.started_at > config_.orphan_grace_s) submit(j);
+        // One replica submits it: the one whose claim moves its start.
+        if (unix_now() - j.started_at > config_.orphan_grace_s) {
+          auto mine = service_->store().claim_orphan(j.id, j.started_at, unix_now());
+          if (mine && *mine) submit(j);
+        }
         continue;
       }
     }

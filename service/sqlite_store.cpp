@@ -451,6 +451,16 @@ class SqliteStore final : public Store {
     return s.step() == SQLITE_DONE ? Status::ok() : error("set_job_executor_ref");
   }
 
+  Expected<bool> claim_orphan(const std::string& id, double seen_started_at,
+                              double now) override {
+    std::lock_guard lock(mu_);
+    Stmt s = stmt("UPDATE jobs SET started_at = ? WHERE id = ? AND state = 'running' AND "
+                  "executor_ref = '' AND started_at = ?");
+    s.bind(1, now).bind(2, id).bind(3, seen_started_at);
+    if (s.step() != SQLITE_DONE) return error("claim_orphan");
+    return sqlite3_changes(db_) > 0;
+  }
+
   Expected<std::vector<Job>> running_jobs() override {
     std::lock_guard lock(mu_);
     Stmt s = stmt(std::string("SELECT ") + kJobColumns +
@@ -482,11 +492,12 @@ class SqliteStore final : public Store {
     return ids;
   }
 
-  Status delete_job(const std::string& id) override {
+  Expected<bool> delete_job(const std::string& id) override {
     std::lock_guard lock(mu_);
-    Stmt s = stmt("DELETE FROM jobs WHERE id = ?");
+    Stmt s = stmt("DELETE FROM jobs WHERE id = ? AND state != 'running'");
     s.bind(1, id);
-    return s.step() == SQLITE_DONE ? Status::ok() : error("delete_job");
+    if (s.step() != SQLITE_DONE) return error("delete_job");
+    return sqlite3_changes(db_) > 0;
   }
 
   Expected<uint64_t> count_jobs_in_dir(const std::string& run_dir,

@@ -155,6 +155,11 @@ class Store {
                                     double now, const LogRow* log) = 0;
   // Records where a job runs outside the service (its Slurm job id).
   virtual Status set_job_executor_ref(const std::string& id, const std::string& ref) = 0;
+  // Takes a claimed job that never got an executor ref (its submitter died) for
+  // submitting again: true for the one caller that moved its start from
+  // seen_started_at to now; another replica that saw the same start gets false.
+  virtual Expected<bool> claim_orphan(const std::string& id, double seen_started_at,
+                                      double now) = 0;
   // The jobs running now (the Slurm executor follows them), oldest first.
   virtual Expected<std::vector<Job>> running_jobs() = 0;
   // A queued job becomes cancelled at once; true when it was queued.
@@ -163,7 +168,9 @@ class Store {
   // Cluster jobs (an executor_ref) are left alone: they run on under their
   // scheduler, and the Slurm executor follows them.
   virtual Expected<std::vector<std::string>> requeue_running_jobs() = 0;
-  virtual Status delete_job(const std::string& id) = 0;
+  // Deletes a job that is not running; false when it was running (a worker
+  // may claim a queued job between the caller's look and this).
+  virtual Expected<bool> delete_job(const std::string& id) = 0;
   // Other jobs whose files are in run_dir (a reused result shares them).
   virtual Expected<uint64_t> count_jobs_in_dir(const std::string& run_dir,
                                                const std::string& except_id) = 0;

@@ -26,6 +26,8 @@
 #include "service/http_server.h"
 #include "service/job_service.h"
 #include "service/store.h"
+#include "sim/shapes.h"
+#include "sim/mesh.h"
 #include "tests/service/http_client.h"
 #include "tests/service/service_client.h"
 
@@ -293,6 +295,17 @@ TEST_F(ServiceTest, SubmitWatchDownloadShareRevoke) {
   // Shared: opens without a session, then revoked.
   json share = c.call_json("POST", "/api/v1/jobs/" + id + "/shares", nullptr, 201);
   const std::string token = share["token"];
+  // Paths out of this real job's folder, or to its working files, are not
+  // files of it, through the owner's route or a share; its result is.
+  Client stranger = client();
+  for (const std::string& base : {"/api/v1/jobs/" + id + "/files/", "/s/" + token + "/"}) {
+    Client& who = base[1] == 's' ? stranger : c;
+    EXPECT_EQ(who.call("GET", base + "result.json").status, 200) << base;
+    for (const char* path : {"../../collidoscope.db", "%2e%2e/%2e%2e/collidoscope.db",
+                             "render/../../../collidoscope.db", "render/%2e%2e/job.json",
+                             "checkpoint.bin", "job.json", ".hidden", "render/", "/etc/passwd"})
+      EXPECT_EQ(who.call("GET", base + path).status, 404) << base << path;
+  }
   EXPECT_EQ(share["url"], c.base() + "/s/" + token);
   Client anon = client();
   auto page = anon.call("GET", "/s/" + token);
@@ -326,6 +339,56 @@ TEST_F(ServiceTest, SubmitWatchDownloadShareRevoke) {
   EXPECT_EQ(rows->back().job_id, id);
   EXPECT_GT(rows->back().total_s, 0);
   EXPECT_GT(rows->back().predicted_host_bytes, 0u);
+
+  // Deleted, the original's files stay for the job that reused them, and go
+  // with it: no folder is left that no job names.
+  EXPECT_EQ(c.call("DELETE", "/api/v1/jobs/" + id).status, 204);
+  EXPECT_EQ(c.call("GET", again["links"]["mp4"].get<std::string>()).body, whole.body);
+  EXPECT_TRUE(fs::exists(dir_ + "/jobs/" + id));
+  EXPECT_EQ(c.call("DELETE", "/api/v1/jobs/" + again["id"].get<std::string>()).status, 204);
+  EXPECT_FALSE(fs::exists(dir_ + "/jobs/" + id));
+}
+
+// A job runs on the STL it was submitted with, though its owner uploads
+// another one to the model and deletes the model while it waits or runs.
+TEST_F(ServiceTest, AJobKeepsTheModelItWasSubmittedWith) {
+  Client c = client();
+  c.sign_up("pia");
+  auto stl_of = [&](const char* spec) {
+    const std::string path = dir_ + "/shape.stl";
+    EXPECT_TRUE(bool(collido::sim::save_stl(*collido::sim::make_shape(spec), path)));
+    std::ifstream in(path, std::ios::binary);
+    std::stringstream bytes;
+    bytes << in.rdbuf();
+    return bytes.str();
+  };
+  const std::string box = stl_of("box:x=20,y=20,z=20"), ball = stl_of("sphere:r=10,subdivisions=2");
+  json model = c.call_json("POST", "/api/v1/models", {{"name", "vessel"}, {"kind", "stl"}}, 201);
+  const std::string m = "/api/v1/models/" + std::to_string(model["id"].get<int>());
+  ASSERT_EQ(c.call("PUT", m + "/stl", box).status, 200);
+  json job = c.call_json("POST", "/api/v1/jobs", tiny_job({{"model", model["id"]}}), 202);
+  ASSERT_EQ(c.call("PUT", m + "/stl", ball).status, 200);
+  ASSERT_EQ(c.call("DELETE", m).status, 204);
+  job = c.wait_job(job["id"]);
+  ASSERT_EQ(job["state"], "done") << job.dump();
+  const auto wall = c.call("GET", "/api/v1/jobs/" + job["id"].get<std::string>() + "/files/wall.stl");
+  ASSERT_EQ(wall.status, 200);
+  EXPECT_EQ(wall.body.size(), 84u + 50u * 12u);  // the box's twelve triangles, not the ball's
+  // The same mesh uploaded by someone else runs for them: an instant result
+  // would say that another user has it.
+  Client other = client();
+  other.sign_up("quinn");
+  json theirs = other.call_json("POST", "/api/v1/models", {{"name", "same"}, {"kind", "stl"}}, 201);
+  const std::string t = "/api/v1/models/" + std::to_string(theirs["id"].get<int>());
+  ASSERT_EQ(other.call("PUT", t + "/stl", box).status, 200);
+  json run = other.call_json("POST", "/api/v1/jobs", tiny_job({{"model", theirs["id"]}}), 202);
+  EXPECT_FALSE(run.contains("reused_from") && !run["reused_from"].is_null() &&
+               !run["reused_from"].get<std::string>().empty())
+      << run.dump();
+  // Its owner gets their own result again at once.
+  EXPECT_EQ(other.wait_job(run["id"])["state"], "done");
+  EXPECT_EQ(other.call_json("POST", "/api/v1/jobs", tiny_job({{"model", theirs["id"]}}), 200)["reused_from"],
+            run["id"]);
 }
 
 TEST_F(ServiceTest, AccountsSessionsAndOwnership) {
@@ -412,9 +475,27 @@ TEST_F(ServiceTest, BadInputGetsClearErrorsAndTheServerGoesOn) {
   auto forged = c.call("POST", "/api/v1/jobs", "{}", {"Content-Length: 99999999999999"});
   EXPECT_EQ(forged.status, 413);
   EXPECT_EQ(c.call("GET", "/api/v1/health").status, 200);
+  // A body nested past any document of the API: refused before it is parsed
+  // (copying such a value would overflow the stack), and the server goes on.
+  const std::string deep = "{\"scene\":" + std::string(30000, '[') + std::string(30000, ']') + "}";
+  auto nested = c.call("POST", "/api/v1/predict", deep);
+  EXPECT_EQ(nested.status, 400) << nested.body;
+  EXPECT_NE(json::parse(nested.body)["error"].get<std::string>().find("levels deep"), std::string::npos);
+  // Brackets inside a string are text, not depth.
+  auto in_text = c.call("POST", "/api/v1/predict", "{\"note\":\"" + std::string(100, '[') + "\"}");
+  EXPECT_EQ(in_text.status, 400);
+  EXPECT_EQ(json::parse(in_text.body)["error"].get<std::string>().find("levels deep"), std::string::npos);
+  // A known key of the wrong type: 400, not an internal error.
+  EXPECT_EQ(c.call("POST", "/api/v1/models", json{{"name", "n"}, {"kind", 5}}.dump()).status, 400);
+  s = tiny_job("wall1");
+  s["fresh"] = "yes";
+  EXPECT_EQ(c.call("POST", "/api/v1/jobs", s.dump()).status, 400);
   // STL uploads: bytes that do not parse get the loader's message; too large, 413.
   json model = c.call_json("POST", "/api/v1/models", {{"name", "upload"}, {"kind", "stl"}}, 201);
   const std::string stl = "/api/v1/models/" + std::to_string(model["id"].get<int>()) + "/stl";
+  // Signed out, an upload's body is refused at the JSON documents' limit,
+  // before the server holds it (an upload's limit a connection, for anyone).
+  EXPECT_EQ(client().call("PUT", stl, std::string(100 << 10, 'x')).status, 413);
   auto junk = c.call("PUT", stl, "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 zero\n");
   EXPECT_EQ(junk.status, 422);
   EXPECT_FALSE(json::parse(junk.body)["error"].get<std::string>().empty());

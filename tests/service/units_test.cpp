@@ -19,6 +19,12 @@ TEST(HttpParse, RequestHeadsGiveTargetLengthAndChunked) {
   EXPECT_EQ(h.content_length, 684u);
   EXPECT_FALSE(h.chunked);
   EXPECT_FALSE(h.bad_length);
+  EXPECT_EQ(h.method, "PUT");
+  EXPECT_TRUE(h.bearer.empty());
+  // The session, as the guard reads it before a body is buffered.
+  h = parse_request_head("PUT / HTTP/1.1\r\nAuthorization: Bearer abc-1\r\nCookie: a=1; collido_session=x_2");
+  EXPECT_EQ(h.bearer, "abc-1");
+  EXPECT_EQ(h.cookies, "a=1; collido_session=x_2");
   EXPECT_TRUE(parse_request_head("POST / HTTP/1.1\r\nTransfer-Encoding: gzip, Chunked").chunked);
   // Lengths two parsers could read differently are refused.
   for (const char* head : {"POST / HTTP/1.1\r\nContent-Length: 5\r\nContent-Length: 6",
@@ -138,6 +144,30 @@ TEST(Store, RestartsRequeueLocalJobsOnlyAndJobsEndOnce) {
   EXPECT_EQ((*logs)[0].total_s, 3);
   EXPECT_EQ(st.job_by_id("cluster")->state, "done");
   EXPECT_EQ(st.job_by_id("cluster")->error, "");
+  // An orphan (claimed, never given a Slurm id) goes to one replica of two
+  // that saw it at the same start; a queued job or one with an id to none.
+  Job orphan;
+  orphan.id = "orphan";
+  orphan.owner_id = 1;
+  orphan.state = "running";
+  orphan.started_at = 100;
+  orphan.scene_json = orphan.prediction_json = orphan.cost_json = "{}";
+  ASSERT_TRUE(st.insert_job(orphan));
+  auto a = st.claim_orphan("orphan", 100, 200), b = st.claim_orphan("orphan", 100, 201);
+  ASSERT_TRUE(a && b);
+  EXPECT_TRUE(*a);
+  EXPECT_FALSE(*b);
+  EXPECT_EQ(st.job_by_id("orphan")->started_at, 200);
+  EXPECT_FALSE(*st.claim_orphan("cluster", 0, 300));
+  ASSERT_TRUE(st.set_job_executor_ref("orphan", "4712"));
+  EXPECT_FALSE(*st.claim_orphan("orphan", 200, 300));
+  // Deleting takes a job that is not running, and only such a one.
+  auto running_delete = st.delete_job("orphan");
+  ASSERT_TRUE(running_delete);
+  EXPECT_FALSE(*running_delete);
+  EXPECT_TRUE(st.job_by_id("orphan"));
+  EXPECT_TRUE(*st.delete_job("local"));
+  EXPECT_FALSE(st.job_by_id("local"));
   store->reset();
   std::filesystem::remove_all(dir);
 }
