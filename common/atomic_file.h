@@ -6,10 +6,13 @@
 // module can use it without linking anything.
 #pragma once
 
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <atomic>
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <string>
 
 #include "common/status.h"
@@ -32,21 +35,56 @@ inline bool is_temp_name(const std::string& name) {
   return true;
 }
 
+// How far a write is carried before it returns. kSynced also survives the
+// machine going down (a node lost under a cluster job): the bytes reach the
+// disk before the rename, and the rename before the call returns; a process
+// killed at any moment needs neither, since the kernel keeps what it wrote.
+enum class Durability { kProcess, kSynced };
+
+// Flushes a folder's entries (a rename in it) to the disk; errors ignored: not
+// every file system can open a folder for it.
+inline void sync_folder_of(const std::string& path) {
+  const size_t slash = path.rfind('/');
+  const std::string dir = slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return;
+  (void)::fsync(fd);
+  ::close(fd);
+}
+
+// Everything written to the file system that holds `dir` on its disk.
+inline Status sync_file_system(const std::string& dir) {
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return io_error(dir + ": cannot open: " + std::strerror(errno));
+  const int rc = ::syncfs(fd);
+  const int e = errno;
+  ::close(fd);
+  if (rc != 0) return io_error(dir + ": cannot sync: " + std::strerror(e));
+  return Status::ok();
+}
+
 // Writes `bytes` to `path` through a temporary name; the file is closed on every path.
-inline Status write_file_atomic(const std::string& path, const std::string& bytes) {
+inline Status write_file_atomic(const std::string& path, const std::string& bytes,
+                                Durability durability = Durability::kProcess) {
   const std::string tmp = temp_path_for(path);
   std::FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) return io_error("cannot create " + tmp);
-  const bool wrote = std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size();
+  if (!f) return io_error("cannot create " + tmp + ": " + std::strerror(errno));
+  bool wrote = std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size();
+  if (wrote && durability == Durability::kSynced)
+    wrote = std::fflush(f) == 0 && ::fsync(::fileno(f)) == 0;
+  const int write_errno = errno;
   const bool closed = std::fclose(f) == 0;
   if (!wrote || !closed) {
+    const int e = !wrote ? write_errno : errno;
     std::remove(tmp.c_str());
-    return io_error("cannot write " + path + " (disk full?)");
+    return io_error("cannot write " + path + ": " + std::strerror(e));
   }
   if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    const int e = errno;
     std::remove(tmp.c_str());
-    return io_error("cannot rename " + tmp + " to " + path);
+    return io_error("cannot rename " + tmp + " to " + path + ": " + std::strerror(e));
   }
+  if (durability == Durability::kSynced) sync_folder_of(path);
   return Status::ok();
 }
 

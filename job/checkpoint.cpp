@@ -9,12 +9,16 @@
 namespace collido::job {
 namespace {
 
-// The last two characters are the format: 03 holds the neighbour lists after
-// the arrays; 02 (read still: its lists are built afresh) did not; 02 holds the
-// engine's particle numbering among the arrays (01, before particles were
+// The last two characters are the format: 04 holds the wall's method and grid
+// length after the lists; 03 (read still) did not; 03 holds the neighbour lists
+// after the arrays; 02 (read still: its lists are built afresh) did not; 02 holds
+// the engine's particle numbering among the arrays (01, before particles were
 // renumbered by cell, did not).
-constexpr char kMagic[8] = {'C', 'L', 'C', 'K', 'P', 'T', '0', '3'};
+constexpr char kMagic[8] = {'C', 'L', 'C', 'K', 'P', 'T', '0', '4'};
+constexpr char kMagicWithoutMethod[8] = {'C', 'L', 'C', 'K', 'P', 'T', '0', '3'};
 constexpr char kMagicWithoutLists[8] = {'C', 'L', 'C', 'K', 'P', 'T', '0', '2'};
+// Longer than any method's name: a longer one means a damaged file.
+constexpr uint32_t kMaxMethodName = 64;
 // More than any run holds; a larger count or size means a damaged file.
 constexpr uint32_t kMaxArrays = 64;
 
@@ -68,8 +72,12 @@ Status write_checkpoint(const std::string& path, const Checkpoint& c) {
       b.append(reinterpret_cast<const char*>(a.data()), a.size());
     }
   }
+  put(&b, uint32_t(c.method.size()));
+  b.append(c.method);
+  put(&b, c.grid_length);
   put(&b, fnv1a(b));
-  return write_file_atomic(path, b);
+  // On the disk when this returns (the files it speaks for went first, job.cpp).
+  return write_file_atomic(path, b, Durability::kSynced);
 }
 
 Expected<Checkpoint> read_checkpoint(const std::string& path) {
@@ -79,15 +87,17 @@ Expected<Checkpoint> read_checkpoint(const std::string& path) {
   ss << in.rdbuf();
   const std::string b = ss.str();
   auto damaged = [&](const char* why) { return parse_error(path + ": damaged checkpoint (" + why + ")"); };
-  const bool without_lists =
-      b.size() >= sizeof kMagic && std::memcmp(b.data(), kMagicWithoutLists, sizeof kMagic) == 0;
-  if (b.size() >= sizeof kMagic && std::memcmp(b.data(), kMagic, 6) == 0 &&
-      std::memcmp(b.data(), kMagic, sizeof kMagic) != 0 && !without_lists)
+  auto is = [&](const char* magic) {
+    return b.size() >= sizeof kMagic && std::memcmp(b.data(), magic, sizeof kMagic) == 0;
+  };
+  const bool without_lists = is(kMagicWithoutLists);
+  const bool without_method = without_lists || is(kMagicWithoutMethod);
+  if (b.size() >= sizeof kMagic && std::memcmp(b.data(), kMagic, 6) == 0 && !is(kMagic) &&
+      !without_method)
     return parse_error(path + ": a checkpoint of another format (" + b.substr(6, 2) +
                        ", this version reads " + std::string(kMagic + 6, 2) +
                        "): run the scene again from its start");
-  if (b.size() < sizeof kMagic + 8 ||
-      (std::memcmp(b.data(), kMagic, sizeof kMagic) != 0 && !without_lists))
+  if (b.size() < sizeof kMagic + 8 || (!is(kMagic) && !without_method))
     return damaged("not a checkpoint");
   uint64_t stored = 0;
   std::memcpy(&stored, b.data() + b.size() - 8, 8);
@@ -110,6 +120,13 @@ Expected<Checkpoint> read_checkpoint(const std::string& path) {
       uint64_t n = 0;
       if (!r.get(&n) || n > b.size() || !r.bytes(size_t(n), &a)) return damaged("arrays");
     }
+  }
+  if (!without_method) {
+    uint32_t len = 0;
+    std::vector<uint8_t> name;
+    if (!r.get(&len) || len > kMaxMethodName || !r.bytes(len, &name) || !r.get(&c.grid_length))
+      return damaged("method");
+    c.method.assign(name.begin(), name.end());
   }
   if (r.at() + 8 != b.size()) return damaged("length");
   return c;

@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <optional>
 #include <fstream>
 #include <memory>
 #include <new>
@@ -290,6 +291,12 @@ class JobRunner {
                                           scene_.dynamics.gravity, scene_.seed, pool_.get());
     if (!particles) return particles.status();
     result_.particles = particles->size();
+    // A resumed run's checkpoint, read before the wall's representation is chosen.
+    if (spec_.dir_policy == DirPolicy::kResume) {
+      auto ck = read_checkpoint(paths_.checkpoint());
+      if (!ck && ck.status().code() != ErrorCode::kNotFound) return ck.status();
+      if (ck) resume_ = std::move(*ck);
+    }
     if (Status st = choose_wall_representation(*particles); !st) return st;
     auto sim_or = sim::Simulation::create(wall_, scene_.dynamics, *particles);
     if (!sim_or) return sim_or.status();
@@ -314,7 +321,15 @@ class JobRunner {
   // in the wall's box (the benchmarks' placement).
   Status choose_wall_representation(const sim::ParticleSet& placed) {
     sim::DynamicsConfig& d = scene_.dynamics;
-    if (scene_.method_auto || scene_.grid_auto) {
+    sim::Method kept = d.method;
+    if ((scene_.method_auto || scene_.grid_auto) && resume_ && !resume_->method.empty() &&
+        sim::parse_method(resume_->method, &kept)) {
+      // The state continues with the representation it was made with.
+      if (scene_.method_auto) d.method = kept;
+      if (scene_.grid_auto) d.grid_length = resume_->grid_length;
+      result_.choice = "kept from the run's first attempt: " + resume_->method;
+      note("automatic choice: " + result_.choice);
+    } else if (scene_.method_auto || scene_.grid_auto) {
       sim::Particles p;
       const bool inlet = scene_.placement.kind != sim::PlacementKind::kFill;
       if (inlet) {
@@ -374,15 +389,22 @@ class JobRunner {
     const sim::Vec3d origin = sim::mesh_bounds(wall_).center();
     uint64_t first = 0;
     std::vector<double> times;  // simulated time of each frame written, for the PVD index
-    auto ck = spec_.dir_policy == DirPolicy::kResume ? read_checkpoint(paths_.checkpoint())
-                                                      : Expected<Checkpoint>(not_found(""));
-    if (!ck && ck.status().code() != ErrorCode::kNotFound) return ck.status();
+    std::optional<Checkpoint>& ck = resume_;  // read by prepare()
     if (ck) {
       if (Status st = sim_->restore_state(ck->state); !st) return st;
+      // Killed after its last frame (while rendering, say): the statistics are
+      // whole under their final name; they continue from there, as from a partial file.
+      std::error_code ec;
+      if (ck->frame == frames && !fs::exists(paths_.stats_partial(), ec) &&
+          fs::exists(paths_.stats(), ec)) {
+        fs::rename(paths_.stats(), paths_.stats_partial(), ec);
+        if (ec) return io_error(paths_.stats() + ": " + ec.message());
+      }
       if (Status st = stats_.resume(paths_.stats_partial(), ck->frame, &times); !st) return st;
       first = ck->frame + 1;
       result_.resumed_from_frame = ck->frame;
       note("resumed from the checkpoint of frame " + std::to_string(ck->frame));
+      ck.reset();  // its state is the engine's now
     } else {
       // A fresh run, or one killed before its first checkpoint: from frame 0.
       if (spec_.dir_policy == DirPolicy::kResume) note("no checkpoint yet: starting from frame 0");
@@ -439,7 +461,12 @@ class JobRunner {
       if (f == frames || seconds_since(last_save) >= spec_.checkpoint_interval_s) {
         Checkpoint ck;
         ck.frame = f;
+        ck.method = sim::to_string(scene_.dynamics.method);
+        ck.grid_length = scene_.dynamics.grid_length;
         if (Status c = sim_->save_state(&ck.state); !c) return c;
+        // The frames, statistics and files so far on the disk before the
+        // checkpoint names them done: a node that goes down keeps both or neither.
+        if (Status c = sync_file_system(paths_.dir); !c) return c;
         if (Status c = write_checkpoint(paths_.checkpoint(), ck); !c) return c;
         last_save = Clock::now();
       }
@@ -447,6 +474,9 @@ class JobRunner {
       const double per_frame = elapsed / double(f - first + 1);
       report(Stage::kSimulate, f, frames, per_frame * double(frames - f));
     }
+    // Resumed past the last frame: the end state's figures, which the loop did not measure.
+    if (first > frames)
+      if (Status s = sim_->measure(&last_); !s) return s;
     if (Status st = stats_.finish(paths_.stats()); !st) return st;
     if (scene_.vtp)
       if (Status w = sim::write_pvd(paths_.pvd(), pvd); !w) return w;
@@ -495,7 +525,8 @@ class JobRunner {
       Status w = write_file_atomic(paths_.result(), m.dump(2) + "\n");
       if (result_.status.is_ok() && !w) result_.status = w;
     }
-    report(Stage::kDone, 1, 1, 0);
+    // Done only when it is: a failed or cancelled job's last report says how far it got.
+    if (result_.status.is_ok()) report(Stage::kDone, 1, 1, 0);
     return result_;
   }
 
@@ -514,6 +545,7 @@ class JobRunner {
   sim::FrameStats last_;
   uint64_t lost_ = 0;
   bool held_noted_ = false;
+  std::optional<Checkpoint> resume_;  // the checkpoint a resumed run continues
 };
 
 }  // namespace

@@ -327,6 +327,10 @@ Expected<JobMeasure> job_measure_from_manifest(const std::string& result_json,
   const json r = json::parse(result_json, nullptr, false);
   if (!r.is_object() || !r.contains("cost"))
     return backend_error("the job's result.json is not a manifest with a cost");
+  // A run resumed from a checkpoint measured its last attempt's time over the
+  // whole run's frames and steps: no cost to learn from.
+  if (r.value("resumed_from_frame", uint64_t(0)) > 0)
+    return invalid_argument("the job resumed from a checkpoint: its cost covers its last attempt only");
   JobMeasure m;
   try {
     const json& c = r.at("cost");

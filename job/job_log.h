@@ -84,7 +84,8 @@ JobInputs job_inputs(const JobAssessment& a, const std::string& backend,
 
 // A finished job's measure from its manifest (the run directory's result.json text):
 // times per stage, peaks, GPU share of the whole job, steps taken, and the bytes of
-// every artifact. *backend (when given) is the backend the job ran on.
+// every artifact. *backend (when given) is the backend the job ran on. A run resumed
+// from a checkpoint has no measure (its times are its last attempt's alone).
 Expected<JobMeasure> job_measure_from_manifest(const std::string& result_json,
                                                std::string* backend = nullptr);
 

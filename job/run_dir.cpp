@@ -39,6 +39,7 @@ Status claim_run_dir(const std::string& dir_name, DirPolicy policy) {
   if (fs::is_directory(dir, ec)) {
     remove_temporaries(dir);
     const bool empty = fs::is_empty(dir, ec);
+    if (ec) return io_error(dir_name + ": cannot read it: " + ec.message());
     if (policy == DirPolicy::kResume) {
       if (!holds_a_run(dir.string())) return not_found(dir_name + ": holds no run to resume");
     } else if (!empty) {
@@ -48,7 +49,13 @@ Status claim_run_dir(const std::string& dir_name, DirPolicy policy) {
                                 "run (--force) or continue it (--resume)");
       if (!holds_a_run(dir.string()))
         return invalid_argument(dir_name + ": holds files but no run; not replacing it");
-      for (const auto& entry : fs::directory_iterator(dir, ec)) fs::remove_all(entry.path(), ec);
+      // Every entry goes, or the run stops: an old file left behind would be
+      // listed, or rendered, as the new run's.
+      for (const auto& entry : fs::directory_iterator(dir, ec)) {
+        std::error_code rm;
+        fs::remove_all(entry.path(), rm);
+        if (rm) return io_error(entry.path().string() + ": cannot remove it: " + rm.message());
+      }
       if (ec) return io_error(dir_name + ": cannot empty it: " + ec.message());
     }
   } else if (policy == DirPolicy::kResume) {

@@ -1,5 +1,7 @@
 #include "job/stats_file.h"
 
+#include <cerrno>
+#include <cstring>
 #include <fstream>
 #include <sstream>
 
@@ -23,7 +25,7 @@ Status StatsFile::create(const std::string& partial_path) {
   close();
   path_ = partial_path;
   f_ = std::fopen(path_.c_str(), "wb");
-  if (!f_) return io_error(path_ + ": cannot create");
+  if (!f_) return io_error(path_ + ": cannot create: " + std::strerror(errno));
   if (std::fputs(kStatsHeader, f_) < 0 || std::fflush(f_) != 0)
     return io_error(path_ + ": cannot write");
   return Status::ok();
@@ -77,7 +79,7 @@ Status StatsFile::append(const sim::FrameStats& s, double wall_ms) {
       (unsigned long long)s.particle_contacts, (unsigned long long)s.touching_wall, s.kinetic,
       s.potential, s.elastic, s.total_energy(), s.max_speed, s.max_overlap,
       (unsigned long long)s.history_overflow, wall_ms);
-  if (n < 0 || std::fflush(f_) != 0) return io_error(path_ + ": cannot write (disk full?)");
+  if (n < 0 || std::fflush(f_) != 0) return io_error(path_ + ": cannot write: " + std::strerror(errno));
   return Status::ok();
 }
 

@@ -103,16 +103,25 @@ void Subprocess::send_signal(int sig) {
 }
 
 ExitInfo Subprocess::wait(const std::function<void(const std::string&)>& on_line,
-                          const std::atomic<bool>* cancel, int cancel_signal) {
+                          const std::atomic<bool>* cancel, int cancel_signal,
+                          double kill_after_s) {
   ExitInfo out;
   if (reaped_) return out;
-  bool cancel_sent = false;
+  bool cancel_sent = false, killed = false;
+  std::chrono::steady_clock::time_point cancel_at;
   std::string buffer;
   char chunk[4096];
   for (;;) {
     if (cancel && cancel->load() && !cancel_sent) {
       send_signal(cancel_signal);
       cancel_sent = true;
+      cancel_at = std::chrono::steady_clock::now();
+    }
+    if (cancel_sent && !killed && cancel_signal != SIGKILL &&
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - cancel_at).count() >
+            kill_after_s) {
+      send_signal(SIGKILL);
+      killed = true;
     }
     pollfd p{fd_, POLLIN, 0};
     const int ready = poll(&p, 1, 100);

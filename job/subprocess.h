@@ -50,9 +50,13 @@ class Subprocess {
 
   // Calls on_line with each line the child writes (without its newline) until
   // the child closes the pipe, then reaps it. Polls `cancel` every 100 ms and
-  // sends cancel_signal once it is set.
+  // sends cancel_signal once it is set, then SIGKILL if the child is still
+  // there kill_after_s later (a job answers a cancel between frames, and a
+  // frame of a scene with an absurd step count would never end).
   ExitInfo wait(const std::function<void(const std::string&)>& on_line,
-                const std::atomic<bool>* cancel = nullptr, int cancel_signal = SIGTERM);
+                const std::atomic<bool>* cancel = nullptr, int cancel_signal = SIGTERM,
+                double kill_after_s = kCancelGraceSeconds);
+  static constexpr double kCancelGraceSeconds = 30;
   // Sends sig unless the child has been reaped.
   void send_signal(int sig);
   pid_t pid() const { return pid_; }

@@ -44,8 +44,12 @@ struct Scene {
 // Limits on a scene's timing, one place for the parser and `run --duration`.
 inline constexpr double kMaxDuration = 1e5;      // simulated seconds
 inline constexpr uint64_t kMaxFrames = 1000000;  // duration x fps
-// Checks duration in (0, kMaxDuration] and at most kMaxFrames frames; the message
-// names the key ("duration: ..." or "fps: ...").
+// duration / a fixed time_step: past it a run would take days at any speed
+// (a job answers a cancel only between frames, and one frame would be most of it).
+inline constexpr double kMaxFixedSteps = 1e9;
+// Checks duration in (0, kMaxDuration], at most kMaxFrames frames and, with a
+// fixed time step, at most kMaxFixedSteps steps; the message names the key
+// ("duration: ...", "fps: ..." or "time_step: ...").
 Status check_timing(const Scene& s);
 
 // Parses and validates a scene document. Unknown keys, wrong types and

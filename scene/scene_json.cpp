@@ -25,6 +25,8 @@ Status check_timing(const Scene& s) {
     return invalid_argument("duration: must lie in (0, 1e5] s");
   if (s.frames() > kMaxFrames)
     return invalid_argument("fps: duration x fps gives more than 10^6 frames");
+  if (s.dynamics.time_step > 0 && s.duration / s.dynamics.time_step > kMaxFixedSteps)
+    return invalid_argument("time_step: duration / time_step gives more than 10^9 steps");
   return Status::ok();
 }
 
@@ -360,6 +362,7 @@ Expected<Scene> parse_scene(const std::string& text) {
     return invalid_argument("integrator: \"" + integrator +
                             "\" is not velocity_verlet or symplectic_euler");
   COLLIDO_TRY(r.number("time_step", &s.dynamics.time_step, 0, 1e3));
+  COLLIDO_TRY(check_timing(s));  // again, with the time step
   // A length, or absent / negative for the automatic skin (0: the grid every step).
   COLLIDO_TRY(r.number("neighbour_skin", &s.dynamics.neighbour_skin, -1, 1e9));
   COLLIDO_TRY(r.integer("seed", &s.seed, 0, UINT64_MAX));

@@ -19,6 +19,7 @@
 #include "job/checkpoint.h"
 #include "job/child.h"
 #include "job/job.h"
+#include "job/job_log.h"
 #include "job/subprocess.h"
 #include "sim/snapshot.h"
 #ifdef COLLIDO_HAVE_RENDER
@@ -190,6 +191,7 @@ TEST(Job, CheckpointsRoundTripAndDamageIsDetected) {
   EXPECT_EQ(ck->state.particles, 64u);
   EXPECT_GT(ck->state.arrays.size(), 6u);  // friction and pairs: springs saved too
   EXPECT_GT(ck->state.lists.size(), 2u);   // and the neighbour lists as built
+  EXPECT_FALSE(ck->method.empty());         // and the wall's representation they fit
   std::string bytes = read_file(dir + "/checkpoint.bin");
   bytes[bytes.size() / 2] ^= 1;
   ASSERT_TRUE(write_file_atomic(dir + "/damaged.bin", bytes));
@@ -220,6 +222,22 @@ TEST(Job, CheckpointsRoundTripAndDamageIsDetected) {
   ASSERT_TRUE(without_lists) << without_lists.status().message();
   EXPECT_EQ(without_lists->state.arrays, ck->state.arrays);
   EXPECT_TRUE(without_lists->state.lists.empty());
+  // One of the format before the wall's method was saved (03) is read, with its lists.
+  std::string v3 = "CLCKPT03" + v2.substr(8, v2.size() - 16);
+  auto put3 = [&](const auto& v) { v3.append(reinterpret_cast<const char*>(&v), sizeof v); };
+  put3(uint32_t(ck->state.lists.size()));
+  for (const auto& a : ck->state.lists) {
+    put3(uint64_t(a.size()));
+    v3.append(reinterpret_cast<const char*>(a.data()), a.size());
+  }
+  hash = 1469598103934665603ull;
+  for (unsigned char c : v3) hash = (hash ^ c) * 1099511628211ull;
+  put3(hash);
+  ASSERT_TRUE(write_file_atomic(dir + "/v3.bin", v3));
+  const auto without_method = read_checkpoint(dir + "/v3.bin");
+  ASSERT_TRUE(without_method) << without_method.status().message();
+  EXPECT_EQ(without_method->state.lists, ck->state.lists);
+  EXPECT_TRUE(without_method->method.empty());
 }
 
 // Runs the spec in a job-exec child and kills it with SIGKILL once it has
@@ -289,6 +307,41 @@ TEST(Job, AKilledRunResumesToTheSameEnd) {
   EXPECT_GE(killed, 2);
 }
 
+// Killed after its last frame, before its manifest (while rendering, say): the
+// resumed run finds its statistics under their final name and ends as the
+// uninterrupted one did; a wall chosen automatically stays the one the state
+// was made with; and the resumed run's cost is not taken for a measure.
+TEST(Job, ARunKilledAfterItsLastFrameResumes) {
+  const std::string dir = fresh_dir("after_last");
+  JobSpec spec = drop_spec(dir);
+  json scene = json::parse(kDropScene);
+  scene["method"] = "auto";
+  spec.scene_json = scene.dump();
+  const JobResult first = run_job(spec, {});
+  ASSERT_TRUE(first.status) << first.status.message();
+  const auto rows = stats_rows(dir);
+  ASSERT_EQ(rows.size(), 14u);  // the header and 13 frames
+  const auto ck = read_checkpoint(dir + "/checkpoint.bin");
+  ASSERT_TRUE(ck) << ck.status().message();
+  EXPECT_EQ(ck->frame, 12u);
+  EXPECT_EQ(ck->method, first.method);
+  EXPECT_TRUE(job_measure_from_manifest(read_file(dir + "/result.json")));
+  fs::remove(dir + "/result.json");
+
+  JobSpec resume = spec;
+  resume.dir_policy = DirPolicy::kResume;
+  const JobResult r = run_job(resume, {});
+  ASSERT_TRUE(r.status) << r.status.message();
+  EXPECT_EQ(r.resumed_from_frame, 12u);
+  EXPECT_EQ(r.method, first.method);
+  EXPECT_NE(r.choice.find("kept from the run's first attempt"), std::string::npos) << r.choice;
+  EXPECT_EQ(stats_rows(dir), rows);
+  EXPECT_FALSE(fs::exists(dir + "/stats.csv.partial"));
+  const auto measure = job_measure_from_manifest(read_file(dir + "/result.json"));
+  ASSERT_FALSE(measure);
+  EXPECT_NE(measure.status().message().find("resumed"), std::string::npos);
+}
+
 TEST(Job, ASpawnedChildGetsTheReportPipeAndNothingElseOfTheParent) {
   // A parent as the service is: SIGPIPE ignored, a descriptor without close-on-exec.
   struct sigaction old {};
@@ -319,6 +372,21 @@ TEST(Job, ASpawnedChildGetsTheReportPipeAndNothingElseOfTheParent) {
   // SigIgn is a hex mask; SIGPIPE (13) is bit 12.
   const unsigned long ignored = std::stoul(lines[1].substr(lines[1].find(':') + 1), nullptr, 16);
   EXPECT_EQ(ignored & (1ul << (SIGPIPE - 1)), 0ul) << lines[1];
+}
+
+// A child that goes on after a cancel (a frame that never ends, here one that
+// ignores SIGTERM) is killed once the grace has passed.
+TEST(Job, ACancelledChildThatGoesOnIsKilled) {
+  auto child = Subprocess::start({"/bin/sh", "-c", "trap '' TERM; echo ready >&3; exec sleep 60"}, 3,
+                                 "", {});
+  ASSERT_TRUE(child) << child.status().message();
+  std::atomic<bool> cancel{false};
+  const ExitInfo e = (*child)->wait(
+      [&](const std::string& line) {
+        if (line == "ready") cancel = true;
+      },
+      &cancel, SIGTERM, 0.5);
+  EXPECT_EQ(e.signal, SIGKILL);
 }
 
 TEST(Job, JobExecReportsProgressAndRefusesBadSpecs) {

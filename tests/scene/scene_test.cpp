@@ -132,6 +132,8 @@ TEST(Scene, ErrorsNameTheKey) {
   expect_error(R"({"wall": "wall1", "gravity": [0, 0, "down"]})", "gravity");
   expect_error(R"({"wall": "wall1", "duration": 0})", "duration");
   expect_error(R"({"wall": "wall1", "duration": 1e5, "fps": 1e4})", "fps");
+  // A fixed step that would take days at any speed (a job answers a cancel between frames).
+  expect_error(R"({"wall": "wall1", "duration": 100, "time_step": 1e-15})", "time_step");
   expect_error(R"({"wall": "wall1", "method": "magic"})", "method");
   expect_error(R"({"wall": "wall1", "method": "reference"})", "method");
   expect_error(R"({"wall": "wall1", "grid_length": "big"})", "grid_length");
