@@ -45,6 +45,23 @@ int64_t ParsedArgs::get_int(const std::string& name, int64_t fallback, std::stri
   return v;
 }
 
+bool ParsedArgs::get_int_in(const std::string& name, int64_t fallback, int64_t lo, int64_t hi,
+                            int* out, std::string* error) const {
+  std::string e;
+  const int64_t v = get_int(name, fallback, &e);
+  if (!e.empty()) {
+    *error = e;
+    return false;
+  }
+  if (v < lo || v > hi) {
+    *error = "--" + name + " must be in " + std::to_string(lo) + ".." + std::to_string(hi) +
+             ", got " + std::to_string(v);
+    return false;
+  }
+  *out = int(v);
+  return true;
+}
+
 std::optional<ParsedArgs> parse_args(const std::vector<std::string>& args,
                                      const std::vector<FlagSpec>& specs, std::string* error) {
   ParsedArgs out;

@@ -32,6 +32,10 @@ class ParsedArgs {
   // Typed accessors; on a malformed value they set *error and return the fallback.
   double get_double(const std::string& name, double fallback, std::string* error) const;
   int64_t get_int(const std::string& name, int64_t fallback, std::string* error) const;
+  // An integer flag in [lo, hi] (fallback when absent); false with *error set
+  // otherwise, so a value past int's range is refused rather than wrapped.
+  bool get_int_in(const std::string& name, int64_t fallback, int64_t lo, int64_t hi, int* out,
+                  std::string* error) const;
 
  private:
   friend std::optional<ParsedArgs> parse_args(const std::vector<std::string>&,

@@ -172,16 +172,8 @@ int gvm_train_jobs(const ParsedArgs& p, const std::string& log_path) {
                 seconds_text(cmp->report.seconds).c_str(), (long long)cmp->report.proposals,
                 cmp->report.proposals ? 100.0 * cmp->report.accepted / cmp->report.proposals : 0.0);
     if (s == 0 && p.has("curve")) {
-      std::ofstream out(p.get("curve"), std::ios::trunc);
-      out << "epoch,train_loss,validation_loss,acceptance\n";
-      char line[128];
-      for (const auto& c : cmp->report.curve) {
-        std::snprintf(line, sizeof line, "%d,%.9g,%.9g,%.6f\n", c.epoch, c.train_loss,
-                      c.validation_loss, c.acceptance);
-        out << line;
-      }
-      if (!out.flush()) {
-        std::fprintf(stderr, "collidoscope %s: cannot write %s\n", cmd, p.get("curve").c_str());
+      if (Status st = write_loss_curve(p.get("curve"), cmp->report.curve); !st) {
+        std::fprintf(stderr, "collidoscope %s: %s\n", cmd, st.message().c_str());
         return kExitFailure;
       }
     }

@@ -11,6 +11,7 @@
 
 #include "app/cli.h"
 #include "app/commands.h"
+#include "common/atomic_file.h"
 #include "gvm/gvm.h"
 #ifdef COLLIDO_HAVE_JOB_COST
 #include "job/job_log.h"
@@ -206,16 +207,8 @@ int gvm_train(const Args& args) {
 
   if (parsed->has("curve")) {
     const std::string path = parsed->get("curve");
-    std::ofstream out(path, std::ios::trunc);
-    out << "epoch,train_loss,validation_loss,acceptance\n";
-    char line[128];
-    for (const auto& c : rep.curve) {
-      std::snprintf(line, sizeof line, "%d,%.9g,%.9g,%.6f\n", c.epoch, c.train_loss,
-                    c.validation_loss, c.acceptance);
-      out << line;
-    }
-    if (!out.flush()) {
-      std::fprintf(stderr, "collidoscope %s: cannot write %s\n", cmd, path.c_str());
+    if (Status st = write_loss_curve(path, rep.curve); !st) {
+      std::fprintf(stderr, "collidoscope %s: %s\n", cmd, st.message().c_str());
       return kExitFailure;
     }
     std::printf("loss curve: %s (%zu epochs)\n", path.c_str(), n);
@@ -228,7 +221,7 @@ int gvm_train(const Args& args) {
     const std::string path = parsed->get("predictions");
     const auto& va = cmp->split.validation;
     std::istringstream log(g::format_run_log(va));
-    std::ofstream out(path, std::ios::trunc);
+    std::ostringstream out;
     std::string line;
     for (size_t i = 0; std::getline(log, line); ++i) {
       out << line;
@@ -246,8 +239,8 @@ int gvm_train(const Args& args) {
       }
       out << '\n';
     }
-    if (!out.flush()) {
-      std::fprintf(stderr, "collidoscope %s: cannot write %s\n", cmd, path.c_str());
+    if (Status st = write_file_atomic(path, out.str()); !st) {
+      std::fprintf(stderr, "collidoscope %s: %s\n", cmd, st.message().c_str());
       return kExitFailure;
     }
     std::printf("validation predictions: %s (%zu rows)\n", path.c_str(), va.size());
@@ -425,6 +418,17 @@ const std::vector<FlagSpec>& predict_flags() {
 }
 
 }  // namespace
+
+Status write_loss_curve(const std::string& path, const std::vector<gvm::EpochLoss>& curve) {
+  std::string text = "epoch,train_loss,validation_loss,acceptance\n";
+  char line[128];
+  for (const auto& c : curve) {
+    std::snprintf(line, sizeof line, "%d,%.9g,%.9g,%.6f\n", c.epoch, c.train_loss,
+                  c.validation_loss, c.acceptance);
+    text += line;
+  }
+  return write_file_atomic(path, text);
+}
 
 int cmd_gvm(const Args& args) {
   if (args.empty()) {

@@ -69,28 +69,6 @@ bool parse_video_list(const std::string& list, job::RenderSettings* rs, std::str
   return true;
 }
 
-namespace {
-
-// Integer flag in [lo, hi]; false with *error set otherwise.
-bool int_flag(const ParsedArgs& p, const std::string& name, int64_t fallback, int64_t lo,
-              int64_t hi, int* out, std::string* error) {
-  std::string e;
-  const int64_t v = p.get_int(name, fallback, &e);
-  if (!e.empty()) {
-    *error = e;
-    return false;
-  }
-  if (v < lo || v > hi) {
-    *error = "--" + name + " must be in " + std::to_string(lo) + ".." + std::to_string(hi) +
-             ", got " + std::to_string(v);
-    return false;
-  }
-  *out = int(v);
-  return true;
-}
-
-}  // namespace
-
 int cmd_render(const Args& args) {
   std::string err;
   auto p = parse_args(args, kRenderFlags, &err);
@@ -112,11 +90,11 @@ int cmd_render(const Args& args) {
   const std::string run_dir = p->positional()[0];
 
   job::RenderSettings rs;
-  if (!int_flag(*p, "width", 1280, 16, 8192, &rs.width, &err) ||
-      !int_flag(*p, "height", 720, 16, 8192, &rs.height, &err) ||
-      !int_flag(*p, "fps", 30, 1, 240, &rs.fps, &err) ||
-      !int_flag(*p, "png-every", 10, 0, 1000000000, &rs.png_every, &err) ||
-      !int_flag(*p, "msaa", 0, 0, 16, &rs.msaa, &err))
+  if (!p->get_int_in("width", 1280, 16, 8192, &rs.width, &err) ||
+      !p->get_int_in("height", 720, 16, 8192, &rs.height, &err) ||
+      !p->get_int_in("fps", 30, 1, 240, &rs.fps, &err) ||
+      !p->get_int_in("png-every", 10, 0, 1000000000, &rs.png_every, &err) ||
+      !p->get_int_in("msaa", 0, 0, 16, &rs.msaa, &err))
     return usage_error("render", err);
   rs.camera = p->get("camera", "iso");
   rs.color = p->get("color", "speed");
@@ -251,12 +229,12 @@ int bench_render(const Args& args) {
     return usage_error("bench render", "unexpected argument '" + p->positional()[0] + "'");
   render::RenderOptions ro;
   int frames = 10, encode_frames = 90, seed = 1;
-  if (!int_flag(*p, "width", 1280, 16, 8192, &ro.width, &err) ||
-      !int_flag(*p, "height", 720, 16, 8192, &ro.height, &err) ||
-      !int_flag(*p, "frames", 10, 1, 100000, &frames, &err) ||
-      !int_flag(*p, "encode-frames", 90, 1, 100000, &encode_frames, &err) ||
-      !int_flag(*p, "msaa", 0, 0, 16, &ro.msaa_samples, &err) ||
-      !int_flag(*p, "seed", 1, 0, 1 << 30, &seed, &err))
+  if (!p->get_int_in("width", 1280, 16, 8192, &ro.width, &err) ||
+      !p->get_int_in("height", 720, 16, 8192, &ro.height, &err) ||
+      !p->get_int_in("frames", 10, 1, 100000, &frames, &err) ||
+      !p->get_int_in("encode-frames", 90, 1, 100000, &encode_frames, &err) ||
+      !p->get_int_in("msaa", 0, 0, 16, &ro.msaa_samples, &err) ||
+      !p->get_int_in("seed", 1, 0, 1 << 30, &seed, &err))
     return usage_error("bench render", err);
   if (ro.width % 2 || ro.height % 2)
     return usage_error("bench render", "--width and --height must be even (video)");

@@ -8,6 +8,7 @@
 #include <sys/prctl.h>
 
 #include <cerrno>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <cstring>
@@ -27,6 +28,9 @@ namespace collido::app {
 namespace fs = std::filesystem;
 
 namespace {
+
+// More threads than any machine here has: a larger --threads is a mistake.
+constexpr int64_t kMaxThreads = 4096;
 
 const std::vector<FlagSpec> kFlags = {
     {"out", true, "run directory (default results/<scene name>)"},
@@ -99,14 +103,14 @@ std::string apply_flags(const ParsedArgs& p, job::JobSpec* spec) {
     // 0 in a spec means "the scene's"; the job holds the rest to the scene's limits.
     if (!(spec->duration > 0)) return "--duration must be a positive number of seconds";
   }
-  if (p.has("threads")) {
-    spec->threads = int(p.get_int("threads", 0, &err));
-    if (!err.empty()) return err;
-  }
+  if (p.has("threads") && !p.get_int_in("threads", 0, 0, kMaxThreads, &spec->threads, &err))
+    return err;
   if (p.has("checkpoint-every")) {
     spec->checkpoint_interval_s = p.get_double("checkpoint-every", 1, &err);
     if (!err.empty()) return err;
-    if (!(spec->checkpoint_interval_s >= 0)) return "--checkpoint-every must be >= 0";
+    // A finite number: job.json keeps it for --resume, and JSON has no infinity.
+    if (!(spec->checkpoint_interval_s >= 0) || !std::isfinite(spec->checkpoint_interval_s))
+      return "--checkpoint-every must be a number of seconds >= 0";
   }
   if (p.has("vtp")) spec->vtp = true;
   if (p.has("video")) {
@@ -115,9 +119,9 @@ std::string apply_flags(const ParsedArgs& p, job::JobSpec* spec) {
     job::RenderSettings& rs = spec->render_settings;
     if (!parse_video_list(p.get("formats", "mp4,webm,gif"), &rs, &err))
       return "--formats: " + err;
-    rs.width = int(p.get_int("width", rs.width, &err));
-    rs.height = int(p.get_int("height", rs.height, &err));
-    if (!err.empty()) return err;
+    if (!p.get_int_in("width", rs.width, 16, 8192, &rs.width, &err) ||
+        !p.get_int_in("height", rs.height, 16, 8192, &rs.height, &err))
+      return err;
     rs.camera = p.get("camera", rs.camera);
 #else
     return "--video: this build has no renderer";
@@ -157,8 +161,8 @@ int cmd_run(const Args& args) {
     spec = std::move(*saved);
     spec.out_dir = dir;
     spec.dir_policy = job::DirPolicy::kResume;
-    if (p->has("threads")) spec.threads = int(p->get_int("threads", 0, &err));
-    if (!err.empty()) return usage_error("run", err);
+    if (p->has("threads") && !p->get_int_in("threads", 0, 0, kMaxThreads, &spec.threads, &err))
+      return usage_error("run", err);
   } else {
     if (p->positional().size() != 1)
       return usage_error("run", "one scene file expected (see --help)");
@@ -166,7 +170,8 @@ int cmd_run(const Args& args) {
     auto text = read_text(scene_path, size_t(16) << 20);
     if (!text) return usage_error("run", text.status().message());
     spec.scene_json = *text;
-    spec.scene_dir = fs::path(scene_path).parent_path().string();
+    // Absolute: --resume may run from another working directory.
+    spec.scene_dir = fs::absolute(fs::path(scene_path)).parent_path().string();
     spec.out_dir = p->get("out", "results/" + fs::path(scene_path).stem().string());
     spec.dir_policy = p->has("force") ? job::DirPolicy::kReplace : job::DirPolicy::kRefuse;
     if (std::string e = apply_flags(*p, &spec); !e.empty()) return usage_error("run", e);

@@ -5,6 +5,11 @@
 #include <string>
 #include <vector>
 
+#include "common/status.h"
+#ifdef COLLIDO_HAVE_GVM
+#include "gvm/machine.h"
+#endif
+
 namespace collido::job {
 struct RenderSettings;  // job/render_run.h
 }
@@ -44,6 +49,8 @@ int cmd_admin(const Args& args);         // app/cmd_serve.cpp: `admin create NAM
 #ifdef COLLIDO_HAVE_GVM
 int cmd_gvm(const Args& args);           // app/cmd_gvm.cpp: `gvm train`
 int cmd_predict(const Args& args);       // app/cmd_gvm.cpp
+// app/cmd_gvm.cpp: a training's loss curve as CSV, written whole or not at all.
+Status write_loss_curve(const std::string& path, const std::vector<gvm::EpochLoss>& curve);
 #endif
 
 #ifdef COLLIDO_HAVE_JOB_COST
