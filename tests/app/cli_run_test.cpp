@@ -96,6 +96,20 @@ TEST(CliRun, BadInputExitsTwo) {
   // --duration is held to the scene's own timing limits (scene::check_timing).
   for (const char* d : {"0", "-1", "1e6", "nan"})
     EXPECT_EQ(cmd_run({ok, "--duration", d}), kExitUsage) << d;
+  // Integers past their range are refused, not wrapped (4294967297 would be 1
+  // as an int); a checkpoint interval job.json could not keep for --resume too.
+  const std::string unused = ::testing::TempDir() + "/run_unused";
+  for (const std::vector<std::string>& flags :
+       std::vector<std::vector<std::string>>{{"--threads", "4294967297"},
+                                             {"--threads", "-1"},
+                                             {"--checkpoint-every", "inf"},
+                                             {"--checkpoint-every", "nan"},
+                                             {"--video", "--width", "4294968576"}}) {
+    std::vector<std::string> args = {ok, "--out", unused, "--quiet"};
+    args.insert(args.end(), flags.begin(), flags.end());
+    EXPECT_EQ(cmd_run(args), kExitUsage) << flags[0] << " " << flags.back();
+  }
+  EXPECT_FALSE(fs::exists(unused));
   // A wall that does not exist, and more particles than the vessel holds.
   const std::string dir = ::testing::TempDir() + "/run_fail";
   fs::remove_all(dir);
