@@ -347,6 +347,14 @@ class JobRunner {
       sim::AutoRequest req;
       req.method = scene_.method_auto, req.grid_length = scene_.grid_auto;
       req.particle_traversal_only = true;
+      // A candidate is held to the run's budget, as the scene's own setting was.
+      req.admit = [&](sim::Method m, double grid_length) {
+        sim::DynamicsConfig c = d;
+        c.method = m;
+        c.grid_length = grid_length;
+        return check_budget(estimate_work(wall_, c, scene_.particles.count, scene_.particles.r_max),
+                            spec_.budget);
+      };
       auto choice = sim::choose_detection(wall_, p, base, req);
       if (!choice) return choice.status();
       d.method = choice->method;

@@ -138,16 +138,29 @@ Expected<AutoChoice> choose_detection(const TriangleMesh& mesh, const Particles&
     for (Traversal t : traversals)
       for (double g : grids) choice.candidates.push_back(AutoCandidate{m, t, g, 0, 0, {}});
   }
+  // Those the caller refuses are not prepared; they stay listed with the reason.
+  std::vector<AutoCandidate> timed, refused;
+  for (AutoCandidate& c : choice.candidates) {
+    Status ok = req.admit ? req.admit(c.method, c.grid_length) : Status::ok();
+    if (ok) {
+      timed.push_back(c);
+    } else {
+      c.error = ok.message();
+      refused.push_back(c);
+    }
+  }
   // All candidates at once on the CPU, whose timings drift with the machine's
   // other work; one at a time on the GPU, whose timings are steady and where
   // a dozen detectors on four million particles would hold gigabytes.
-  AutoCandidate* all = choice.candidates.data();
-  const size_t n = choice.candidates.size();
+  AutoCandidate* all = timed.data();
+  const size_t n = timed.size();
   if (gpu) {
     for (size_t i = 0; i < n; ++i) time_together(mesh, sample, base, repeats, all + i, all + i + 1);
-  } else {
+  } else if (n) {
     time_together(mesh, sample, base, repeats, all, all + n);
   }
+  choice.candidates = std::move(timed);
+  choice.candidates.insert(choice.candidates.end(), refused.begin(), refused.end());
   const AutoCandidate* best = nullptr;
   for (const auto& c : choice.candidates)
     if (c.error.empty() && (!best || c.frame_ms < best->frame_ms)) best = &c;

@@ -9,6 +9,7 @@
 // setting on the speed/accuracy front.
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -34,6 +35,9 @@ struct AutoRequest {
   int repeats = 0;
   // Dynamics walks the wall per particle: time only the particle traversal.
   bool particle_traversal_only = false;
+  // When set, a candidate it refuses (a run's memory budget, say: a finer grid
+  // or a divided wall holds more) is not prepared; its error is the reason.
+  std::function<Status(Method, double grid_length)> admit;
 };
 
 struct AutoCandidate {

@@ -128,6 +128,40 @@ TEST(AutoChoice, AFixedMethodOrGridIsKept) {
   EXPECT_NE(c->reason.find("bvh/particle "), std::string::npos) << c->reason;
 }
 
+// A candidate the caller refuses (a run's memory budget) is never prepared:
+// it is listed with the reason and the choice is among the others.
+TEST(AutoChoice, ARefusedCandidateIsNotTimed) {
+  const TriangleMesh wall = make_box(10, 10, 10);
+  const Particles p = random_particles(2000, mesh_bounds(wall), 0.5, 1, 4);
+  DetectConfig base;
+  base.r_max = 1;
+  AutoRequest req;
+  int asked = 0;
+  req.admit = [&](Method m, double grid) {
+    ++asked;
+    return m == Method::kBin && grid < 2.5 ? resource_exhausted("over the budget") : Status::ok();
+  };
+  auto c = choose_detection(wall, p, base, req);
+  ASSERT_TRUE(c) << c.status().message();
+  EXPECT_GT(asked, 0);
+  EXPECT_FALSE(c->method == Method::kBin && c->grid_length < 2.5) << c->reason;
+  size_t refused = 0;
+  for (const AutoCandidate& k : c->candidates) {
+    const bool over = k.method == Method::kBin && k.grid_length < 2.5;
+    EXPECT_EQ(k.error == "over the budget", over) << to_string(k.method) << " " << k.grid_length;
+    if (over) {
+      ++refused;
+      EXPECT_EQ(k.frame_ms, 0);  // never timed
+    }
+  }
+  EXPECT_EQ(refused, 3u);  // grids of 1, 1.5 and 2 r_max
+  // Every one refused: no choice, and the reason why.
+  req.admit = [](Method, double) { return resource_exhausted("over the budget"); };
+  auto none = choose_detection(wall, p, base, req);
+  ASSERT_FALSE(none);
+  EXPECT_NE(none.status().message().find("over the budget"), std::string::npos);
+}
+
 // Division is worth timing only on the GPU and for triangles large against
 // the radius; bin and the tree always.
 TEST(AutoChoice, DivisionIsACandidateOnlyWhereItCanWin) {
