@@ -92,13 +92,15 @@ TEST(CliRun, BadInputExitsTwo) {
   EXPECT_EQ(cmd_run({write_scene("bad_json.json", R"({"wall": )")}), kExitUsage);
   const std::string ok =
       write_scene("ok.json", R"({"wall": "wall1", "particles": {"count": 5}, "duration": 0.01})");
-  EXPECT_EQ(cmd_run({ok, "--backend", "quantum"}), kExitUsage);
+  // Into a folder that does not exist: a refusal is the flag's, not the folder's.
+  const std::string unused = ::testing::TempDir() + "/run_unused";
+  fs::remove_all(unused);
+  EXPECT_EQ(cmd_run({ok, "--out", unused, "--backend", "quantum"}), kExitUsage);
   // --duration is held to the scene's own timing limits (scene::check_timing).
   for (const char* d : {"0", "-1", "1e6", "nan"})
-    EXPECT_EQ(cmd_run({ok, "--duration", d}), kExitUsage) << d;
+    EXPECT_EQ(cmd_run({ok, "--out", unused, "--duration", d}), kExitUsage) << d;
   // Integers past their range are refused, not wrapped (4294967297 would be 1
   // as an int); a checkpoint interval job.json could not keep for --resume too.
-  const std::string unused = ::testing::TempDir() + "/run_unused";
   for (const std::vector<std::string>& flags :
        std::vector<std::vector<std::string>>{{"--threads", "4294967297"},
                                              {"--threads", "-1"},

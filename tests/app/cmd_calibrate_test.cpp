@@ -52,8 +52,13 @@ TEST(CmdCalibrate, BadArgumentsExitTwo) {
 }
 
 TEST(CmdCalibrate, UnwritableOutputExitsOne) {
+  testing::internal::CaptureStderr();
   EXPECT_EQ(cmd_calibrate({"--out", "/nonexistent-dir/runs.csv", "--quick", "--backend", "cpu"}),
             kExitFailure);
+  const std::string said = testing::internal::GetCapturedStderr();
+  // The file and why it cannot be written.
+  EXPECT_NE(said.find("/nonexistent-dir/runs.csv"), std::string::npos) << said;
+  EXPECT_NE(said.find("No such file or directory"), std::string::npos) << said;
 }
 
 std::vector<gvm::RunRecord> quick_sweep(const std::string& path, const char* configs,

@@ -83,9 +83,12 @@ TEST(CmdStudy, BadArgumentsExitTwo) {
 }
 
 TEST(CmdStudy, AMissingMeshFolderIsAFailureThatSaysSo) {
+  testing::internal::CaptureStderr();
   EXPECT_EQ(cmd_study({"--quick", "--only", "detect", "--meshes", "/nonexistent/meshes", "--out",
                        testing::TempDir() + "/cmd_study_test_missing"}),
             kExitFailure);
+  const std::string said = testing::internal::GetCapturedStderr();
+  EXPECT_NE(said.find("cannot read the mesh folder /nonexistent/meshes"), std::string::npos) << said;
 }
 
 }  // namespace
