@@ -205,34 +205,37 @@ TEST(Job, CheckpointsRoundTripAndDamageIsDetected) {
   ASSERT_FALSE(older);
   EXPECT_NE(older.status().message().find("another format (01"), std::string::npos)
       << older.status().message();
+  // Older formats, written as the header says: each value's bytes, arrays as
+  // a count and then each one's size and bytes, an FNV-1a hash of it all last.
+  auto put = [](std::string* b, const auto& v) {
+    b->append(reinterpret_cast<const char*>(&v), sizeof v);
+  };
+  auto put_arrays = [&](std::string* b, const std::vector<std::vector<uint8_t>>& arrays) {
+    put(b, uint32_t(arrays.size()));
+    for (const auto& a : arrays) {
+      put(b, uint64_t(a.size()));
+      b->append(reinterpret_cast<const char*>(a.data()), a.size());
+    }
+  };
+  auto hashed = [&](std::string b) {
+    uint64_t hash = 1469598103934665603ull;
+    for (unsigned char c : b) hash = (hash ^ c) * 1099511628211ull;
+    put(&b, hash);
+    return b;
+  };
   // One of the format before the lists were saved (02) is read, without lists.
-  std::string v2("CLCKPT02", 8);
-  auto put = [&](const auto& v) { v2.append(reinterpret_cast<const char*>(&v), sizeof v); };
-  put(ck->frame), put(ck->state.particles), put(ck->state.time), put(ck->state.steps);
-  put(uint8_t(ck->state.all_released)), put(uint32_t(ck->state.arrays.size()));
-  for (const auto& a : ck->state.arrays) {
-    put(uint64_t(a.size()));
-    v2.append(reinterpret_cast<const char*>(a.data()), a.size());
-  }
-  uint64_t hash = 1469598103934665603ull;  // FNV-1a, as the header says
-  for (unsigned char c : v2) hash = (hash ^ c) * 1099511628211ull;
-  put(hash);
-  ASSERT_TRUE(write_file_atomic(dir + "/v2.bin", v2));
+  std::string body;
+  put(&body, ck->frame), put(&body, ck->state.particles), put(&body, ck->state.time);
+  put(&body, ck->state.steps), put(&body, uint8_t(ck->state.all_released));
+  put_arrays(&body, ck->state.arrays);
+  ASSERT_TRUE(write_file_atomic(dir + "/v2.bin", hashed("CLCKPT02" + body)));
   const auto without_lists = read_checkpoint(dir + "/v2.bin");
   ASSERT_TRUE(without_lists) << without_lists.status().message();
   EXPECT_EQ(without_lists->state.arrays, ck->state.arrays);
   EXPECT_TRUE(without_lists->state.lists.empty());
   // One of the format before the wall's method was saved (03) is read, with its lists.
-  std::string v3 = "CLCKPT03" + v2.substr(8, v2.size() - 16);
-  auto put3 = [&](const auto& v) { v3.append(reinterpret_cast<const char*>(&v), sizeof v); };
-  put3(uint32_t(ck->state.lists.size()));
-  for (const auto& a : ck->state.lists) {
-    put3(uint64_t(a.size()));
-    v3.append(reinterpret_cast<const char*>(a.data()), a.size());
-  }
-  hash = 1469598103934665603ull;
-  for (unsigned char c : v3) hash = (hash ^ c) * 1099511628211ull;
-  put3(hash);
+  put_arrays(&body, ck->state.lists);
+  const std::string v3 = hashed("CLCKPT03" + body);
   ASSERT_TRUE(write_file_atomic(dir + "/v3.bin", v3));
   const auto without_method = read_checkpoint(dir + "/v3.bin");
   ASSERT_TRUE(without_method) << without_method.status().message();
