@@ -13,6 +13,7 @@
 #include <mutex>
 #include <thread>
 
+#include "common/atomic_file.h"
 #include "job/assess.h"
 #include "render/render.h"
 #include "scene/scene.h"
@@ -200,6 +201,13 @@ class OutputWorker {
         if (queue_.empty()) return;
         job = std::move(queue_.front());
         queue_.pop_front();
+        // After an error the rest is dropped: nothing more is encoded or
+        // written for a render that has failed.
+        if (!error_.is_ok()) {
+          spare_.push_back(std::move(job.image));
+          cv_.notify_all();
+          continue;
+        }
         busy_ = true;
       }
       Status st;
@@ -296,6 +304,32 @@ void wall_model_matrix(const sim::WallPose& pose, sim::Vec3d origin, float out[1
   out[15] = 1;
 }
 
+// A render replaces the one before it in out_dir: its videos, poster and frame
+// images go, whatever the new settings ask for (an old WebM beside a new MP4
+// would be listed as this render's), and so do the temporary files of a writer
+// that was killed. Only these names: out_dir may hold other files.
+static Status clear_previous_outputs(const fs::path& out_dir) {
+  auto ours = [](const std::string& name, bool frames) {
+    std::string base = name;
+    if (is_temp_name(name)) base = name.substr(0, name.rfind(".tmp"));
+    if (frames)
+      return base.size() > 10 && base.compare(0, 6, "frame_") == 0 &&
+             base.compare(base.size() - 4, 4, ".png") == 0;
+    return base == "video.mp4" || base == "video.webm" || base == "loop.gif" || base == "poster.png";
+  };
+  for (const auto& [dir, frames] : {std::pair{out_dir, false}, std::pair{out_dir / "frames", true}}) {
+    std::error_code ec;
+    for (auto it = fs::directory_iterator(dir, ec); !ec && it != fs::directory_iterator();
+         it.increment(ec)) {
+      if (!ours(it->path().filename().string(), frames)) continue;
+      std::error_code rm;
+      fs::remove(it->path(), rm);
+      if (rm) return io_error(it->path().string() + ": cannot remove it: " + rm.message());
+    }
+  }
+  return Status::ok();
+}
+
 Status render_run(const std::string& run_dir, const std::string& out_dir,
                   const RenderSettings& settings, const FrameProgress& progress,
                   const std::atomic<bool>* cancel, RenderOutcome* outcome) {
@@ -317,6 +351,7 @@ Status render_run(const std::string& run_dir, const std::string& out_dir,
   std::error_code ec;
   fs::create_directories(fs::path(out_dir) / "frames", ec);
   if (ec) return io_error("cannot create " + out_dir + ": " + ec.message());
+  if (Status st = clear_previous_outputs(out_dir); !st) return st;
 
   // Render coordinates are centred on the first frame's origin, so float keeps
   // its precision however far from the world origin the scene lies.
@@ -376,8 +411,11 @@ Status render_run(const std::string& run_dir, const std::string& out_dir,
     vo.codec = render::VideoCodec::kVP9;
     if (!(webm = render::VideoWriter::open(webm_path, vo, &st))) return st;
   }
-  // The GIF keeps every gif_stride-th frame, at the rate that keeps its speed.
-  const int gif_stride = std::max(1, settings.fps / std::max(1, settings.gif_fps));
+  // The GIF keeps every gif_stride-th frame, at the rate that keeps its speed,
+  // at most gif_fps (rounding the stride down gave up to twice that: at 90 fps
+  // and 50 kept, every frame, whose 1/90 s delays a browser shows as 1/10 s).
+  const int gif_fps = std::max(1, settings.gif_fps);
+  const int gif_stride = std::max(1, (settings.fps + gif_fps - 1) / gif_fps);
   if (settings.gif) {
     render::VideoOptions go;
     go.codec = render::VideoCodec::kGif;

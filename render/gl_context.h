@@ -20,9 +20,9 @@ class GlContext {
   virtual std::string backend() const = 0;
 };
 
-// Creates an OSMesa core-profile 3.3 context (llvmpipe). Sets LP_NUM_THREADS to
-// the core count first unless the environment already sets it. On failure
-// returns nullptr and puts the reason in *error.
+// Creates an OSMesa core-profile 3.3 context (llvmpipe), whose rasterizer
+// threads follow LP_NUM_THREADS as the program set it at start-up (see
+// render/render.h). On failure returns nullptr and puts the reason in *error.
 std::unique_ptr<GlContext> create_osmesa_context(std::string* error);
 
 // The default offscreen context of this build (OSMesa today).

@@ -126,6 +126,7 @@ std::unique_ptr<VideoWriter> VideoWriter::open(const std::string& path, const Vi
   if (rc < 0 || !impl->format) return fail(path + ": no " + muxer + " muxer: " + av_error(rc));
 
   AVCodecContext* c = impl->codec = avcodec_alloc_context3(enc);
+  if (!c) return fail(path + ": out of memory");
   c->width = o.width;
   c->height = o.height;
   c->time_base = AVRational{1, o.fps};
@@ -184,6 +185,7 @@ std::unique_ptr<VideoWriter> VideoWriter::open(const std::string& path, const Vi
 
   impl->frame = av_frame_alloc();
   impl->packet = av_packet_alloc();
+  if (!impl->frame || !impl->packet) return fail(path + ": out of memory");
   impl->frame->format = c->pix_fmt;
   impl->frame->width = o.width;
   impl->frame->height = o.height;
@@ -216,7 +218,10 @@ Status VideoWriter::add_frame(const Image& image) {
   if (rc < 0) return backend_error(s.path + ": " + av_error(rc));
   const uint8_t* src[1] = {image.rgb.data()};
   const int stride[1] = {image.width * 3};
-  sws_scale(s.sws, src, stride, 0, image.height, s.frame->data, s.frame->linesize);
+  // Every output row, or the frame would carry the last one's pixels.
+  if (sws_scale(s.sws, src, stride, 0, image.height, s.frame->data, s.frame->linesize) !=
+      s.frame->height)
+    return backend_error(s.path + ": swscale could not convert a frame");
   s.frame->pts = s.next_pts++;
   rc = avcodec_send_frame(s.codec, s.frame);
   if (rc < 0) return backend_error(s.path + ": encoder refused a frame: " + av_error(rc));
@@ -304,11 +309,14 @@ struct Decoder {
     stream = av_find_best_stream(fmt, AVMEDIA_TYPE_VIDEO, -1, -1, &decoder, 0);
     if (stream < 0 || !decoder) return backend_error(path + ": no decodable video stream");
     dec = avcodec_alloc_context3(decoder);
-    avcodec_parameters_to_context(dec, fmt->streams[stream]->codecpar);
+    if (!dec) return backend_error(path + ": out of memory");
+    if ((rc = avcodec_parameters_to_context(dec, fmt->streams[stream]->codecpar)) < 0)
+      return backend_error(path + ": bad stream parameters: " + av_error(rc));
     if ((rc = avcodec_open2(dec, decoder, nullptr)) < 0)
       return backend_error(path + ": cannot open decoder: " + av_error(rc));
     pkt = av_packet_alloc();
     frame = av_frame_alloc();
+    if (!pkt || !frame) return backend_error(path + ": out of memory");
     return Status::ok();
   }
 
@@ -329,6 +337,10 @@ struct Decoder {
       // The decoder wants input: the next packet of our stream, or a flush.
       for (;;) {
         rc = av_read_frame(fmt, pkt);
+        // The end of the file flushes the decoder; a read error is one (a
+        // video cut short must not probe as a shorter whole one).
+        if (rc < 0 && rc != AVERROR_EOF)
+          return backend_error(path + ": cannot read: " + av_error(rc));
         if (rc < 0) {
           avcodec_send_packet(dec, nullptr);
           flushing = true;

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <string>
+#include <vector>
 
 #include "app/cli.h"
 #include "app/commands.h"
@@ -79,6 +81,29 @@ TEST_F(RenderCliTest, RendersFramesPosterAndBothVideos) {
     EXPECT_EQ(info.width, 160) << name;
     EXPECT_NEAR(info.duration_s, 1.0, 0.13) << name;
   }
+}
+
+// A render replaces the one before it: what the new settings do not make
+// (the WebM, frame images) goes, as do a killed writer's temporary files;
+// files that are not a render's stay.
+TEST_F(RenderCliTest, ARenderReplacesThePreviousOne) {
+  write_run(4);
+  const std::vector<std::string> small = {"--out", out(), "--width", "96", "--height", "64"};
+  std::vector<std::string> first = {run(), "--png-every", "1"};
+  first.insert(first.end(), small.begin(), small.end());
+  ASSERT_EQ(cmd_render(first), kExitOk);
+  ASSERT_TRUE(fs::exists(out() + "/video.webm"));
+  ASSERT_TRUE(fs::exists(out() + "/frames/frame_000003.png"));
+  std::ofstream(out() + "/video.mp4.tmp-12345-0") << "half";
+  std::ofstream(out() + "/notes.txt") << "mine";
+  std::vector<std::string> second = {run(), "--png-every", "0", "--video", "mp4"};
+  second.insert(second.end(), small.begin(), small.end());
+  ASSERT_EQ(cmd_render(second), kExitOk);
+  EXPECT_TRUE(fs::exists(out() + "/video.mp4"));
+  EXPECT_FALSE(fs::exists(out() + "/video.webm"));
+  EXPECT_FALSE(fs::exists(out() + "/frames/frame_000000.png"));
+  EXPECT_FALSE(fs::exists(out() + "/video.mp4.tmp-12345-0"));
+  EXPECT_TRUE(fs::exists(out() + "/notes.txt"));
 }
 
 TEST_F(RenderCliTest, FarFromOriginRendersLikeNearOrigin) {
