@@ -22,6 +22,11 @@ sim::Expected<sim::TriangleMesh> import_mesh(const std::string& path, sim::MeshR
       if (face.mNumIndices != 3) continue;  // points and lines are not walls
       std::array<sim::Vec3d, 3> tri;
       for (int k = 0; k < 3; ++k) {
+        // Assimp checks its indices only when asked to validate; a damaged file may hold any.
+        if (face.mIndices[k] >= mesh->mNumVertices)
+          return sim::parse_error(path + ": triangle " + std::to_string(soup.size()) +
+                                  " names vertex " + std::to_string(face.mIndices[k]) + " of " +
+                                  std::to_string(mesh->mNumVertices));
         const aiVector3D& v = mesh->mVertices[face.mIndices[k]];
         tri[k] = {v.x, v.y, v.z};
         if (!std::isfinite(tri[k].x) || !std::isfinite(tri[k].y) || !std::isfinite(tri[k].z))

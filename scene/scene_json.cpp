@@ -25,6 +25,8 @@ Status check_timing(const Scene& s) {
     return invalid_argument("duration: must lie in (0, 1e5] s");
   if (s.frames() > kMaxFrames)
     return invalid_argument("fps: duration x fps gives more than 10^6 frames");
+  if (s.frames() < 1)
+    return invalid_argument("fps: duration x fps gives no frame after the first");
   if (s.dynamics.time_step > 0 && s.duration / s.dynamics.time_step > kMaxFixedSteps)
     return invalid_argument("time_step: duration / time_step gives more than 10^9 steps");
   return Status::ok();

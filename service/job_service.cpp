@@ -128,7 +128,10 @@ Expected<std::string> spec_of_parts(const json& parts) {
 
 std::string Reply::text() const {
   if (serialized) return *serialized;
-  return status == 204 ? std::string() : body.dump() + "\n";
+  // A string that is not UTF-8 (a message quoting a file's bytes) is sent
+  // with U+FFFD in place of the bad bytes rather than failing the answer.
+  return status == 204 ? std::string()
+                       : body.dump(-1, ' ', false, json::error_handler_t::replace) + "\n";
 }
 
 Reply error_reply(int status, const std::string& message) {

@@ -614,7 +614,10 @@ Status inlet_layout(const TriangleMesh& wall, const ParticleSpec& ps, const Plac
     if (disc2 < 0)
       return invalid_argument("placement.velocity: " + number_text(v0) +
                               " m/s is too slow against gravity to leave the inlet");
-    tau = (std::sqrt(disc2) - v0) / a;
+    // (sqrt(disc2) - v0) / a, written without the difference that loses
+    // every digit when 2 a D is tiny against v0^2 (a fast jet in weak gravity:
+    // tau came out 0, and the rate check passed whatever the rate).
+    tau = 2 * D / (v0 + std::sqrt(disc2));
   }
   const double capacity = double(disc.size()) / tau;
   if (pl.rate > capacity * (1 + 1e-9)) {

@@ -108,6 +108,21 @@ Expected<TriangleMesh> parse_ascii(const std::string& bytes, const std::string& 
   };
   auto expect = [&](const char* word) -> bool { return tk.next(tok) && iequals(tok, word); };
   bool in_solid = false;
+  // A token as an error quotes it: printable ASCII only, at most 32 characters.
+  auto quoted = [](const std::string& t) {
+    std::string out;
+    for (size_t i = 0; i < t.size() && i < 32; ++i) {
+      const unsigned char c = static_cast<unsigned char>(t[i]);
+      if (c >= 0x20 && c < 0x7f) {
+        out += char(c);
+      } else {
+        char hex[8];
+        std::snprintf(hex, sizeof hex, "\\x%02x", c);
+        out += hex;
+      }
+    }
+    return t.size() > 32 ? out + "..." : out;
+  };
   while (tk.next(tok)) {
     if (iequals(tok, "solid")) {
       tk.skip_line();
@@ -129,8 +144,8 @@ Expected<TriangleMesh> parse_ascii(const std::string& bytes, const std::string& 
           if (!tk.next(tok)) return where("truncated vertex");
           char* end = nullptr;
           x = std::strtod(tok.c_str(), &end);
-          if (end == tok.c_str() || *end != '\0') return where("bad number '" + tok + "'");
-          if (!std::isfinite(x)) return where("non-finite coordinate '" + tok + "'");
+          if (end == tok.c_str() || *end != '\0') return where("bad number '" + quoted(tok) + "'");
+          if (!std::isfinite(x)) return where("non-finite coordinate '" + quoted(tok) + "'");
         }
         tri[k] = {c[0], c[1], c[2]};
       }
@@ -138,10 +153,12 @@ Expected<TriangleMesh> parse_ascii(const std::string& bytes, const std::string& 
       if (!expect("endfacet")) return where("expected 'endfacet'");
       soup.push_back(tri);
     } else {
-      return where("unexpected '" + tok + "'");
+      return where("unexpected '" + quoted(tok) + "'");
     }
   }
   if (in_solid && soup.empty()) return where("truncated: no facet before the end of the file");
+  // Cut between two facets, a file would load with the rest of its wall missing.
+  if (in_solid) return where("truncated: no 'endsolid' after the last facet");
   return finish(soup, "stl-ascii", name, report);
 }
 
@@ -157,7 +174,10 @@ Expected<TriangleMesh> parse_stl(const std::string& bytes, const std::string& na
   }
   size_t first = 0;
   while (first < bytes.size() && std::isspace(static_cast<unsigned char>(bytes[first]))) ++first;
-  if (bytes.compare(first, 5, "solid") == 0) return parse_ascii(bytes, name, report);
+  // Text never holds a NUL; a binary file whose header begins with "solid"
+  // (SolidWorks writes them) and whose size is off is a damaged binary file.
+  if (bytes.compare(first, 5, "solid") == 0 && bytes.find('\0') == std::string::npos)
+    return parse_ascii(bytes, name, report);
   if (bytes.size() < kBinaryHeader)
     return parse_error(name + ": truncated: " + std::to_string(bytes.size()) +
                        " bytes, shorter than a binary STL header (84) and not ASCII STL");

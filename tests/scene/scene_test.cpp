@@ -134,6 +134,8 @@ TEST(Scene, ErrorsNameTheKey) {
   expect_error(R"({"wall": "wall1", "duration": 1e5, "fps": 1e4})", "fps");
   // A fixed step that would take days at any speed (a job answers a cancel between frames).
   expect_error(R"({"wall": "wall1", "duration": 100, "time_step": 1e-15})", "time_step");
+  // No frame to write after the first: nothing would be simulated.
+  expect_error(R"({"wall": "wall1", "duration": 1e-9, "fps": 0.001})", "fps");
   expect_error(R"({"wall": "wall1", "method": "magic"})", "method");
   expect_error(R"({"wall": "wall1", "method": "reference"})", "method");
   expect_error(R"({"wall": "wall1", "grid_length": "big"})", "grid_length");

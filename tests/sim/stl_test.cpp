@@ -75,6 +75,14 @@ TEST(Stl, TruncatedBinaryNamesFileAndTriangle) {
   auto tiny = parse_stl(std::string(40, 'x'), "tiny.stl");
   ASSERT_FALSE(tiny);
   EXPECT_NE(tiny.status().message().find("truncated"), std::string::npos);
+  // One whose header says "solid" is still read as the binary file it is,
+  // not as text whose error would quote its bytes.
+  s = binary_stl(kQuad, "solid by SolidWorks");
+  s.pop_back();
+  m = parse_stl(s, "cut_solid.stl");
+  ASSERT_FALSE(m);
+  EXPECT_NE(m.status().message().find("the header announces 2 triangles"), std::string::npos)
+      << m.status().message();
 }
 
 TEST(Stl, TruncatedAsciiNamesLineAndTriangle) {
@@ -83,6 +91,20 @@ TEST(Stl, TruncatedAsciiNamesLineAndTriangle) {
   ASSERT_FALSE(m);
   EXPECT_NE(m.status().message().find("cut_ascii.stl"), std::string::npos);
   EXPECT_NE(m.status().message().find("triangle 0"), std::string::npos) << m.status().message();
+  // Cut between two facets: refused, not loaded with the rest of its wall missing.
+  const std::string facet =
+      " facet normal 0 0 1\n  outer loop\n   vertex 0 0 0\n   vertex 1 0 0\n   vertex 0 1 0\n"
+      "  endloop\n endfacet\n";
+  auto between = parse_stl("solid t\n" + facet + facet, "cut_between.stl");
+  ASSERT_FALSE(between);
+  EXPECT_NE(between.status().message().find("no 'endsolid'"), std::string::npos)
+      << between.status().message();
+  EXPECT_TRUE(parse_stl("solid t\n" + facet + "endsolid t\n", "whole.stl"));
+  // Bytes an error quotes are printable: a token of control bytes is escaped.
+  auto junk = parse_stl("solid t\n\x01\x02\xff\n", "junk.stl");
+  ASSERT_FALSE(junk);
+  EXPECT_NE(junk.status().message().find("\\x01\\x02\\xff"), std::string::npos)
+      << junk.status().message();
 }
 
 TEST(Stl, NanIsRejectedWithTriangleIndex) {
@@ -165,6 +187,7 @@ TEST(Stl, SaveRoundTrip) {
 TEST(Stl, MutatedInputsNeverCrash) {
   std::ifstream in(kData + "/meshes/sphere_with_hole_assimp.stl", std::ios::binary);
   const std::string ascii((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_FALSE(ascii.empty());  // else the ASCII half would fuzz nothing
   const std::string binary = binary_stl(kQuad);
   uint64_t state = 12345;
   auto next = [&] { return state = state * 6364136223846793005ull + 1442695040888963407ull; };
