@@ -343,9 +343,16 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
     return n < 1 ? uint64_t(0) : uint64_t(std::min(n, 1e7));
   };
   const uint64_t nx = sites(lo.x, hi.x), ny = sites(lo.y, hi.y), nz = sites(lo.z, hi.z);
-  if (nx * ny > (uint64_t(1) << 26))
+  // A layer's sites cost a few hundred bytes each (their positions, the
+  // detector's buffers): never more than the fill could use, give or take, so
+  // that ten tiny particles in a large box do not ask for gigabytes.
+  const uint64_t most_sites =
+      std::min<uint64_t>(uint64_t(1) << 26, std::max<uint64_t>(uint64_t(1) << 20, 64 * ps.count));
+  if (nx * ny > most_sites)
     return invalid_argument("placement.region: a layer of " + std::to_string(nx * ny) +
-                            " sites is too large");
+                            " sites is too large for " + std::to_string(ps.count) +
+                            " particles (at most " + std::to_string(most_sites) +
+                            "); give a smaller region or larger particles");
   // An open vessel (a cup, a funnel) has no inside by parity: a site is
   // inside where its own winding number says so. A fill's box region holds a
   // cup's corners, outside the cup: 30 of 300 particles were placed there and

@@ -218,6 +218,18 @@ TEST(Placement, FillRefusesWhatDoesNotFitAndSaysHowManyDo) {
   ASSERT_FALSE(inverted);
   EXPECT_EQ(inverted.status().message().rfind("placement.region", 0), 0u)
       << inverted.status().message();
+  // Ten tiny particles in a large box: a layer of millions of sites (gigabytes)
+  // is refused before anything is allocated for it, saying why.
+  const TriangleMesh big = make_box(100, 100, 10);
+  ps.count = 10;
+  ps.r_min = ps.r_max = 0.01;
+  auto tiny = place_particles(big, ps, PlacementSpec{}, {0, 0, -9.81}, 1);
+  ASSERT_FALSE(tiny);
+  EXPECT_NE(tiny.status().message().find("too large for 10 particles"), std::string::npos)
+      << tiny.status().message();
+  ps.count = 100000;  // as many sites are worth their memory when the particles need them
+  ps.r_min = ps.r_max = 0.1;
+  EXPECT_TRUE(place_particles(big, ps, PlacementSpec{}, {0, 0, -9.81}, 1));
 }
 
 TEST(Placement, PourReleasesAStreamThatNeverOverlaps) {
