@@ -195,6 +195,10 @@ Expected<ShapeArgs> parse_params(const std::string& kind, const std::string& par
     double v = std::strtod(value.c_str(), &end);
     if (end == value.c_str() || *end != '\0' || !std::isfinite(v))
       return invalid_argument(kind + ": " + key + " must be a finite number, got '" + value + "'");
+    // An offset far past the shape's own size leaves it in float's rounding
+    // (box:dx=1e20 came out flat along x, and a fill blamed its region).
+    if ((key == "dx" || key == "dy" || key == "dz") && !(std::fabs(v) <= 1e9))
+      return invalid_argument(kind + ": " + key + " must lie within +-1e9, got '" + value + "'");
     out.num[key] = v;
   }
   return out;

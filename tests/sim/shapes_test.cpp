@@ -89,7 +89,7 @@ TEST(Shapes, BadSpecsNameTheProblem) {
                {"cylinder:radius=5", "unknown parameter 'radius'"}, {"teacup:r=1", "unknown shape"},
                {"box:x=abc", "finite number"},       {"sphere:subdivisions=12", "subdivisions"},
                {"cylinder:r=5,caps=maybe", "caps"},  {"cone:r1=0,r2=0", "radii"},
-               {"cylinder:r", "key=value"}};
+               {"cylinder:r", "key=value"},          {"box:dx=1e20", "dx must lie within"}};
   for (const auto& c : cases) {
     auto m = make_shape(c.spec);
     ASSERT_FALSE(m) << c.spec;
