@@ -71,9 +71,16 @@ Particles sample_of(const Particles& p, size_t n) {
   return s;
 }
 
-// A candidate's detector on the sample, ready to time (c->error says why not).
+// A candidate's detector on the sample, ready to time (c->error says why not:
+// the caller refused it, or it could not be prepared).
 std::unique_ptr<Detector> prepare_candidate(const TriangleMesh& mesh, const Particles& sample,
-                                            const DetectConfig& base, AutoCandidate* c) {
+                                            const DetectConfig& base, const AutoRequest& req,
+                                            AutoCandidate* c) {
+  if (req.admit)
+    if (Status ok = req.admit(c->method, c->grid_length); !ok) {
+      c->error = ok.message();
+      return nullptr;
+    }
   DetectConfig cfg = base;
   cfg.method = c->method, cfg.traversal = c->traversal, cfg.grid_length = c->grid_length;
   cfg.collect_contacts = false, cfg.time_stages = false;
@@ -93,11 +100,12 @@ std::unique_ptr<Detector> prepare_candidate(const TriangleMesh& mesh, const Part
 // Times candidates [begin, end) together (fastest_frames_ms), each on its
 // own detector.
 void time_together(const TriangleMesh& mesh, const Particles& sample, const DetectConfig& base,
-                   int min_frames, AutoCandidate* begin, AutoCandidate* end) {
+                   const AutoRequest& req, int min_frames, AutoCandidate* begin,
+                   AutoCandidate* end) {
   std::vector<std::unique_ptr<Detector>> owned;
   std::vector<Detector*> dets;
   for (AutoCandidate* c = begin; c != end; ++c) {
-    owned.push_back(prepare_candidate(mesh, sample, base, c));
+    owned.push_back(prepare_candidate(mesh, sample, base, req, c));
     dets.push_back(owned.back().get());
   }
   std::vector<double> ms;
@@ -138,29 +146,17 @@ Expected<AutoChoice> choose_detection(const TriangleMesh& mesh, const Particles&
     for (Traversal t : traversals)
       for (double g : grids) choice.candidates.push_back(AutoCandidate{m, t, g, 0, 0, {}});
   }
-  // Those the caller refuses are not prepared; they stay listed with the reason.
-  std::vector<AutoCandidate> timed, refused;
-  for (AutoCandidate& c : choice.candidates) {
-    Status ok = req.admit ? req.admit(c.method, c.grid_length) : Status::ok();
-    if (ok) {
-      timed.push_back(c);
-    } else {
-      c.error = ok.message();
-      refused.push_back(c);
-    }
-  }
   // All candidates at once on the CPU, whose timings drift with the machine's
   // other work; one at a time on the GPU, whose timings are steady and where
   // a dozen detectors on four million particles would hold gigabytes.
-  AutoCandidate* all = timed.data();
-  const size_t n = timed.size();
+  AutoCandidate* all = choice.candidates.data();
+  const size_t n = choice.candidates.size();
   if (gpu) {
-    for (size_t i = 0; i < n; ++i) time_together(mesh, sample, base, repeats, all + i, all + i + 1);
-  } else if (n) {
-    time_together(mesh, sample, base, repeats, all, all + n);
+    for (size_t i = 0; i < n; ++i)
+      time_together(mesh, sample, base, req, repeats, all + i, all + i + 1);
+  } else {
+    time_together(mesh, sample, base, req, repeats, all, all + n);
   }
-  choice.candidates = std::move(timed);
-  choice.candidates.insert(choice.candidates.end(), refused.begin(), refused.end());
   const AutoCandidate* best = nullptr;
   for (const auto& c : choice.candidates)
     if (c.error.empty() && (!best || c.frame_ms < best->frame_ms)) best = &c;
