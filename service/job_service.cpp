@@ -3,6 +3,7 @@
 #include <sys/stat.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -294,6 +295,10 @@ void JobService::set_public_url(const std::string& url) {
 std::string JobService::public_url() const {
   std::lock_guard lock(url_mu_);
   return config_.public_url;
+}
+
+uint64_t JobService::memory_for_jobs() const {
+  return config_.host_bytes ? config_.host_bytes : job::machine_memory_bytes();
 }
 
 std::string JobService::job_dir(const std::string& id) const {
@@ -832,7 +837,7 @@ Reply JobService::submit(const User& u, const json& body) {
   // Admitted by its predicted memory's high end, which the engine's own
   // estimate (checked when it was prepared) may stay under: a job whose figure
   // is more than the jobs may ever use would wait for ever.
-  const uint64_t total = config_.host_bytes ? config_.host_bytes : job::machine_memory_bytes();
+  const uint64_t total = memory_for_jobs();
   if (p->host_bytes > total) {
     char text[160];
     std::snprintf(text, sizeof text,
@@ -876,12 +881,18 @@ Expected<bool> JobService::pin_model_wall(PreparedJob* p, const std::string& job
   json scene = json::parse(p->spec.scene_json);
   const std::string source = scene["wall"]["file"].get<std::string>();
   const std::string pinned = fs::absolute(fs::path(job_dir) / "model.stl").string();
-  std::ifstream in(source, std::ios::binary);
+  // A second name for the upload's file: an upload after this one renames a
+  // new file over the model's name (write_file_atomic) and leaves this one be.
+  std::error_code ec;
+  fs::create_hard_link(source, pinned, ec);
+  if (ec) fs::copy_file(source, pinned, ec);  // another file system
+  if (ec) return ec.value() == ENOENT ? Expected<bool>(false)
+                                      : Expected<bool>(io_error(pinned + ": " + ec.message()));
+  // An upload between pricing and the link would change what the result's key says.
+  std::ifstream in(pinned, std::ios::binary);
   std::stringstream bytes;
   bytes << in.rdbuf();
-  // The upload between pricing and here would change what the result's key says.
   if (!in || sha256_hex(bytes.str()) != p->model_sha256) return false;
-  if (Status st = write_file_atomic(pinned, bytes.str()); !st) return st;
   scene["wall"]["file"] = pinned;
   p->spec.scene_json = scene.dump();
   return true;

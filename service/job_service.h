@@ -95,6 +95,9 @@ class JobService {
   // The base URL of share links; set once the port is known (requests may already come).
   void set_public_url(const std::string& url);
   std::string public_url() const;
+  // The memory the jobs of this machine may use in all (ServiceConfig::host_bytes,
+  // else the machine's): what a job is admitted against.
+  uint64_t memory_for_jobs() const;
   Store& store() { return *store_; }
 
   // Accounts and sessions.

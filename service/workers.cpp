@@ -11,7 +11,6 @@
 #include <sstream>
 
 #include "common/atomic_file.h"
-#include "job/budget.h"
 #include "job/child.h"
 #include "service/job_service.h"
 
@@ -84,8 +83,7 @@ void WorkerPool::stop() {
 uint64_t WorkerPool::free_bytes_for_jobs() {
   // What the configured share of the machine leaves after the jobs running now,
   // and no more than the kernel says is free.
-  const uint64_t total =
-      service_->config().host_bytes ? service_->config().host_bytes : job::machine_memory_bytes();
+  const uint64_t total = service_->memory_for_jobs();
   const uint64_t left = total > running_bytes_ ? total - running_bytes_ : 0;
   const uint64_t avail = available_memory_bytes();
   return avail ? std::min(left, avail) : left;

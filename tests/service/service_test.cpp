@@ -367,6 +367,17 @@ TEST_F(ServiceTest, AJobKeepsTheModelItWasSubmittedWith) {
   const std::string m = "/api/v1/models/" + std::to_string(model["id"].get<int>());
   ASSERT_EQ(c.call("PUT", m + "/stl", box).status, 200);
   json job = c.call_json("POST", "/api/v1/jobs", tiny_job({{"model", model["id"]}}), 202);
+  // The job's spec names its own copy, which holds the box, whenever it runs.
+  const std::string folder = dir_ + "/jobs/" + job["id"].get<std::string>();
+  std::ifstream spec_file(folder + "/spec.json");
+  std::stringstream spec;
+  spec << spec_file.rdbuf();
+  EXPECT_NE(spec.str().find(folder + "/model.stl"), std::string::npos) << spec.str();
+  EXPECT_EQ(spec.str().find("/models/"), std::string::npos) << spec.str();
+  std::ifstream pinned(folder + "/model.stl", std::ios::binary);
+  std::stringstream pinned_bytes;
+  pinned_bytes << pinned.rdbuf();
+  EXPECT_EQ(pinned_bytes.str(), box);
   ASSERT_EQ(c.call("PUT", m + "/stl", ball).status, 200);
   ASSERT_EQ(c.call("DELETE", m).status, 204);
   job = c.wait_job(job["id"]);
