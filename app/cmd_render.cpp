@@ -90,8 +90,8 @@ int cmd_render(const Args& args) {
   const std::string run_dir = p->positional()[0];
 
   job::RenderSettings rs;
-  if (!p->get_int_in("width", 1280, 16, 8192, &rs.width, &err) ||
-      !p->get_int_in("height", 720, 16, 8192, &rs.height, &err) ||
+  if (!p->get_int_in("width", 1280, job::kMinFrameSide, job::kMaxFrameSide, &rs.width, &err) ||
+      !p->get_int_in("height", 720, job::kMinFrameSide, job::kMaxFrameSide, &rs.height, &err) ||
       !p->get_int_in("fps", 30, 1, 240, &rs.fps, &err) ||
       !p->get_int_in("png-every", 10, 0, 1000000000, &rs.png_every, &err) ||
       !p->get_int_in("msaa", 0, 0, 16, &rs.msaa, &err))
@@ -229,8 +229,8 @@ int bench_render(const Args& args) {
     return usage_error("bench render", "unexpected argument '" + p->positional()[0] + "'");
   render::RenderOptions ro;
   int frames = 10, encode_frames = 90, seed = 1;
-  if (!p->get_int_in("width", 1280, 16, 8192, &ro.width, &err) ||
-      !p->get_int_in("height", 720, 16, 8192, &ro.height, &err) ||
+  if (!p->get_int_in("width", 1280, job::kMinFrameSide, job::kMaxFrameSide, &ro.width, &err) ||
+      !p->get_int_in("height", 720, job::kMinFrameSide, job::kMaxFrameSide, &ro.height, &err) ||
       !p->get_int_in("frames", 10, 1, 100000, &frames, &err) ||
       !p->get_int_in("encode-frames", 90, 1, 100000, &encode_frames, &err) ||
       !p->get_int_in("msaa", 0, 0, 16, &ro.msaa_samples, &err) ||

@@ -29,9 +29,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// More threads than any machine here has: a larger --threads is a mistake.
-constexpr int64_t kMaxThreads = 4096;
-
 const std::vector<FlagSpec> kFlags = {
     {"out", true, "run directory (default results/<scene name>)"},
     {"force", false, "replace the run already in --out (else a non-empty --out is refused)"},
@@ -103,7 +100,7 @@ std::string apply_flags(const ParsedArgs& p, job::JobSpec* spec) {
     // 0 in a spec means "the scene's"; the job holds the rest to the scene's limits.
     if (!(spec->duration > 0)) return "--duration must be a positive number of seconds";
   }
-  if (p.has("threads") && !p.get_int_in("threads", 0, 0, kMaxThreads, &spec->threads, &err))
+  if (p.has("threads") && !p.get_int_in("threads", 0, 0, job::kMaxThreads, &spec->threads, &err))
     return err;
   if (p.has("checkpoint-every")) {
     spec->checkpoint_interval_s = p.get_double("checkpoint-every", 1, &err);
@@ -119,8 +116,8 @@ std::string apply_flags(const ParsedArgs& p, job::JobSpec* spec) {
     job::RenderSettings& rs = spec->render_settings;
     if (!parse_video_list(p.get("formats", "mp4,webm,gif"), &rs, &err))
       return "--formats: " + err;
-    if (!p.get_int_in("width", rs.width, 16, 8192, &rs.width, &err) ||
-        !p.get_int_in("height", rs.height, 16, 8192, &rs.height, &err))
+    if (!p.get_int_in("width", rs.width, job::kMinFrameSide, job::kMaxFrameSide, &rs.width, &err) ||
+        !p.get_int_in("height", rs.height, job::kMinFrameSide, job::kMaxFrameSide, &rs.height, &err))
       return err;
     rs.camera = p.get("camera", rs.camera);
 #else
@@ -161,7 +158,7 @@ int cmd_run(const Args& args) {
     spec = std::move(*saved);
     spec.out_dir = dir;
     spec.dir_policy = job::DirPolicy::kResume;
-    if (p->has("threads") && !p->get_int_in("threads", 0, 0, kMaxThreads, &spec.threads, &err))
+    if (p->has("threads") && !p->get_int_in("threads", 0, 0, job::kMaxThreads, &spec.threads, &err))
       return usage_error("run", err);
   } else {
     if (p->positional().size() != 1)

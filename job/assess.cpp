@@ -37,8 +37,8 @@ Expected<ResolvedScene> resolve_scene(const JobSpec& spec) {
     return invalid_argument("render: this build has no renderer");
 #endif
   }
-  if (spec.threads < 0 || spec.threads > 4096)
-    return invalid_argument("threads: must be in [0, 4096]");
+  if (spec.threads < 0 || spec.threads > kMaxThreads)
+    return invalid_argument("threads: must be in [0, " + std::to_string(kMaxThreads) + "]");
   return out;
 }
 

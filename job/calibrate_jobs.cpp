@@ -432,7 +432,8 @@ Status validate(const JobSweepSpec& s) {
   if (s.backend != "cpu" && s.backend != "cuda")
     return invalid_argument("backend must be cpu or cuda for a job sweep, got '" + s.backend + "'");
   if (s.configs < 1 || s.configs > 100000) return invalid_argument("configs must be in 1..100000");
-  if (s.threads < 0 || s.threads > 4096) return invalid_argument("threads must be in 0..4096");
+  if (s.threads < 0 || s.threads > kMaxThreads)
+    return invalid_argument("threads must be in 0.." + std::to_string(kMaxThreads));
   if (s.repeats < 1 || s.repeats > 100) return invalid_argument("repeats must be in 1..100");
   if (!(s.budget_s >= 0) || !std::isfinite(s.budget_s))
     return invalid_argument("budget must be >= 0 seconds");

@@ -53,13 +53,16 @@ inline RenderSettings job_render_defaults() {
   return r;
 }
 
+// More CPU threads than any machine here has: a larger count is a mistake.
+inline constexpr int kMaxThreads = 4096;
+
 struct JobSpec {
   std::string scene_json;  // the scene document (scene/scene.h)
   // Folder that relative wall files of the scene are found in ("" = the current one).
   std::string scene_dir;
   std::string out_dir;  // the run directory
   DirPolicy dir_policy = DirPolicy::kRefuse;
-  int threads = 0;            // CPU threads of this job's pool; 0 = the CPUs it may use
+  int threads = 0;            // CPU threads of this job's pool, 0..kMaxThreads; 0 = the CPUs it may use
   std::string backend;        // "" = the scene's; else auto | cpu | cuda
   double duration = 0;        // > 0: simulated seconds instead of the scene's (a preview)
   bool vtp = false;           // also ParaView frames (vtp/*.vtp, frames.pvd)

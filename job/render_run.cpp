@@ -252,7 +252,8 @@ Status int_in(const char* name, int v, int lo, int hi) {
 }  // namespace
 
 Status validate(const RenderSettings& s) {
-  for (Status st : {int_in("width", s.width, 16, 8192), int_in("height", s.height, 16, 8192),
+  for (Status st : {int_in("width", s.width, kMinFrameSide, kMaxFrameSide),
+                    int_in("height", s.height, kMinFrameSide, kMaxFrameSide),
                     int_in("fps", s.fps, 1, 240), int_in("png_every", s.png_every, 0, 1000000000),
                     int_in("msaa", s.msaa, 0, 16), int_in("gif_width", s.gif_width, 16, 4096),
                     int_in("gif_fps", s.gif_fps, 1, 50)})

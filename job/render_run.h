@@ -19,8 +19,11 @@ struct Snapshot;
 
 namespace collido::job {
 
+// A frame's width and height, pixels.
+inline constexpr int kMinFrameSide = 16, kMaxFrameSide = 8192;
+
 struct RenderSettings {
-  int width = 1280, height = 720;  // pixels; even when a video is written
+  int width = 1280, height = 720;  // pixels, kMinFrameSide..kMaxFrameSide; even when a video is written
   int fps = 30;                    // video frame rate
   int png_every = 10;              // every K-th frame as PNG; 0 = none
   std::string camera = "iso";      // front | iso | top | orbit
