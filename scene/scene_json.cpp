@@ -29,6 +29,14 @@ Status check_timing(const Scene& s) {
     return invalid_argument("fps: duration x fps gives no frame after the first");
   if (s.dynamics.time_step > 0 && s.duration / s.dynamics.time_step > kMaxFixedSteps)
     return invalid_argument("time_step: duration / time_step gives more than 10^9 steps");
+  // An inlet's first particle leaves within 1 / rate of the start (at a random
+  // phase of its slot), so a rate under 1 / duration may release none at all.
+  const sim::PlacementSpec& pl = s.placement;
+  if (pl.kind != sim::PlacementKind::kFill && pl.rate > 0 && pl.rate * s.duration < 1)
+    return invalid_argument("placement.rate: " + number_text(pl.rate) +
+                            " particles/s may release no particle within the scene's " +
+                            number_text(s.duration) + " s; give at least " +
+                            number_text(1 / s.duration) + " particles/s (or 0: as fast as the inlet clears)");
   return Status::ok();
 }
 
@@ -190,6 +198,11 @@ Status read_placement(const json& p, Scene* s) {
   }
   COLLIDO_TRY(r.vec3("inlet", &pl.inlet, kMaxCoordinate, &pl.has_inlet));
   COLLIDO_TRY(r.number("inlet_radius", &pl.inlet_radius, 0, kMaxCoordinate));
+  // Held as 0 when absent; given, it is the disc's radius and cannot be 0.
+  if (r.has("inlet_radius") && !(pl.inlet_radius > 0))
+    return invalid_argument(
+        "placement.inlet_radius: must be positive (leave it out for the default, a third of "
+        "the wall box's narrower side)");
   COLLIDO_TRY(r.number("rate", &pl.rate, 0, 1e12));
   COLLIDO_TRY(r.vec3("velocity", &pl.velocity, kMaxSpeed));
   if (pl.kind == sim::PlacementKind::kJet && !(length(pl.velocity) > 0))
@@ -416,7 +429,7 @@ std::string to_json(const Scene& si) {
       j["placement"]["region"] = {{"min", v3(pl.region_lo)}, {"max", v3(pl.region_hi)}};
   } else {
     if (pl.has_inlet) j["placement"]["inlet"] = v3(pl.inlet);
-    j["placement"]["inlet_radius"] = pl.inlet_radius;
+    if (pl.inlet_radius > 0) j["placement"]["inlet_radius"] = pl.inlet_radius;
     j["placement"]["rate"] = pl.rate;
   }
   const sim::Material& m = s.dynamics.material;

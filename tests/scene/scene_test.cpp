@@ -87,6 +87,17 @@ void expect_error(const std::string& doc, const std::string& key) {
 
 // "auto" for the method and the grid length: chosen when the job starts,
 // kept as "auto" through a round trip; a fixed grid length follows the unit.
+// A pour on the default inlet is written back without an inlet_radius (the
+// default is held as 0, which a document may not give).
+TEST(Scene, ADefaultInletRoundTrips) {
+  auto a = parse_scene(R"({"wall": "wall1", "placement": {"kind": "pour", "rate": 100}})");
+  ASSERT_TRUE(a) << a.status().message();
+  EXPECT_EQ(to_json(*a).find("inlet_radius"), std::string::npos) << to_json(*a);
+  auto b = parse_scene(to_json(*a));
+  ASSERT_TRUE(b) << b.status().message() << "\n" << to_json(*a);
+  EXPECT_EQ(to_json(*a), to_json(*b));
+}
+
 TEST(Scene, MethodAndGridLengthMayBeAutomatic) {
   auto s = parse_scene(R"({"wall": "wall1", "method": "auto", "grid_length": "auto"})");
   ASSERT_TRUE(s) << s.status().message();
@@ -152,6 +163,17 @@ TEST(Scene, ErrorsNameTheKey) {
                "placement.region");
   expect_error(R"({"wall": "wall1", "placement": {"region": {"min": [0,0,0]}}})",
                "placement.region");
+  // Given, an inlet's radius is the disc's: 0 is not the default (leaving it out is).
+  expect_error(R"({"wall": "wall1", "placement": {"kind": "pour", "inlet_radius": 0}})",
+               "placement.inlet_radius: must be positive");
+  // A rate whose first particle may leave after the scene ends.
+  expect_error(R"({"wall": "wall1", "duration": 2, "placement": {"kind": "pour", "rate": 0.4}})",
+               "placement.rate: 0.4 particles/s may release no particle within the scene's 2 s");
+  expect_error(
+      R"({"wall": "wall1", "duration": 1, "placement": {"kind": "jet", "rate": 0.5, "velocity": [0, 0, -1]}})",
+      "placement.rate");
+  EXPECT_TRUE(parse_scene(R"({"wall": "wall1", "duration": 2, "placement": {"kind": "pour", "rate": 0.5}})"));
+  EXPECT_TRUE(parse_scene(R"({"wall": "wall1", "duration": 2, "placement": {"kind": "pour", "rate": 0}})"));
   expect_error(R"({"wall": {"shape": "wall1", "file": "a.stl"}})", "wall");
   expect_error(R"({"wall": {}})", "wall");
   expect_error(R"({"particles": {"count": 5}})", "wall");
