@@ -97,20 +97,19 @@ class Welder {
 TriangleMesh weld_soup(const std::vector<std::array<Vec3d, 3>>& soup,
                        const std::vector<uint32_t>& source_ids, double weld_tolerance,
                        MeshReport* report) {
-  Bounds3d box;
-  for (const auto& t : soup)
-    for (const auto& p : t) box.grow(p);
-  const double diag2 = box.empty ? 0.0 : norm2(box.extent());
-  // Zero area relative to the mesh size: the cross product of two edges of a
-  // triangle whose corners are collinear is pure rounding noise, ~1e-16 diag^2.
-  const double area_floor = 1e-14 * diag2;
-
   TriangleMesh mesh;
   Welder welder(weld_tolerance);
   size_t dropped = 0;
   for (size_t t = 0; t < soup.size(); ++t) {
     const auto& s = soup[t];
-    if (triangle_area(s[0], s[1], s[2]) <= area_floor) {
+    // Zero area relative to the triangle's own size: the cross product of two
+    // edges of a triangle whose corners are collinear is rounding noise of
+    // about 1e-16 times its longest edge squared (make_planar's test of a
+    // segment). Not relative to the mesh: one stray facet far away would make
+    // every small real triangle count as zero area.
+    const double longest2 =
+        std::max({norm2(s[1] - s[0]), norm2(s[2] - s[1]), norm2(s[0] - s[2])});
+    if (!(length(cross(s[1] - s[0], s[2] - s[0])) > 1e-14 * longest2)) {
       ++dropped;
       continue;
     }

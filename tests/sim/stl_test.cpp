@@ -146,6 +146,23 @@ TEST(Stl, ZeroAreaTrianglesAreDroppedAndCounted) {
   EXPECT_EQ(m->source_ids, (std::vector<uint32_t>{0, 1}));
 }
 
+// Zero area is judged against each triangle's own size: a millimetre facet
+// beside a stray facet ten kilometres away is kept (against the mesh's box it
+// counted as zero area and was dropped), and a collinear one far out is still dropped.
+TEST(Stl, ZeroAreaIsRelativeToTheTriangleNotTheMesh) {
+  auto tris = kQuad;
+  for (auto& t : tris)
+    for (float& c : t) c *= 1e-3f;                      // a 1 mm square
+  tris.push_back({1e4f, 1e4f, 0, 1e4f + 1, 1e4f, 0, 1e4f, 1e4f + 1, 0});  // a stray facet
+  tris.push_back({1e4f, 0, 0, 1e4f + 1, 0, 0, 1e4f + 2, 0, 0});           // collinear, far out
+  MeshReport rep;
+  auto m = parse_stl(binary_stl(tris), "stray.stl", &rep);
+  ASSERT_TRUE(m) << m.status().message();
+  EXPECT_EQ(rep.dropped_zero_area, 1u);
+  EXPECT_EQ(m->source_ids, (std::vector<uint32_t>{0, 1, 2}));
+  EXPECT_NEAR(mesh_area(*m), 1e-6 + 0.5, 1e-9);
+}
+
 TEST(Stl, MultiSolidAsciiAndRealFiles) {
   struct Case {
     const char* file;
