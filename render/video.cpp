@@ -10,6 +10,7 @@ extern "C" {
 }
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstring>
 #include <mutex>
@@ -107,6 +108,8 @@ std::unique_ptr<VideoWriter> VideoWriter::open(const std::string& path, const Vi
   if (o.source_width < 0 || o.source_height < 0 || (o.source_width > 0) != (o.source_height > 0))
     return fail(path + ": source size must be given as both width and height, or neither");
   if (o.fps <= 0 || o.fps > 240) return fail(path + ": fps must be in 1..240");
+  if (o.fps_divisor < 1 || o.fps_divisor > o.fps)
+    return fail(path + ": fps_divisor must be in 1..fps");
 
   quiet_libav_logs();
   auto impl = std::make_unique<Impl>();
@@ -129,12 +132,16 @@ std::unique_ptr<VideoWriter> VideoWriter::open(const std::string& path, const Vi
   if (!c) return fail(path + ": out of memory");
   c->width = o.width;
   c->height = o.height;
-  c->time_base = AVRational{1, o.fps};
-  c->framerate = AVRational{o.fps, 1};
+  // The exact rate, not a rounded one: the GIF muxer keeps its delays in
+  // centiseconds, rounding each frame's time, so their mean is this rate.
+  c->framerate = av_make_q(o.fps, o.fps_divisor);
+  av_reduce(&c->framerate.num, &c->framerate.den, o.fps, o.fps_divisor, 1 << 16);
+  c->time_base = av_inv_q(c->framerate);
   // GIF: a fixed 3-3-2 palette with swscale's dithering needs no palette pass
   // over the whole clip, so frames are still encoded as they arrive.
   c->pix_fmt = gif ? AV_PIX_FMT_RGB8 : AV_PIX_FMT_YUV420P;
-  c->gop_size = 2 * o.fps;  // a key frame every 2 s keeps seeking in the browser quick
+  // A key frame every 2 s keeps seeking in the browser quick.
+  c->gop_size = std::max(1, 2 * o.fps / o.fps_divisor);
   c->thread_count = gif ? 1 : o.threads;
   if (!gif) {
     // Tag the stream as BT.709 limited range, matching the swscale conversion,

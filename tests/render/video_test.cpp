@@ -26,7 +26,8 @@ class VideoTest : public ::testing::Test {
 
   // Renders `frames` frames of a particle crossing the vessel into a video;
   // keeps the first frame in first_.
-  void write_video(VideoCodec codec, int frames, int fps, const std::string& path) {
+  void write_video(VideoCodec codec, int frames, int fps, const std::string& path,
+                   int fps_divisor = 1) {
     RenderOptions o;
     o.width = 320;
     o.height = 240;
@@ -39,6 +40,7 @@ class VideoTest : public ::testing::Test {
     vo.width = 320;
     vo.height = 240;
     vo.fps = fps;
+    vo.fps_divisor = fps_divisor;
     auto w = VideoWriter::open(path, vo, &st);
     ASSERT_TRUE(w) << st.message();
     Snapshot s = testing::one_particle_scene(1.5f, 0.5f);
@@ -105,6 +107,26 @@ TEST_F(VideoTest, WebmVp9DecodesToTheFramesWritten) {
   EXPECT_EQ(info.frames, 12);
   EXPECT_NEAR(info.duration_s, 0.5, 1.0 / 24 + 1e-6);
   EXPECT_LT(first_frame_error(path), 3.0);
+}
+
+// A GIF keeping every second frame of a 25 fps clip plays at 12.5 frames a
+// second: its centisecond delays alternate so that the clip keeps its length
+// (a rate rounded to 13 played 4 % fast).
+TEST_F(VideoTest, GifKeepsAFractionalFrameRate) {
+  const std::string path = (dir_ / "loop.gif").string();
+  write_video(VideoCodec::kGif, 25, 25, path, /*fps_divisor=*/2);
+  VideoInfo info;
+  Status st = probe_video(path, &info);
+  ASSERT_TRUE(st) << st.message();
+  EXPECT_EQ(info.codec, "gif");
+  EXPECT_EQ(info.frames, 25);
+  EXPECT_NEAR(info.duration_s, 2.0, 0.011) << "25 frames at 12.5 a second";
+  VideoOptions bad;
+  bad.codec = VideoCodec::kGif;
+  bad.fps = 10;
+  bad.fps_divisor = 0;
+  EXPECT_FALSE(VideoWriter::open((dir_ / "bad.gif").string(), bad, &st));
+  EXPECT_NE(st.message().find("fps_divisor"), std::string::npos) << st.message();
 }
 
 TEST_F(VideoTest, OddSizeAndWrongFrameSizeAreErrors) {
