@@ -331,10 +331,10 @@ static Status clear_previous_outputs(const fs::path& out_dir) {
   return Status::ok();
 }
 
-Status render_run(const std::string& run_dir, const std::string& out_dir,
-                  const RenderSettings& settings, const FrameProgress& progress,
-                  const std::atomic<bool>* cancel, RenderOutcome* outcome) {
-  *outcome = RenderOutcome{};
+// render_run's work, into a folder of its own (render_run's staging folder).
+static Status render_outputs(const std::string& run_dir, const std::string& out_dir,
+                             const RenderSettings& settings, const FrameProgress& progress,
+                             const std::atomic<bool>* cancel, RenderOutcome* outcome) {
   if (Status st = validate(settings); !st) return st;
   render::RenderOptions ro;
   ro.width = settings.width;
@@ -352,7 +352,6 @@ Status render_run(const std::string& run_dir, const std::string& out_dir,
   std::error_code ec;
   fs::create_directories(fs::path(out_dir) / "frames", ec);
   if (ec) return io_error("cannot create " + out_dir + ": " + ec.message());
-  if (Status st = clear_previous_outputs(out_dir); !st) return st;
 
   // Render coordinates are centred on the first frame's origin, so float keeps
   // its precision however far from the world origin the scene lies.
@@ -424,7 +423,8 @@ Status render_run(const std::string& run_dir, const std::string& out_dir,
     go.height = std::max(2, int(std::lround(double(ro.height) * go.width / ro.width)));
     go.source_width = ro.width;
     go.source_height = ro.height;
-    go.fps = std::max(1, int(std::lround(double(settings.fps) / gif_stride)));
+    go.fps = settings.fps;
+    go.fps_divisor = gif_stride;
     if (!(gif = render::VideoWriter::open(gif_path, go, &st))) return st;
   }
   std::vector<render::VideoWriter*> videos;
@@ -480,6 +480,48 @@ Status render_run(const std::string& run_dir, const std::string& out_dir,
   if (webm) outcome->webm = webm_path, outcome->webm_encoder = webm->encoder_name();
   if (gif) outcome->gif = gif_path;
   return Status::ok();
+}
+
+// Moves a finished render from `staging` into out_dir, in place of the one
+// before it, and points the outcome's paths there.
+static Status publish_outputs(const fs::path& staging, const fs::path& out_dir,
+                              RenderOutcome* outcome) {
+  std::error_code ec;
+  fs::create_directories(out_dir / "frames", ec);
+  if (ec) return io_error("cannot create " + (out_dir / "frames").string() + ": " + ec.message());
+  if (Status st = clear_previous_outputs(out_dir); !st) return st;
+  for (const char* sub : {"", "frames"}) {
+    for (auto it = fs::directory_iterator(staging / sub, ec); !ec && it != fs::directory_iterator();
+         it.increment(ec)) {
+      if (!it->is_regular_file()) continue;
+      const fs::path to = out_dir / sub / it->path().filename();
+      std::error_code mv;
+      fs::rename(it->path(), to, mv);
+      if (mv) return io_error("cannot move " + it->path().string() + " to " + to.string() + ": " + mv.message());
+    }
+    if (ec) return io_error((staging / sub).string() + ": " + ec.message());
+  }
+  for (std::string* path : {&outcome->poster, &outcome->mp4, &outcome->webm, &outcome->gif})
+    if (!path->empty()) *path = (out_dir / fs::path(*path).filename()).string();
+  return Status::ok();
+}
+
+Status render_run(const std::string& run_dir, const std::string& out_dir,
+                  const RenderSettings& settings, const FrameProgress& progress,
+                  const std::atomic<bool>* cancel, RenderOutcome* outcome) {
+  *outcome = RenderOutcome{};
+  // Rendered apart and moved in whole: a render that fails or is cancelled
+  // leaves the one before it as it was, not a few frame images or an MP4
+  // finished before the WebM failed (which would be listed as this render's).
+  const fs::path staging = fs::path(out_dir) / ".render-staging";
+  std::error_code ec;
+  fs::remove_all(staging, ec);  // a killed render's
+  if (ec) return io_error(staging.string() + ": cannot remove it: " + ec.message());
+  Status st = render_outputs(run_dir, staging.string(), settings, progress, cancel, outcome);
+  if (st) st = publish_outputs(staging, out_dir, outcome);
+  fs::remove_all(staging, ec);
+  if (!st) *outcome = RenderOutcome{};
+  return st;
 }
 
 }  // namespace collido::job

@@ -68,8 +68,11 @@ using FrameProgress = std::function<void(size_t, size_t)>;
 
 // Renders run_dir's frames into out_dir (out_dir/frames/*.png, poster.png,
 // video.mp4, video.webm, loop.gif). Every file appears under its final name
-// only when complete. `cancel`, when set, is polled every frame: the step then
-// stops with kCancelled and no video is left behind.
+// only when complete, and replaces the previous render's only when the whole
+// render is: one that fails or is cancelled leaves the previous one as it was
+// (a killed one leaves a hidden staging folder, which the next render
+// removes). `cancel`, when set, is polled every frame: the step then stops
+// with kCancelled.
 Status render_run(const std::string& run_dir, const std::string& out_dir,
                   const RenderSettings& settings, const FrameProgress& progress,
                   const std::atomic<bool>* cancel, RenderOutcome* outcome);

@@ -106,6 +106,31 @@ TEST_F(RenderCliTest, ARenderReplacesThePreviousOne) {
   EXPECT_TRUE(fs::exists(out() + "/notes.txt"));
 }
 
+// A render that fails part way (a damaged frame) leaves the one before it as
+// it was: not the frame images it drew before failing, nor a half set of videos.
+TEST_F(RenderCliTest, AFailedRenderLeavesThePreviousOne) {
+  write_run(4);
+  ASSERT_EQ(cmd_render({run(), "--out", out(), "--width", "96", "--height", "64", "--png-every",
+                        "1"}),
+            kExitOk);
+  render::Image before;
+  ASSERT_TRUE(render::read_png(out() + "/poster.png", &before));
+  std::ofstream(sim::snapshot_path(run(), 3), std::ios::trunc) << "not a snapshot";
+  EXPECT_NE(cmd_render({run(), "--out", out(), "--width", "160", "--height", "120",
+                        "--png-every", "1"}),
+            kExitOk);
+  render::Image after;
+  ASSERT_TRUE(render::read_png(out() + "/poster.png", &after));
+  EXPECT_EQ(after.width, 96) << "the previous poster";
+  EXPECT_EQ(after.rgb, before.rgb);
+  for (const char* name : {"/video.mp4", "/video.webm", "/frames/frame_000003.png"})
+    EXPECT_TRUE(fs::exists(out() + name)) << name;
+  render::Image frame0;
+  ASSERT_TRUE(render::read_png(out() + "/frames/frame_000000.png", &frame0));
+  EXPECT_EQ(frame0.width, 96) << "frame 0 drawn by the failed render replaced the previous one's";
+  EXPECT_FALSE(fs::exists(out() + "/.render-staging"));
+}
+
 TEST_F(RenderCliTest, FarFromOriginRendersLikeNearOrigin) {
   // The same scene a million units away: the render origin keeps float
   // precision, so the poster matches the one rendered at the origin.
