@@ -6,11 +6,12 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
-#include <optional>
 #include <fstream>
+#include <optional>
 #include <memory>
 #include <new>
 #include <nlohmann/json.hpp>
+#include <sstream>
 
 #include "common/atomic_file.h"
 #include "common/process_memory.h"
@@ -296,6 +297,7 @@ class JobRunner {
       auto ck = read_checkpoint(paths_.checkpoint());
       if (!ck && ck.status().code() != ErrorCode::kNotFound) return ck.status();
       if (ck) resume_ = std::move(*ck);
+      if (Status st = check_same_wall(); !st) return st;
     }
     if (Status st = choose_wall_representation(*particles); !st) return st;
     auto sim_or = sim::Simulation::create(wall_, scene_.dynamics, *particles);
@@ -311,6 +313,22 @@ class JobRunner {
            std::to_string(ts.critical_step) +
            " s of the contact spring; expect energy to blow up and particles to tunnel");
     return Status::ok();
+  }
+
+  // A resumed run continues on the wall it started with: the run's wall.stl,
+  // written from it before the first frame. A wall file changed or replaced
+  // since then would give the saved state another wall (and wall lists that
+  // name its triangles).
+  Status check_same_wall() {
+    if (!resume_) return Status::ok();
+    std::ifstream in(paths_.wall(), std::ios::binary);
+    if (!in) return Status::ok();  // never written: nothing to hold it to
+    std::ostringstream saved;
+    saved << in.rdbuf();
+    if (saved.str() == sim::stl_bytes(wall_)) return Status::ok();
+    return invalid_argument("wall: " + scene_.wall + " is not the wall this run started with (" +
+                            paths_.wall() +
+                            " holds that one); put the original back, or start the run again");
   }
 
   // method / grid_length "auto": time the candidates where the particles will

@@ -63,7 +63,9 @@ Expected<TriangleMesh> load_stl(const std::string& path, MeshReport* report = nu
 // Parses STL bytes already in memory; `name` is used in error messages.
 Expected<TriangleMesh> parse_stl(const std::string& bytes, const std::string& name,
                                  MeshReport* report = nullptr);
-// Writes a binary STL with per-face normals.
+// A binary STL with per-face normals, in memory (the bytes save_stl writes).
+std::string stl_bytes(const TriangleMesh& mesh);
+// Writes a binary STL with per-face normals (through a temporary name).
 Status save_stl(const TriangleMesh& mesh, const std::string& path);
 
 // Appends b's triangles to a (a union of shapes as one wall; no boolean CSG).

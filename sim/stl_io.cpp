@@ -198,29 +198,29 @@ Expected<TriangleMesh> load_stl(const std::string& path, MeshReport* report) {
   return parse_stl(ss.str(), path, report);
 }
 
-Status save_stl(const TriangleMesh& mesh, const std::string& path) {
-  const std::string tmp = temp_path_for(path);
-  std::FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) return io_error(path + ": cannot open for writing");
-  char header[80] = "binary STL written by collidoscope";
-  uint32_t n = static_cast<uint32_t>(mesh.triangles.size());
-  bool ok = std::fwrite(header, 1, 80, f) == 80 && std::fwrite(&n, 4, 1, f) == 1;
-  for (size_t t = 0; ok && t < mesh.triangles.size(); ++t) {
+std::string stl_bytes(const TriangleMesh& mesh) {
+  std::string out(80, '\0');
+  const char header[] = "binary STL written by collidoscope";
+  std::memcpy(out.data(), header, sizeof header - 1);
+  const uint32_t n = static_cast<uint32_t>(mesh.triangles.size());
+  out.append(reinterpret_cast<const char*>(&n), 4);
+  out.reserve(84 + 50 * size_t(n));
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
     Vec3d a = mesh.corner(t, 0), b = mesh.corner(t, 1), c = mesh.corner(t, 2);
     Vec3d nrm = cross(b - a, c - a);
     double len = length(nrm);
     if (len > 0) nrm = nrm * (1.0 / len);
-    float rec[12] = {float(nrm.x), float(nrm.y), float(nrm.z), float(a.x), float(a.y), float(a.z),
-                     float(b.x),   float(b.y),   float(b.z),   float(c.x), float(c.y), float(c.z)};
-    uint16_t attr = 0;
-    ok = std::fwrite(rec, 4, 12, f) == 12 && std::fwrite(&attr, 2, 1, f) == 1;
+    const float rec[12] = {float(nrm.x), float(nrm.y), float(nrm.z), float(a.x), float(a.y),
+                           float(a.z),   float(b.x),   float(b.y),   float(b.z), float(c.x),
+                           float(c.y),   float(c.z)};
+    out.append(reinterpret_cast<const char*>(rec), sizeof rec);
+    out.append(2, '\0');  // attribute bytes
   }
-  ok = (std::fclose(f) == 0) && ok;
-  if (!ok || std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    return io_error(path + ": write failed");
-  }
-  return Status::ok();
+  return out;
+}
+
+Status save_stl(const TriangleMesh& mesh, const std::string& path) {
+  return write_file_atomic(path, stl_bytes(mesh));
 }
 
 }  // namespace collido::sim

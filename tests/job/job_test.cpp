@@ -21,6 +21,8 @@
 #include "job/job.h"
 #include "job/job_log.h"
 #include "job/subprocess.h"
+#include "sim/mesh.h"
+#include "sim/shapes.h"
 #include "sim/snapshot.h"
 #ifdef COLLIDO_HAVE_RENDER
 #include "job/render_run.h"
@@ -343,6 +345,37 @@ TEST(Job, ARunKilledAfterItsLastFrameResumes) {
   const auto measure = job_measure_from_manifest(read_file(dir + "/result.json"));
   ASSERT_FALSE(measure);
   EXPECT_NE(measure.status().message().find("resumed"), std::string::npos);
+}
+
+// A run on a wall file resumes only on the wall it started with: the file
+// replaced since is refused with the reason (the saved state and its wall
+// lists belong to the first wall); put back, the run resumes.
+TEST(Job, AResumedRunRefusesAWallFileChangedSinceItStarted) {
+  const std::string dir = fresh_dir("changed_wall");
+  const std::string meshes = fresh_dir("changed_wall_meshes");
+  fs::create_directories(meshes);
+  ASSERT_TRUE(sim::save_stl(sim::make_box(6, 6, 6), meshes + "/vessel.stl"));
+  JobSpec spec = drop_spec(dir);
+  json scene = json::parse(kDropScene);
+  scene["wall"] = {{"file", "vessel.stl"}};
+  spec.scene_json = scene.dump();
+  spec.scene_dir = meshes;
+  ASSERT_TRUE(run_job(spec, {}).status);
+  fs::remove(dir + "/result.json");  // as if killed before its manifest
+  sim::TriangleMesh other = sim::make_box(6, 6, 6);
+  for (auto& v : other.vertices) v.z *= 1.5;
+  ASSERT_TRUE(sim::save_stl(other, meshes + "/vessel.stl"));
+  JobSpec resume = spec;
+  resume.dir_policy = DirPolicy::kResume;
+  const JobResult refused = run_job(resume, {});
+  ASSERT_FALSE(refused.status);
+  EXPECT_EQ(refused.status.message().rfind("wall: ", 0), 0u) << refused.status.message();
+  EXPECT_NE(refused.status.message().find("not the wall this run started with"), std::string::npos)
+      << refused.status.message();
+  ASSERT_TRUE(sim::save_stl(sim::make_box(6, 6, 6), meshes + "/vessel.stl"));
+  const JobResult resumed = run_job(resume, {});
+  ASSERT_TRUE(resumed.status) << resumed.status.message();
+  EXPECT_EQ(resumed.resumed_from_frame, 12u);
 }
 
 TEST(Job, ASpawnedChildGetsTheReportPipeAndNothingElseOfTheParent) {
