@@ -367,6 +367,8 @@ std::vector<Route> make_routes(JobService* svc, const ServerOptions& opt) {
     auto b = json_body(q, &e, true);
     return b ? reply(svc->create_share(*q.user, q.params["id"], *b)) : e;
   });
+  add("GET", "/api/v1/jobs/{id}/shares", Auth::kUser,
+      [=](Request& q) { return reply(svc->list_shares(*q.user, q.params["id"])); });
   add("DELETE", "/api/v1/shares/{token}", Auth::kUser,
       [=](Request& q) { return reply(svc->delete_share(*q.user, q.params["token"])); });
   add("GET", "/api/v1/shares/{token}", Auth::kNone,

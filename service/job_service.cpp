@@ -729,9 +729,26 @@ json JobService::price(const job::JobAssessment& a, const json& assessment,
   return p;
 }
 
+// Admitted by its predicted memory's high end, which the engine's own
+// estimate (checked when it was prepared) may stay under: a job whose figure
+// is more than the jobs may ever use would wait for ever. The 409 that says
+// so, or none.
+std::optional<Reply> JobService::over_memory(uint64_t host_bytes) {
+  const uint64_t total = memory_for_jobs();
+  if (host_bytes <= total) return std::nullopt;
+  char text[160];
+  std::snprintf(text, sizeof text,
+                "the job is admitted by its predicted peak memory, %.2f GiB, more than the %.2f "
+                "GiB jobs may use here; use fewer particles",
+                double(host_bytes) / double(1 << 30), double(total) / double(1 << 30));
+  return error_reply(409, text);
+}
+
 Reply JobService::predict(const User& u, const json& body) {
   auto p = prepare(u, body);
   if (!p) return status_reply(p.status());
+  // What submitting it would answer: the form says so before the user submits.
+  if (auto refused = over_memory(p->host_bytes)) return *refused;
   Reply r;
   r.body = p->prediction;
   return r;
@@ -834,18 +851,7 @@ Reply JobService::submit(const User& u, const json& body) {
       return r;
     }
   }
-  // Admitted by its predicted memory's high end, which the engine's own
-  // estimate (checked when it was prepared) may stay under: a job whose figure
-  // is more than the jobs may ever use would wait for ever.
-  const uint64_t total = memory_for_jobs();
-  if (p->host_bytes > total) {
-    char text[160];
-    std::snprintf(text, sizeof text,
-                  "the job is admitted by its predicted peak memory, %.2f GiB, more than the %.2f "
-                  "GiB jobs may use here; use fewer particles",
-                  double(p->host_bytes) / double(1 << 30), double(total) / double(1 << 30));
-    return error_reply(409, text);
-  }
+  if (auto refused = over_memory(p->host_bytes)) return *refused;
   auto queued = store_->count_jobs(u.id, "queued");
   if (!queued) return status_reply(queued.status());
   if (*queued >= uint64_t(config_.max_queued_per_user))
@@ -1086,10 +1092,29 @@ Reply JobService::create_share(const User& u, const std::string& job_id, const j
   if (Status st = store_->insert_share(sh); !st) return status_reply(st);
   Reply r;
   r.status = 201;
-  r.body = {{"token", sh.token},
-            {"url", public_url() + "/s/" + sh.token},
-            {"embed", public_url() + "/embed/" + sh.token},
-            {"expires_at", sh.expires_at > 0 ? json(sh.expires_at) : json(nullptr)}};
+  r.body = share_view(sh);
+  return r;
+}
+
+json JobService::share_view(const Share& sh) {
+  return {{"token", sh.token},
+          {"url", public_url() + "/s/" + sh.token},
+          {"embed", public_url() + "/embed/" + sh.token},
+          {"created_at", sh.created_at},
+          {"expires_at", sh.expires_at > 0 ? json(sh.expires_at) : json(nullptr)}};
+}
+
+Reply JobService::list_shares(const User& u, const std::string& job_id) {
+  auto j = own_job(u, job_id);
+  if (!j) return status_reply(j.status());
+  auto shares = store_->shares_of_job(job_id);
+  if (!shares) return status_reply(shares.status());
+  const double now = unix_now();
+  Reply r;
+  r.body = json::array();
+  for (const Share& sh : *shares)
+    if (sh.created_by == u.id && !(sh.expires_at > 0 && sh.expires_at < now))
+      r.body.push_back(share_view(sh));
   return r;
 }
 

@@ -146,6 +146,9 @@ class JobService {
 
   // Share links.
   Reply create_share(const User& u, const std::string& job_id, const json& body);
+  // The caller's live share links to their job, oldest first: revocable later,
+  // not only on the page that made them.
+  Reply list_shares(const User& u, const std::string& job_id);
   Reply delete_share(const User& u, const std::string& token);
   // The shared job's public view: state, links, poster, video.
   Reply share_info(const std::string& token);
@@ -223,6 +226,8 @@ class JobService {
                                    const json& manifest, const json& cost, const json& partial);
   // job_json's text, rebuilt only when the job's row has changed since.
   std::shared_ptr<const std::string> job_view(const Job& j);
+  json share_view(const Share& sh);
+  std::optional<Reply> over_memory(uint64_t host_bytes);
   // The view made for a job in this state, if one is kept; null otherwise.
   std::shared_ptr<const std::string> cached_view(const JobStatus& s);
   json links_of(const std::string& base, const Job& j);

@@ -319,7 +319,20 @@ TEST_F(ServiceTest, SubmitWatchDownloadShareRevoke) {
   EXPECT_NE(oembed["html"].get<std::string>().find("/embed/" + token), std::string::npos);
   EXPECT_EQ(anon.call("GET", "/embed/" + token).status, 200);
   EXPECT_EQ(anon.call("GET", mp4).status, 401);  // the owner's link needs the session
+  // The owner's links are listed with the job (revocable from any later visit);
+  // a second link is listed beside the first, and a revoked one is gone.
+  json second = c.call_json("POST", "/api/v1/jobs/" + id + "/shares", json::object(), 201);
+  json listed = c.call_json("GET", "/api/v1/jobs/" + id + "/shares");
+  ASSERT_EQ(listed.size(), 2u) << listed.dump();
+  EXPECT_EQ(listed[0]["token"], token);
+  EXPECT_EQ(listed[0]["url"], share["url"]);
+  EXPECT_EQ(listed[1]["token"], second["token"]);
+  EXPECT_GT(listed[1]["created_at"].get<double>(), 0);
+  EXPECT_EQ(anon.call("GET", "/api/v1/jobs/" + id + "/shares").status, 401);
+  EXPECT_EQ(c.call("DELETE", "/api/v1/shares/" + second["token"].get<std::string>()).status, 204);
+  EXPECT_EQ(c.call_json("GET", "/api/v1/jobs/" + id + "/shares").size(), 1u);
   EXPECT_EQ(c.call("DELETE", "/api/v1/shares/" + token).status, 204);
+  EXPECT_EQ(c.call_json("GET", "/api/v1/jobs/" + id + "/shares"), json::array());
   EXPECT_EQ(anon.call("GET", "/s/" + token + "/render/video.mp4").status, 404);
   EXPECT_EQ(anon.call("GET", "/s/" + token).status, 404);
 
@@ -437,6 +450,7 @@ TEST_F(ServiceTest, AccountsSessionsAndOwnership) {
            {"GET", "/api/v1/jobs/" + id},
            {"POST", "/api/v1/jobs/" + id + "/cancel"},
            {"POST", "/api/v1/jobs/" + id + "/shares"},
+           {"GET", "/api/v1/jobs/" + id + "/shares"},
            {"DELETE", "/api/v1/jobs/" + id},
            {"GET", "/api/v1/jobs/" + id + "/files/result.json"},
            {"GET", "/api/v1/jobs/nosuchjob"}})
@@ -675,6 +689,10 @@ TEST_F(ServiceTest, AJobThatCanNeverFitIsRefusedWithTheFigures) {
   EXPECT_EQ(r.status, 409) << r.body;
   EXPECT_NE(r.body.find("memory"), std::string::npos) << r.body;
   EXPECT_NE(r.body.find("iB"), std::string::npos) << r.body;  // the figures, in bytes units
+  // The prediction answers as the submission would, so the form says so first.
+  auto predicted = c.call("POST", "/api/v1/predict", tiny_job("wall1", 200000, 0.2).dump());
+  EXPECT_EQ(predicted.status, r.status) << predicted.body;
+  EXPECT_EQ(predicted.body, r.body);
 }
 
 TEST(OpenApi, DescribesEveryRouteAndNoOther) {
