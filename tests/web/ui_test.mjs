@@ -572,8 +572,19 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     } finally {
       await visitor.close().catch(() => {});
     }
-    // Sharing again works after a revoke.
+    // Sharing again works after a revoke, and a link made on one visit is
+    // listed on the next, to copy or revoke there.
+    await page.getByRole('button', { name: 'Make a share link' }).click();
+    const again = await page.getByLabel('Share link').inputValue();
+    assert.notEqual(again, shareUrl);
+    await page.reload();
+    await page.getByRole('heading', { name: 'Share' }).waitFor();
+    await page.getByRole('button', { name: 'Make another share link' }).waitFor();
+    assert.equal(await page.getByLabel('Share link').inputValue(), again, 'the link is listed on a later visit');
+    await page.getByRole('button', { name: 'Revoke link' }).click();
+    await page.getByText('The link was revoked').waitFor();
     await page.getByRole('button', { name: 'Make a share link' }).waitFor();
+    assert.equal(await page.getByLabel('Share link').count(), 0);
   });
 
   await step('jobs: live progress, would-wait warning, cancel and delete', async () => {
@@ -601,7 +612,17 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     await page.locator('#prediction').getByText(/would wait its turn/).waitFor();
 
     await page.click('nav >> text=Jobs');
-    await row.getByRole('button', { name: /^Cancel job/ }).click();
+    // Polling updates the progress in place: a button the keyboard is on
+    // keeps the focus across polls (it was replaced every 1.5 s).
+    const cancel = row.getByRole('button', { name: /^Cancel job/ });
+    await cancel.focus();
+    const progressBefore = await row.locator('progress').getAttribute('value');
+    await page.waitForFunction(([id, before]) => {
+      const tr = [...document.querySelectorAll('tr')].find((r) => r.textContent.includes(id));
+      return tr && tr.querySelector('progress')?.getAttribute('value') !== before;
+    }, [long.body.id, progressBefore]);
+    assert.ok(await cancel.evaluate((el) => el === document.activeElement), 'the focused button kept the focus across a poll');
+    await cancel.click();
     await row.getByText('cancelled').waitFor();
     await row.getByRole('button', { name: /^Delete job/ }).click();
     await row.waitFor({ state: 'detached' });

@@ -14,8 +14,15 @@ import * as methods from './pages/methods.js';
 const main = document.getElementById('main');
 const ctx = {
   me: null,  // {id, name, role} once signed in
+  meError: null,  // why /me could not be read, when not because the visitor is signed out
   go(hash) { if (location.hash === hash) route(); else location.hash = hash; },
   async signedIn() { await loadMe(); },
+  // After signing in: the page the visitor was sent away from, else the jobs.
+  afterSignIn() {
+    let wanted = null;
+    try { wanted = sessionStorage.getItem(WANTED); sessionStorage.removeItem(WANTED); } catch { /* no storage */ }
+    ctx.go(wanted && wanted.startsWith('#/') && wanted !== '#/signin' ? wanted : '#/jobs');
+  },
 };
 
 // Route table: pattern -> [page, needs sign-in, needs admin].
@@ -33,12 +40,19 @@ let cleanup = null;
 let routing = 0;
 let routedOnce = false;
 
+// Where a signed-out visitor was going: signing in takes them there.
+const WANTED = 'collido.wanted';
+
 async function loadMe() {
   try {
     ctx.me = await get('/api/v1/me', { quiet401: true });
-  } catch {
+  } catch (e) {
     ctx.me = null;
+    // Signed out is a 401; anything else (the server down, a 5xx) is not, and
+    // the page says so instead of showing a signed-in user the sign-in form.
+    ctx.meError = e && e.status === 401 ? null : e;
   }
+  if (ctx.me) ctx.meError = null;
   updateHeader();
 }
 
@@ -70,21 +84,36 @@ async function route() {
   }
   if (!entry) { ctx.go(ctx.me ? '#/jobs' : '#/signin'); return; }
   const [, page, needsUser, needsAdmin] = entry;
-  if (needsUser && !ctx.me) { ctx.go('#/signin'); return; }
+  if (needsUser && !ctx.me && ctx.meError) {
+    updateHeader();
+    main.replaceChildren(h('h1', {}, 'The server did not answer'),
+      h('div', { class: 'alert error', role: 'alert' },
+        `Could not tell whether you are signed in: ${ctx.meError.message || ctx.meError}. `,
+        h('a', { href: location.hash, onclick: (e) => { e.preventDefault(); loadMe().then(route); } }, 'Try again')));
+    return;
+  }
+  if (needsUser && !ctx.me) {
+    try { sessionStorage.setItem(WANTED, hash); } catch { /* no storage: the jobs page */ }
+    ctx.go('#/signin');
+    return;
+  }
   if (page === signin && ctx.me) { ctx.go('#/jobs'); return; }
   updateHeader();
-  main.replaceChildren();
+  // Each page renders into a container of its own: a page still loading when
+  // the visitor moves on appends into a detached container, not the next page.
+  const view = h('div', { class: 'view' });
+  main.replaceChildren(view);
   if (needsAdmin && ctx.me.role !== 'admin') {
-    main.append(Object.assign(document.createElement('h1'), { textContent: 'Administrators only' }));
+    view.append(Object.assign(document.createElement('h1'), { textContent: 'Administrators only' }));
     return;
   }
   let result;
   try {
-    result = await page.render(main, ctx, ...match.slice(1));
+    result = await page.render(view, ctx, ...match.slice(1));
   } catch (e) {
     // A page that fails says so in words, never as a blank page.
     if (mine === routing) {
-      main.append(h('div', { class: 'alert error', role: 'alert' },
+      view.append(h('div', { class: 'alert error', role: 'alert' },
         `This page could not be shown: ${e.message || e}. Reload to try again.`));
     }
   }
@@ -103,7 +132,10 @@ async function route() {
 
 setUnauthorizedHandler(() => {
   if (ctx.me) { ctx.me = null; updateHeader(); }
-  if (location.hash !== '#/signin') ctx.go('#/signin');
+  if (location.hash !== '#/signin') {
+    try { sessionStorage.setItem(WANTED, location.hash); } catch { /* no storage */ }
+    ctx.go('#/signin');
+  }
 });
 
 document.getElementById('sign-out').addEventListener('click', async () => {

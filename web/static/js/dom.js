@@ -45,15 +45,18 @@ export function fmtBytes(n) {
   if (n === null || n === undefined || !Number.isFinite(n)) return '—';
   const units = ['B', 'KiB', 'MiB', 'GiB', 'TiB'];
   let i = 0;
-  while (n >= 1024 && i < units.length - 1) { n /= 1024; i++; }
+  // The unit is chosen for the value as it will be shown: 1,048,575 B is 1.0 MiB, not 1024.0 KiB.
+  while (i < units.length - 1 && (i === 0 ? n : Math.round(n * 10) / 10) >= 1024) { n /= 1024; i++; }
   return `${n.toFixed(i === 0 ? 0 : 1)} ${units[i]}`;
 }
 
 export function fmtSeconds(s) {
   if (s === null || s === undefined || !Number.isFinite(s)) return '—';
-  if (s < 1) return `${(s * 1000).toFixed(0)} ms`;
-  if (s < 120) return `${s.toFixed(1)} s`;
-  return `${Math.floor(s / 60)} min ${Math.round(s % 60)} s`;
+  // Each range by the value as shown: 0.9996 s is 1.0 s, not 1000 ms; 179.6 s is 3 min 0 s, not 2 min 60 s.
+  if (Math.round(s * 1000) < 1000) return `${(s * 1000).toFixed(0)} ms`;
+  if (Math.round(s * 10) < 1200) return `${s.toFixed(1)} s`;
+  const t = Math.round(s);
+  return `${Math.floor(t / 60)} min ${t % 60} s`;
 }
 
 export function fmtDate(unixSeconds) {

@@ -31,7 +31,7 @@ export function createViewer(box, label) {
     renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
   } catch {
     box.replaceChildren(h('p', { class: 'alert note' }, 'The 3D preview needs WebGL, which this browser does not offer.'));
-    return { show() {}, setLabel() {}, dispose() {}, canvas: null };
+    return { show() {}, setLabel() {}, setExtra() {}, dispose() {}, canvas: null };
   }
   renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
   const scene = new THREE.Scene();

@@ -41,11 +41,15 @@ export async function render(main) {
   const predictor = h('div');
   const retrainStatus = h('p', { role: 'status', id: 'retrain-status' });
   const retrainButton = h('button', { type: 'button', class: 'secondary' }, 'Retrain now');
+  let left = false;  // the visitor left the page: its polling stops
+  let disposeCharts = [];  // the charts on show (their observers), freed when replaced
+  const freeCharts = () => { for (const d of disposeCharts) { try { d?.(); } catch { /* gone */ } } disposeCharts = []; };
   async function showPredictor() {
     let answer = null;
     try { answer = await get('/api/v1/admin/predictor'); } catch (e) { showError(error, e); }
-    if (!answer) return null;
-    predictor.replaceChildren(...predictorSections(answer.models));
+    if (!answer || left) return null;
+    freeCharts();
+    predictor.replaceChildren(...predictorSections(answer.models, disposeCharts));
     if (answer.retrain) retrainStatus.replaceChildren(...retrainText(answer.retrain));
     return answer;
   }
@@ -55,8 +59,9 @@ export async function render(main) {
       await post('/api/v1/admin/predictor/retrain', {});
       retrainStatus.textContent = 'Retraining…';
       // Training takes seconds to a minute; poll until it has ended.
-      for (let i = 0; i < 300; i++) {
+      for (let i = 0; i < 300 && !left; i++) {
         await new Promise((r) => setTimeout(r, 1000));
+        if (left) break;
         const answer = await showPredictor();
         if (!answer?.retrain?.running) break;
       }
@@ -91,10 +96,12 @@ export async function render(main) {
       h('h2', { id: 'alg-h' }, 'Algorithms'),
       algorithms ? algorithmsTable(algorithms) : h('p', {}, 'The list could not be read.')));
   await load();
+  return () => { left = true; freeCharts(); };
 }
 
-// One section per job cost model in use: what it was trained on, its intervals, charts.
-function predictorSections(models) {
+// One section per job cost model in use: what it was trained on, its intervals,
+// charts (whose dispose functions go into `disposers`).
+function predictorSections(models, disposers) {
   if (!models.length) {
     return [h('div', { class: 'alert note' }, h('strong', {}, 'No job cost model is loaded. '),
       'Jobs are priced by the engine’s formula for memory, and their time is not predicted. ',
@@ -111,7 +118,7 @@ function predictorSections(models) {
         + `the range given with each prediction held ${Math.round(m.coverage * 100)} % of the held-out jobs.`),
       h('p', { class: 'hint' }, `Ranges around the median: ${costs.map(([k, c]) => `${k.replaceAll('_', ' ')} ${factor(c.interval_factors[0])} to ${factor(c.interval_factors[1])}`).join('; ')}.`),
       box);
-    requestAnimationFrame(() => predictorCharts(box, m));
+    requestAnimationFrame(() => disposers.push(predictorCharts(box, m)));
     return section;
   });
 }

@@ -19,7 +19,8 @@ export function stateText(j) {
 }
 
 export async function render(main) {
-  const error = errorBox();
+  const error = errorBox();  // the list's own: cleared by the next poll that reads it
+  const actionError = errorBox();  // a cancel's or delete's: stays until the next action
   const tbody = h('tbody');
   const empty = h('p', { hidden: true }, 'No jobs yet. ', h('a', { href: '#/new' }, 'Start one'), '.');
   const live = h('p', { class: 'visually-hidden', 'aria-live': 'polite' });
@@ -27,6 +28,35 @@ export async function render(main) {
   let timer = null;
   let stopped = false;
   let lastStates = new Map();
+  // Each job's row, kept while its state stays: a poll updates its progress
+  // cell alone, so a focused link or button is not replaced under the
+  // keyboard (or a click) every tick.
+  let rows = new Map();  // id -> {tr, state, progress}
+
+  function row(j) {
+    const s = j.scene || {};
+    const progress = h('td', {}, progressCell(j));
+    const tr = h('tr', {},
+      h('th', { scope: 'row' }, h('a', { href: `#/jobs/${j.id}` }, j.id)),
+      h('td', {}, fmtDate(j.created_at)),
+      h('td', {}, wallLabel(s.wall, modelsById)),
+      h('td', { class: 'num' }, s.particles?.count?.toLocaleString() ?? '—'),
+      h('td', {}, stateText(j)),
+      progress,
+      h('td', {}, h('div', { class: 'actions' },
+        isActive(j) ? h('button', { type: 'button', class: 'secondary small', 'aria-label': `Cancel job ${j.id}`,
+          onclick: async () => {
+            showError(actionError, null);
+            try { await post(`/api/v1/jobs/${j.id}/cancel`); refresh(); } catch (e) { showError(actionError, e); }
+          } }, 'Cancel') : null,
+        j.state !== 'running' ? h('button', { type: 'button', class: 'danger small', 'aria-label': `Delete job ${j.id}`,
+          onclick: async () => {
+            if (!confirm(`Delete job ${j.id} and its files?`)) return;
+            showError(actionError, null);
+            try { await del(`/api/v1/jobs/${j.id}`); refresh(); } catch (e) { showError(actionError, e); }
+          } }, 'Delete') : null)));
+    return { tr, state: j.state, progress };
+  }
 
   async function refresh() {
     let jobs;
@@ -40,26 +70,22 @@ export async function render(main) {
       if (before && before !== j.state && !isActive(j)) live.textContent = `Job ${j.id} ${j.state}.`;
     }
     lastStates = new Map(jobs.map((j) => [j.id, j.state]));
-    tbody.replaceChildren(...jobs.map((j) => {
-      const s = j.scene || {};
-      return h('tr', {},
-        h('th', { scope: 'row' }, h('a', { href: `#/jobs/${j.id}` }, j.id)),
-        h('td', {}, fmtDate(j.created_at)),
-        h('td', {}, wallLabel(s.wall, modelsById)),
-        h('td', { class: 'num' }, s.particles?.count?.toLocaleString() ?? '—'),
-        h('td', {}, stateText(j)),
-        h('td', {}, progressCell(j)),
-        h('td', {}, h('div', { class: 'actions' },
-          isActive(j) ? h('button', { type: 'button', class: 'secondary small', 'aria-label': `Cancel job ${j.id}`,
-            onclick: async () => {
-              try { await post(`/api/v1/jobs/${j.id}/cancel`); refresh(); } catch (e) { showError(error, e); }
-            } }, 'Cancel') : null,
-          j.state !== 'running' ? h('button', { type: 'button', class: 'danger small', 'aria-label': `Delete job ${j.id}`,
-            onclick: async () => {
-              if (!confirm(`Delete job ${j.id} and its files?`)) return;
-              try { await del(`/api/v1/jobs/${j.id}`); refresh(); } catch (e) { showError(error, e); }
-            } }, 'Delete') : null)));
-    }));
+    const next = new Map();
+    for (const j of jobs) {
+      const kept = rows.get(j.id);
+      if (kept && kept.state === j.state) {
+        kept.progress.replaceChildren(progressCell(j));
+        next.set(j.id, kept);
+      } else {
+        next.set(j.id, row(j));
+      }
+    }
+    rows = next;
+    const order = jobs.map((j) => next.get(j.id).tr);
+    // Rows are put in place only when the list changed (moving a row would blur it).
+    if (order.length !== tbody.children.length || order.some((tr, k) => tbody.children[k] !== tr)) {
+      tbody.replaceChildren(...order);
+    }
     schedule(jobs.some(isActive));
   }
   function schedule(again) {
@@ -70,7 +96,7 @@ export async function render(main) {
   main.append(
     h('h1', {}, 'Jobs'),
     h('div', { class: 'actions' }, h('a', { class: 'button', href: '#/new' }, 'New job')),
-    error, empty, live,
+    error, actionError, empty, live,
     tableBox('Your jobs', h('table', {},
       h('caption', { class: 'visually-hidden' }, 'Your jobs, newest first'),
       h('thead', {}, h('tr', {}, ['Job', 'Submitted', 'Wall', 'Particles', 'State', 'Progress', 'Actions']

@@ -212,7 +212,9 @@ export async function render(main, ctx, modelParam) {
   const mini = (text) => { predMini.textContent = text; };
   let timer = null;
   let inflight = null;
+  let left = false;  // the visitor left the page: a wall file that arrives later starts nothing
   function schedule() {
+    if (left) return;
     clearTimeout(timer);
     predStatus.textContent = 'Updating…';
     timer = setTimeout(predict, DEBOUNCE_MS);
@@ -419,5 +421,5 @@ export async function render(main, ctx, modelParam) {
   clearFigures();
   predict();
   fitRadius();
-  return () => { clearTimeout(timer); inflight?.abort(); startViewer.dispose(); };
+  return () => { left = true; clearTimeout(timer); inflight?.abort(); startViewer.dispose(); };
 }

@@ -7,14 +7,15 @@ import { statsCharts, parseCsv, columnMax } from '../chart.js';
 import { POLL_MS, isActive, progressCell, stateText } from './jobs.js';
 
 export async function render(main, ctx, id) {
-  const error = errorBox();
+  const error = errorBox();  // reading the job: cleared by the next poll that reads it
+  const actionError = errorBox();  // a cancel's or delete's: stays until the next action
   const title = h('h1', {}, `Job ${id}`);
   const subtitle = h('p', { class: 'hint' }, `Job ${id}`);
   const head = h('div', { class: 'card' });
   const actions = h('div', { class: 'actions' });
   const body = h('div');
   const live = h('p', { class: 'visually-hidden', 'aria-live': 'polite' });
-  main.append(title, subtitle, error, head, actions, live, body);
+  main.append(title, subtitle, error, head, actions, actionError, live, body);
   let timer = null;
   let stopped = false;
   let shownDone = false;
@@ -33,12 +34,15 @@ export async function render(main, ctx, id) {
     if (stopped) return;
     showError(error, null);
     if (lastState && lastState !== j.state) live.textContent = `The job is ${j.state}.`;
+    // The buttons are made again only when the state changes: replaced every
+    // poll, a focused button was lost under the keyboard (and a click, now and then).
+    const changed = lastState !== j.state;
     lastState = j.state;
     const s = j.scene || {};
     title.textContent = `${wallLabel(s.wall, modelsById)}: ${s.particles?.count?.toLocaleString() ?? '?'} particles`;
     document.title = `${title.textContent} — Collidoscope`;
     showHead(j);
-    showActions(j);
+    if (changed) showActions(j);
     if (j.state === 'done' && !shownDone) { shownDone = true; await showResult(j); }
     if (isActive(j)) timer = setTimeout(refresh, POLL_MS);
   }
@@ -74,7 +78,7 @@ export async function render(main, ctx, id) {
         fact('Wall', wallLabel(s.wall, modelsById)),
         motionText(s.wall_motion) ? fact('Wall motion', motionText(s.wall_motion)) : null,
         fact('Particles', `${s.particles?.count?.toLocaleString() ?? '—'}, radius ${radius}`),
-        fact('Placement', s.placement?.kind ?? 'pour'),
+        fact('Placement', s.placement?.kind ?? 'fill'),
         s.contact_model === 'hertz_mindlin' ? fact('Contact law', 'Hertz–Mindlin') : null,
         fact('Simulated', `${s.duration ?? '—'} s at ${s.fps ?? '—'} frames/s`),
         fact('Method', `${s.method ?? 'bin'}${s.backend && s.backend !== 'auto' ? `, ${s.backend}` : ''}`),
@@ -90,13 +94,15 @@ export async function render(main, ctx, id) {
     const buttons = [];
     if (isActive(j)) {
       buttons.push(h('button', { type: 'button', class: 'secondary', onclick: async () => {
-        try { await post(`/api/v1/jobs/${j.id}/cancel`); clearTimeout(timer); refresh(); } catch (e) { showError(error, e); }
+        showError(actionError, null);
+        try { await post(`/api/v1/jobs/${j.id}/cancel`); clearTimeout(timer); refresh(); } catch (e) { showError(actionError, e); }
       } }, 'Cancel job'));
     }
     if (j.state !== 'running') {
       buttons.push(h('button', { type: 'button', class: 'danger', onclick: async () => {
         if (!confirm(`Delete job ${j.id} and its files? Share links to it stop working.`)) return;
-        try { await del(`/api/v1/jobs/${j.id}`); ctx.go('#/jobs'); } catch (e) { showError(error, e); }
+        showError(actionError, null);
+        try { await del(`/api/v1/jobs/${j.id}`); ctx.go('#/jobs'); } catch (e) { showError(actionError, e); }
       } }, 'Delete job'));
     }
     buttons.push(h('a', { class: 'button secondary', href: '#/jobs' }, 'All jobs'));
@@ -116,7 +122,7 @@ export async function render(main, ctx, id) {
       if (video.videoWidth) video.style.maxWidth = `${Math.max(480, Math.min(2 * video.videoWidth, 1280))}px`;
     });
     const desc = h('p', { id: 'video-desc', class: 'hint' },
-      `Animation of ${s.particles?.count ?? 'the'} particles (${s.placement?.kind ?? 'pour'}) colliding with ${wallLabel(s.wall, modelsById)}`
+      `Animation of ${s.particles?.count ?? 'the'} particles (${s.placement?.kind ?? 'fill'}) colliding with ${wallLabel(s.wall, modelsById)}`
       + `${motionText(s.wall_motion) ? `, ${s.wall_motion.part > 0 ? 'whose' : 'which'} ${motionText(s.wall_motion)}` : ''}, `
       + `${s.duration ?? '?'} simulated seconds; colour shows each particle's speed; no sound.`);
     const figures = h('dl', { class: 'figures' });
@@ -265,52 +271,70 @@ async function downloads(L, manifest) {
   return h('div', { class: 'card' }, parts);
 }
 
-// A share link: anyone with it sees the result without an account.
+// Share links: anyone with one sees the result without an account. The
+// owner's live links are listed with the job, so one made on an earlier visit
+// can still be copied or revoked.
 function shareSection(j) {
   const error = errorBox();
-  const out = h('div');
+  const list = h('div');
+  const said = h('p', { role: 'status', class: 'status' });
   const button = h('button', { type: 'button' }, 'Make a share link');
+  let shown = 0;
+  const relabel = () => { button.textContent = shown ? 'Make another share link' : 'Make a share link'; };
+  // One link's card: the URL, the embed code, copy, open and revoke.
+  function card(s) {
+    const url = h('input', { class: 'share-url', readonly: true, value: s.url, id: `share-url-${s.token}` });
+    const snippet = `<iframe src="${s.embed}" width="640" height="360" title="Collidoscope result" allowfullscreen></iframe>`;
+    const embed = h('textarea', { class: 'share-url', readonly: true, rows: '3', value: snippet, id: `share-embed-${s.token}` });
+    const copy = (input, what) => async () => {
+      try {
+        await navigator.clipboard.writeText(input.value);
+        said.textContent = `${what} copied.`;
+      } catch {
+        input.focus();
+        input.select();
+        said.textContent = `${what} selected: press Ctrl+C (⌘C on a Mac) to copy it.`;
+      }
+    };
+    const box = h('div', { class: 'card' });
+    const revoke = h('button', { type: 'button', class: 'danger', onclick: async () => {
+      showError(error, null);
+      try {
+        await del(`/api/v1/shares/${s.token}`);
+        box.remove();
+        shown--;
+        relabel();
+        said.textContent = 'The link was revoked: it now shows “not found”.';
+        button.focus();
+      } catch (e) { showError(error, e); }
+    } }, 'Revoke link');
+    box.append(
+      h('label', { for: url.id }, 'Share link', s.created_at ? h('span', { class: 'hint' }, ` (made ${fmtDate(s.created_at)})`) : null), url,
+      h('div', { class: 'actions' }, h('button', { type: 'button', onclick: copy(url, 'Link') }, 'Copy link'),
+        h('a', { class: 'button secondary', href: s.url, target: '_blank', rel: 'noopener' }, 'Open', h('span', { class: 'visually-hidden' }, ' (new tab)')),
+        revoke),
+      h('label', { for: embed.id }, 'Embed in a page or slides'), embed,
+      h('div', { class: 'actions' }, h('button', { type: 'button', class: 'secondary', onclick: copy(embed, 'Embed code') }, 'Copy embed code')),
+      h('p', { class: 'hint' }, s.expires_at ? `The link expires ${fmtDate(s.expires_at)}.` : 'The link does not expire; revoke it to stop it.'));
+    return { box, copyLink: copy(url, 'Link') };
+  }
   button.addEventListener('click', async () => {
     showError(error, null);
     button.disabled = true;
     try {
-      const s = await post(`/api/v1/jobs/${j.id}/shares`, {});
-      const url = h('input', { class: 'share-url', readonly: true, value: s.url, id: 'share-url' });
-      const snippet = `<iframe src="${s.embed}" width="640" height="360" title="Collidoscope result" allowfullscreen></iframe>`;
-      const embed = h('textarea', { class: 'share-url', readonly: true, rows: '3', value: snippet, id: 'share-embed' });
-      const copied = h('p', { role: 'status', class: 'status' });
-      const copy = (input, what) => async () => {
-        try {
-          await navigator.clipboard.writeText(input.value);
-          copied.textContent = `${what} copied.`;
-        } catch {
-          input.focus();
-          input.select();
-          copied.textContent = `${what} selected: press Ctrl+C (⌘C on a Mac) to copy it.`;
-        }
-      };
-      const revoke = h('button', { type: 'button', class: 'danger', onclick: async () => {
-        try {
-          await del(`/api/v1/shares/${s.token}`);
-          out.replaceChildren(h('p', { role: 'status' }, 'The link was revoked: it now shows “not found”.'));
-          button.hidden = false;
-          button.disabled = false;
-          button.focus();
-        } catch (e) { showError(error, e); }
-      } }, 'Revoke link');
-      button.hidden = true;
-      out.replaceChildren(h('div', { class: 'card' },
-        h('label', { for: 'share-url' }, 'Share link'), url,
-        h('div', { class: 'actions' }, h('button', { type: 'button', onclick: copy(url, 'Link') }, 'Copy link'),
-          h('a', { class: 'button secondary', href: s.url, target: '_blank', rel: 'noopener' }, 'Open', h('span', { class: 'visually-hidden' }, ' (new tab)')),
-          revoke),
-        h('label', { for: 'share-embed' }, 'Embed in a page or slides'), embed,
-        h('div', { class: 'actions' }, h('button', { type: 'button', class: 'secondary', onclick: copy(embed, 'Embed code') }, 'Copy embed code')),
-        copied,
-        h('p', { class: 'hint' }, s.expires_at ? `The link expires ${fmtDate(s.expires_at)}.` : 'The link does not expire; revoke it to stop it.')));
-      await copy(url, 'Link')();
-    } catch (e) { showError(error, e); button.disabled = false; }
+      const c = card(await post(`/api/v1/jobs/${j.id}/shares`, {}));
+      list.append(c.box);
+      shown++;
+      relabel();
+      await c.copyLink();
+    } catch (e) { showError(error, e); }
+    button.disabled = false;
   });
+  get(`/api/v1/jobs/${j.id}/shares`).then((shares) => {
+    for (const s of shares) list.append(card(s).box);
+    shown += shares.length;
+    relabel();
+  }).catch((e) => showError(error, e));
   return h('section', { 'aria-labelledby': 'share-h' }, h('h2', { id: 'share-h' }, 'Share'),
-    h('p', {}, 'A link anyone can open without an account, and a player to embed in a page or slides.'), button, error, out);
+    h('p', {}, 'A link anyone can open without an account, and a player to embed in a page or slides.'), list, button, error, said);
 }

@@ -41,7 +41,7 @@ export async function render(main, ctx) {
       await ctx.signedIn();
       if (!ctx.me) throw new Error('Signed in, but the session cookie was not kept: '
         + 'the browser may block cookies for this site.');
-      ctx.go('#/jobs');
+      ctx.afterSignIn();
     } catch (e) {
       showError(f.error, e);
       f.button.disabled = false;
