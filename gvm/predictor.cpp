@@ -330,17 +330,8 @@ Expected<ResourcePredictor> ResourcePredictor::from_json(const std::string& text
 }
 
 Status ResourcePredictor::save(const std::string& path) const {
-  // Write then rename, so a reader never sees half a model.
-  const std::string tmp = temp_path_for(path);
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) return io_error("cannot write model '" + tmp + "'");
-    out << to_json() << "\n";
-    if (!out.flush()) return io_error("error writing model '" + tmp + "'");
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0)
-    return io_error("cannot rename '" + tmp + "' to '" + path + "'");
-  return Status::ok();
+  // Write then rename, so a reader never sees half a model (and a failed write leaves no temporary file).
+  return write_file_atomic(path, to_json() + "\n");
 }
 
 Expected<ResourcePredictor> ResourcePredictor::load(const std::string& path) {

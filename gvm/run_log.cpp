@@ -1,5 +1,6 @@
 #include "gvm/run_log.h"
 
+#include "common/atomic_file.h"
 #include "gvm/csv.h"
 
 #include <algorithm>
@@ -252,13 +253,10 @@ Expected<std::vector<RunRecord>> read_run_log(const std::string& path) {
   return rows;
 }
 
+// Through a temporary name: `gvm merge a.csv b.csv --out a.csv` reads its
+// inputs first, and a write cut short would have left the log truncated.
 Status write_run_log(const std::string& path, const std::vector<RunRecord>& rows) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  if (!out) return io_error("cannot write run log '" + path + "'");
-  out << format_run_log(rows);
-  out.close();
-  if (!out) return io_error("error writing run log '" + path + "'");
-  return Status::ok();
+  return write_file_atomic(path, format_run_log(rows));
 }
 
 }  // namespace collido::gvm

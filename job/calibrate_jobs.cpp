@@ -359,12 +359,14 @@ Expected<CalibrateSummary> run_sweep(const JobSweepSpec& sw, const CalibrateHook
        " draws refused while sizing -> " + sw.out_path);
 
   std::vector<JobRecord> best(plans.size());
-  std::vector<int> state(plans.size(), 0);  // 0 not run, 1 measured, 2 failed
+  // 0 not run, 1 measured, 2 failed, 3 measured and then failed on a repeat
+  // (its measure is kept; a failing job is not run again).
+  std::vector<int> state(plans.size(), 0);
   const std::string dir = sw.work_dir + "/run";
   size_t rows_written = 0;
   for (int pass = 0; pass < sw.repeats && !summary.out_of_budget; ++pass)
     for (size_t i = 0; i < plans.size(); ++i) {
-      if (state[i] == 2) continue;
+      if (state[i] >= 2) continue;
       if (cancel_requested()) return cancelled("calibration cancelled");
       if (sw.budget_s > 0 && seconds_since(t_start) > sw.budget_s) {
         summary.out_of_budget = true;
@@ -388,7 +390,7 @@ Expected<CalibrateSummary> run_sweep(const JobSweepSpec& sw, const CalibrateHook
         st = backend_error("the job ran on " + ran + ", not on " + sw.backend);
       pr.finished = true;
       if (!st) {
-        state[i] = 2;
+        state[i] = state[i] == 1 ? 3 : 2;
         pr.error = st.message();
         if (hooks.progress) hooks.progress(pr);
         continue;
@@ -402,7 +404,7 @@ Expected<CalibrateSummary> run_sweep(const JobSweepSpec& sw, const CalibrateHook
       state[i] = 1;
       std::vector<JobRecord> rows;
       for (size_t j = 0; j < plans.size(); ++j)
-        if (state[j] == 1) rows.push_back(best[j]);
+        if (state[j] == 1 || state[j] == 3) rows.push_back(best[j]);
       if (Status s = write_job_log(sw.out_path, rows); !s) return s;
       rows_written = rows.size();
       pr.triangles = int64_t(row.inputs.triangles);
@@ -413,7 +415,7 @@ Expected<CalibrateSummary> run_sweep(const JobSweepSpec& sw, const CalibrateHook
       pr.rows = rows_written;
       if (hooks.progress) hooks.progress(pr);
     }
-  for (int s : state) summary.failed += s == 2, summary.measured += s == 1;
+  for (int s : state) summary.failed += s == 2, summary.measured += s == 1 || s == 3;
   summary.took_s = seconds_since(t_start);
   if (summary.measured == 0)
     return summary.out_of_budget
