@@ -3,6 +3,8 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 
@@ -36,12 +38,20 @@ int64_t ParsedArgs::get_int(const std::string& name, int64_t fallback, std::stri
   long long v = std::strtoll(s, &end, 10);
   if (end == s || *end != '\0' || errno == ERANGE) {
     // Accept 1e6-style integers, which people type for particle counts.
+    // (Cast only what int64 holds: 1e30, inf and nan would be undefined.)
     double d = std::strtod(s, &end);
-    if (end != s && *end == '\0' && d == static_cast<double>(static_cast<int64_t>(d)))
+    if (end != s && *end == '\0' && std::isfinite(d) && std::fabs(d) < 9.2e18 && d == std::floor(d))
       return static_cast<int64_t>(d);
     if (error) *error = "--" + name + " expects an integer, got '" + it->second + "'";
     return fallback;
   }
+  return v;
+}
+
+int ParsedArgs::get_int32(const std::string& name, int fallback, std::string* error) const {
+  int v = fallback;
+  std::string e;
+  if (!get_int_in(name, fallback, INT32_MIN, INT32_MAX, &v, &e) && error && error->empty()) *error = e;
   return v;
 }
 

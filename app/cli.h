@@ -32,6 +32,9 @@ class ParsedArgs {
   // Typed accessors; on a malformed value they set *error and return the fallback.
   double get_double(const std::string& name, double fallback, std::string* error) const;
   int64_t get_int(const std::string& name, int64_t fallback, std::string* error) const;
+  // The same for a flag held in an int: a value past int's range sets *error
+  // (cast, 4294967297 would have been taken for 1 and passed the range checks).
+  int get_int32(const std::string& name, int fallback, std::string* error) const;
   // An integer flag in [lo, hi] (fallback when absent); false with *error set
   // otherwise, so a value past int's range is refused rather than wrapped.
   bool get_int_in(const std::string& name, int64_t fallback, int64_t lo, int64_t hi, int* out,

@@ -145,8 +145,8 @@ int calibrate_jobs(const ParsedArgs& parsed) {
   spec.quick = parsed.has("quick");
   spec.configs = parsed.get_int("configs", spec.quick ? 4 : cuda ? 150 : 300, &error);
   spec.seed = static_cast<uint64_t>(parsed.get_int("seed", 1, &error));
-  spec.threads = static_cast<int>(parsed.get_int("job-threads", 1, &error));
-  spec.repeats = static_cast<int>(parsed.get_int("repeats", cuda ? 2 : 3, &error));
+  spec.threads = parsed.get_int32("job-threads", 1, &error);
+  spec.repeats = parsed.get_int32("repeats", cuda ? 2 : 3, &error);
   spec.budget_s = static_cast<double>(parsed.get_int("budget", cuda && !spec.quick ? 480 : 0, &error));
   if (!error.empty()) return usage_error(cmd, error);
   spec.render = !parsed.has("no-render");
@@ -280,7 +280,7 @@ int cmd_calibrate_exec(const Args& args) {
     return kExitOk;
   }
   if (p->positional().size() != 1) return usage_error(cmd, "one request expected");
-  const int fd = int(p->get_int("result-fd", STDOUT_FILENO, &err));
+  const int fd = p->get_int32("result-fd", STDOUT_FILENO, &err);
   if (!err.empty()) return usage_error(cmd, err);
   std::string request = p->positional()[0];
   if (request.empty() || request[0] != '{') {

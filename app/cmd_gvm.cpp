@@ -95,8 +95,8 @@ const std::vector<FlagSpec>& train_flags() {
       {"folds", true, "job log: machines per cost, one per fold held out (default 5)"},
       {"coverage", true, "job log: share of held-out runs the interval holds (default 0.8)"},
       {"splits", true, "job log: 70/30 splits scored, seeds split-seed.. (default 1)"},
-      {"resample", true, "job log: train the written model on this many rows drawn with "
-                         "replacement (timing runs)"},
+      {"resample", true, "job log: train the written model on this many of the log's rows, "
+                         "drawn without repeats (timing runs)"},
       {"curve", true, "write every epoch's train/validation loss to this CSV"},
       {"predictions", true, "write the validation rows with every model's predictions to this "
                             "CSV (a job log: the first split's, with the GVM's p10, p50, p90)"},
@@ -128,14 +128,14 @@ int gvm_train(const Args& args) {
   if (!parsed->has("out")) return usage_error(cmd, "--out MODEL.json is required");
 
   g::CompareOptions opt;
-  opt.gvm.hidden = static_cast<int>(parsed->get_int("hidden", opt.gvm.hidden, &error));
-  opt.gvm.epochs = static_cast<int>(parsed->get_int("epochs", opt.gvm.epochs, &error));
+  opt.gvm.hidden = parsed->get_int32("hidden", opt.gvm.hidden, &error);
+  opt.gvm.epochs = parsed->get_int32("epochs", opt.gvm.epochs, &error);
   opt.gvm.seed = static_cast<uint64_t>(parsed->get_int("seed", 1, &error));
   opt.gvm.delta = parsed->get_double("delta", opt.gvm.delta, &error);
   opt.gvm.beta_max = parsed->get_double("beta-max", opt.gvm.beta_max, &error);
-  opt.gvm.ensemble = static_cast<int>(parsed->get_int("ensemble", opt.gvm.ensemble, &error));
+  opt.gvm.ensemble = parsed->get_int32("ensemble", opt.gvm.ensemble, &error);
   opt.split_seed = static_cast<uint64_t>(parsed->get_int("split-seed", 1, &error));
-  opt.mlp.epochs = static_cast<int>(parsed->get_int("mlp-epochs", opt.mlp.epochs, &error));
+  opt.mlp.epochs = parsed->get_int32("mlp-epochs", opt.mlp.epochs, &error);
   if (!error.empty()) return usage_error(cmd, error);
   opt.gvm.adaptive_delta = !parsed->has("fixed-delta");
   if (parsed->has("activation")) {

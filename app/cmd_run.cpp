@@ -259,7 +259,7 @@ int cmd_job_exec(const Args& args) {
     return kExitOk;
   }
   if (p->positional().size() != 1) return usage_error("job-exec", "one spec file expected");
-  int fd = int(p->get_int("progress-fd", -1, &err));
+  int fd = p->get_int32("progress-fd", -1, &err);
   if (!err.empty()) return usage_error("job-exec", err);
   const std::string progress_file = p->get("progress-file", "");
   if (fd >= 0 && !progress_file.empty())
@@ -280,7 +280,7 @@ int cmd_job_exec(const Args& args) {
   auto spec = job::spec_from_json(*text);
   if (!spec) return report(Status(spec.status().code(), p->positional()[0] + ": " +
                                                             spec.status().message()));
-  if (p->has("threads")) spec->threads = int(p->get_int("threads", 0, &err));
+  if (p->has("threads")) spec->threads = p->get_int32("threads", 0, &err);
   if (!err.empty()) return usage_error("job-exec", err);
   if (p->has("resume") && job::holds_a_run(spec->out_dir)) spec->dir_policy = job::DirPolicy::kResume;
   // A job whose parent (a service worker) is gone must not run on beside the

@@ -332,12 +332,16 @@ std::vector<std::string> feature_names_with(const std::vector<std::string>& devi
   return n;
 }
 
-// The q-quantile of sorted values with the split-conformal finite-sample rank:
-// the ceil((n + 1) q)-th smallest, clamped to the sample.
-double conformal_quantile(const std::vector<double>& sorted, double q) {
+// The q-quantile of sorted values with the split-conformal finite-sample rank,
+// each side outward: an upper bound is the ceil((n + 1) q)-th smallest, a lower
+// one the floor((n + 1) q)-th (the ceiling there put one more residual below
+// it: with 10 residuals and q = 0.1 the second smallest, not the first),
+// clamped to the sample.
+double conformal_quantile(const std::vector<double>& sorted, double q, bool lower) {
   if (sorted.empty()) return 0.0;
   const double n = double(sorted.size());
-  long rank = long(std::ceil((n + 1) * q)) - 1;
+  const double at = (n + 1) * q;
+  long rank = long(lower ? std::floor(at) : std::ceil(at)) - 1;
   rank = std::clamp<long>(rank, 0, long(sorted.size()) - 1);
   return sorted[size_t(rank)];
 }
@@ -758,8 +762,8 @@ Expected<JobCostModel> JobCostModel::train(const std::vector<JobRecord>& rows,
       model.held_out_[k].push_back({decode_cost(k, y(r, k), cuda), decode_cost(k, p, cuda)});
     }
     std::sort(res.begin(), res.end());
-    model.q_lo_[k] = conformal_quantile(res, (1 - opt.coverage) / 2);
-    model.q_hi_[k] = conformal_quantile(res, (1 + opt.coverage) / 2);
+    model.q_lo_[k] = conformal_quantile(res, (1 - opt.coverage) / 2, /*lower=*/true);
+    model.q_hi_[k] = conformal_quantile(res, (1 + opt.coverage) / 2, /*lower=*/false);
   }
   JobTrainReport own;
   if (!report) report = &own;
@@ -887,6 +891,11 @@ Expected<JobCostPrediction> JobCostModel::predict(const JobInputs& in) const {
     *iv[k] = {lo, mid, hi};
   }
   p.outside_reasons = check_range(in, x.data());
+  // A GPU job whose device memory the model never learnt (too few GPU rows to
+  // train it) would read as 0 bytes: admission must not trust that.
+  if (cuda && members_[kDevice].empty())
+    p.outside_reasons.push_back(
+        "device memory: the model was trained on too few GPU jobs to predict it (given as 0)");
   p.outside_training = !p.outside_reasons.empty();
   for (const std::string& r : p.outside_reasons)
     p.outside_reason += (p.outside_reason.empty() ? "" : "; ") + r;

@@ -155,6 +155,12 @@ Status validate(const JobMeasure& m) {
       {"output_bytes", m.output_bytes}, {"load_avg", m.load_avg}};
   for (const auto& [name, v] : fields)
     if (!std::isfinite(v) || v < 0) return invalid_argument(std::string(name) + " must be >= 0");
+  // Learnt as logs: a time or memory of 0 would be learnt as 10^-300 and
+  // squeeze every other row into a sliver of the model's range.
+  for (const auto& [name, v] : {std::pair<const char*, double>{"total_s", m.total_s},
+                                {"per_frame_s", m.per_frame_s},
+                                {"peak_host_bytes", m.peak_host_bytes}})
+    if (!(v > 0)) return invalid_argument(std::string(name) + " must be > 0 (a job that ran took time and memory)");
   const std::pair<const char*, double> notes[] = {{"active_steps", m.active_steps},
                                                   {"wall_contact_steps", m.wall_contact_steps},
                                                   {"pair_contact_steps", m.pair_contact_steps}};
@@ -339,7 +345,8 @@ Expected<JobMeasure> job_measure_from_manifest(const std::string& result_json,
     m.simulate_s = c.at("simulate_s").get<double>();
     m.render_s = c.at("render_s").get<double>();
     const double frames = c.at("frames").get<double>();
-    m.per_frame_s = frames > 0 ? (m.simulate_s + m.render_s) / frames : 0.0;
+    if (!(frames > 0)) return invalid_argument("the job wrote no frame: no cost per frame to learn from");
+    m.per_frame_s = (m.simulate_s + m.render_s) / frames;
     m.peak_host_bytes = c.at("peak_host_bytes").get<double>();
     m.peak_device_bytes = c.at("peak_device_bytes").get<double>();
     // The engine's share of the simulation, as a share of the whole job.

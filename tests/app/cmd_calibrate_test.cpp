@@ -199,10 +199,16 @@ TEST(CmdCalibrate, JobSweepTrainAndPredictAScene) {
     const double p10 = at("p10"), p50 = at("p50"), p90 = at("p90");
     EXPECT_TRUE(p10 <= p50 && p50 <= p90 && p10 > 0) << cost << ": " << row;
   }
-  // Options of the other kind of log are refused.
+  // Options of the other kind of log are refused, and so are integers past
+  // int's range (cast, 4294967297 hidden neurons were 1) or past int64's.
   EXPECT_EQ(cmd_gvm({"train", "--logs", std::string(COLLIDO_SOURCE_DIR) + "/bench/data/jobs_cpu.csv",
                      "--out", model, "--ensemble", "3"}),
             kExitUsage);
+  for (const char* hidden : {"4294967297", "1e30", "inf"})
+    EXPECT_EQ(cmd_gvm({"train", "--logs", std::string(COLLIDO_SOURCE_DIR) + "/bench/data/jobs_cpu.csv",
+                       "--out", model, "--hidden", hidden}),
+              kExitUsage)
+        << hidden;
 
   // The model replayed on its log in the log's order, alone and at the machine's pace.
   const std::string jobs_log = std::string(COLLIDO_SOURCE_DIR) + "/bench/data/jobs_cpu.csv";
