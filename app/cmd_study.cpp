@@ -80,7 +80,10 @@ int cmd_study(const Args& args) {
     if (Status s = study::run_dynamics_study(o, &dynamics); !s) return failed(s);
   std::string machine = std::to_string(pool.size()) + " CPU threads";
   if (o.backend == sim::Backend::kCuda) machine += ", " + sim::cuda_device_name();
-  if (Status s = study::write_study(dir, detect, dynamics, machine); !s) return failed(s);
+  if (Status s = study::write_study(dir, only != "dynamics" ? &detect : nullptr,
+                                    only != "detect" ? &dynamics : nullptr, machine);
+      !s)
+    return failed(s);
   // The findings in brief: failures by kind, and the automatic choices.
   size_t lost = 0, auto_rows = 0, auto_inexact = 0;
   for (const auto& r : detect) {

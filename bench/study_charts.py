@@ -72,6 +72,14 @@ def load(path, names):
     return rows
 
 
+def write_text(path, text):
+    """Through a temporary name, so a chart run cut short leaves no half file."""
+    tmp = f"{path}.tmp-{os.getpid()}"
+    with open(tmp, "w") as f:
+        f.write(text)
+    os.replace(tmp, path)
+
+
 def save(fig, out, name):
     path = os.path.join(out, name)
     fig.savefig(path, dpi=DPI, bbox_inches="tight")  # tight: legends sit outside the axes
@@ -141,15 +149,26 @@ def on_front(p, rows, tol=0.0, beyond_repeat=False):
     return not any(q is not p and faster(q) and q["error"] <= p["error"] for q in rows)
 
 
+def folder_backends(rows):
+    """Each study folder's backends (its rows but the reference's)."""
+    out = defaultdict(set)
+    for r in rows:
+        if r["method"] != "reference":
+            out[r["_dir"]].add(r["backend"])
+    return out
+
+
 def pareto_groups(rows):
     """(backend, scene, placement) -> (largest particle count, its rows with an error)."""
     groups = defaultdict(list)
-    # The reference runs on the CPU whatever the study's backend: it belongs to every group.
-    backends = {r["backend"] for r in rows if r["method"] != "reference"} or {"cpu"}
+    # The reference runs on the CPU whatever the study's backend: it belongs to
+    # the groups of its own study (folder), measured on that machine, not to
+    # another machine's charts.
+    backends = folder_backends(rows)
     for r in rows:
         if r["error"] is None:
             continue
-        for b in (backends if r["method"] == "reference" else [r["backend"]]):
+        for b in (backends.get(r["_dir"]) or {"cpu"} if r["method"] == "reference" else [r["backend"]]):
             groups[(b, r["scene"], r["placement"])].append(r)
     out = {}
     for key, rs in sorted(groups.items()):
@@ -241,7 +260,12 @@ def paper_table4(out, rows):
         for scene, method, color in OUR_T4:
             if method == "reference" and backend != "cpu":
                 continue
-            pts = series(paper_rows([r for r in rows if r["backend"] == backend], scene, method))
+            # The CPU's reference from the CPU's own study where there is one (a
+            # GPU study's reference ran on that machine's host).
+            cpu_dirs = {d for d, bs in folder_backends(rows).items() if "cpu" in bs}
+            mine = [r for r in rows if r["backend"] == backend
+                    and (method != "reference" or not cpu_dirs or r["_dir"] in cpu_dirs)]
+            pts = series(paper_rows(mine, scene, method))
             if pts:
                 label = f"ours {backend} {method} {scene}"
                 ax.plot(*zip(*pts), ls=ls, marker=mk, color=color, label=label)
@@ -278,8 +302,7 @@ def paper_table4(out, rows):
         + " |")
     lines.append("\nSpeed-up above 1: this build is faster than the paper's GTX480 circumcircle.")
     path = os.path.join(out, "paper_table4.md")
-    with open(path, "w") as f:
-        f.write("\n".join(lines) + "\n")
+    write_text(path, "\n".join(lines) + "\n")
     print(path)
 
 
@@ -459,7 +482,7 @@ def main(argv):
     out = args.out or os.path.join(args.dirs[0], "charts")
     os.makedirs(out, exist_ok=True)
 
-    rows = detect_rows([r for d in args.dirs for r in load(
+    rows = detect_rows([dict(r, _dir=k) for k, d in enumerate(args.dirs) for r in load(
         os.path.join(d, "study_detect.csv"),
         ("backend", "scene", "placement", "method", "traversal", "precision", "verdict"))])
     summary = {"detect": [], "dynamics": {}}
@@ -487,8 +510,7 @@ def main(argv):
         k: dict(v) for k, v in sorted(per.items())}
 
     path = os.path.join(out, "summary.json")
-    with open(path, "w") as f:
-        json.dump(summary, f, indent=1)
+    write_text(path, json.dumps(summary, indent=1))
     print(path)
 
     print(f"\n{'backend':8} {'scene':12} {'placement':9} {'particles':>10} {'auto':32} "

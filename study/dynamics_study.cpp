@@ -118,7 +118,8 @@ Status run(const Setup& s, double dt, Outcome* out) {
   sim::FrameStats st;
   if (Status e = simu.measure(&st); !e) return e;
   out->e0 = st.total_energy();
-  const uint64_t steps = static_cast<uint64_t>(std::ceil(s.duration / dt));
+  // (A duration that is a whole number of steps is not taken for one more by rounding.)
+  const uint64_t steps = static_cast<uint64_t>(std::ceil(s.duration / dt * (1 - 1e-12)));
   const uint64_t frames = s.per_step ? steps : 20;
   const double frame = s.per_step ? dt : s.duration / 20;
   for (uint64_t f = 0; f < frames; ++f) {
@@ -166,8 +167,17 @@ Status run_dynamics_study(const StudyOptions& o, std::vector<DynamicsRow>* rows)
         if (scene == "box" && o.quick && m != sim::Method::kBin) continue;
         for (double sf : speeds) {
           const double speed = sf * kSceneSpeed;
-          const Setup s = make_setup(scene, speed, pairs, m, o.backend, o.pool);
+          Setup s = make_setup(scene, speed, pairs, m, o.backend, o.pool);
           const double auto_dt = automatic_step(s, speed);
+          // A run step by step ends after a whole number of its steps: every
+          // run ends at the same time only when the duration is a whole number
+          // of the largest step (a multiple of every smaller one and of the
+          // reference's). Else the coarse runs flew on past the reference's end
+          // and the trajectory error measured that flight, not the step.
+          if (s.per_step) {
+            const double largest = auto_dt * dt_factors.back();
+            s.duration = std::ceil(s.duration / largest * (1 - 1e-12)) * largest;
+          }
           // One reference per setting: 16 times below the smallest factor's step.
           Outcome ref;
           if (Status e = run(s, auto_dt * dt_factors.front() / 16, &ref); !e) return e;

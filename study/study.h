@@ -74,8 +74,10 @@ Status run_dynamics_study(const StudyOptions& options, std::vector<DynamicsRow>*
 // Writes DIR/study_detect.csv, DIR/study_dynamics.csv (RFC 4180 quoting;
 // measurements with no value, such as a blown-up run's trajectory error, left
 // empty) and DIR/study.json (both tables plus the machine, the same rows),
-// each through a temporary name.
-Status write_study(const std::string& dir, const std::vector<DetectRow>& detect,
-                   const std::vector<DynamicsRow>& dynamics, const std::string& machine);
+// each through a temporary name. A half given as null was not run: its table
+// stays as it is, and so does its part of an existing study.json (`study
+// --only dynamics` refreshes the dynamics without emptying the detection).
+Status write_study(const std::string& dir, const std::vector<DetectRow>* detect,
+                   const std::vector<DynamicsRow>* dynamics, const std::string& machine);
 
 }  // namespace collido::study

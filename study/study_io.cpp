@@ -3,6 +3,7 @@
 // row is built once, as an ordered JSON object, and written both ways.
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
@@ -82,14 +83,28 @@ std::string table(const std::vector<T>& rows, Row* json, const Row& empty_header
 
 }  // namespace
 
-Status write_study(const std::string& dir, const std::vector<DetectRow>& detect,
-                   const std::vector<DynamicsRow>& dynamics, const std::string& machine) {
-  Row jd, jy;
-  const std::string d = table(detect, &jd, row_of(DetectRow{}));
-  const std::string y = table(dynamics, &jy, row_of(DynamicsRow{}));
-  const Row doc = {{"machine", machine}, {"detect", jd}, {"dynamics", jy}};
-  if (Status s = write_file_atomic(dir + "/study_detect.csv", d); !s) return s;
-  if (Status s = write_file_atomic(dir + "/study_dynamics.csv", y); !s) return s;
+Status write_study(const std::string& dir, const std::vector<DetectRow>* detect,
+                   const std::vector<DynamicsRow>* dynamics, const std::string& machine) {
+  // The half not run keeps its rows from the study.json already there.
+  Row doc = {{"machine", machine}, {"detect", Row::array()}, {"dynamics", Row::array()}};
+  if (!detect || !dynamics) {
+    std::ifstream in(dir + "/study.json");
+    const Row old = in ? Row::parse(in, nullptr, /*allow_exceptions=*/false) : Row();
+    for (const char* half : {"detect", "dynamics"})
+      if (old.is_object() && old.contains(half) && old[half].is_array()) doc[half] = old[half];
+  }
+  if (detect) {
+    Row rows;
+    const std::string d = table(*detect, &rows, row_of(DetectRow{}));
+    if (Status s = write_file_atomic(dir + "/study_detect.csv", d); !s) return s;
+    doc["detect"] = rows;
+  }
+  if (dynamics) {
+    Row rows;
+    const std::string y = table(*dynamics, &rows, row_of(DynamicsRow{}));
+    if (Status s = write_file_atomic(dir + "/study_dynamics.csv", y); !s) return s;
+    doc["dynamics"] = rows;
+  }
   return write_file_atomic(dir + "/study.json", doc.dump(1) + "\n");
 }
 

@@ -3,6 +3,7 @@
 // choice exact and marked), and bad arguments are usage errors. No timings.
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <sstream>
@@ -40,6 +41,10 @@ std::vector<std::map<std::string, std::string>> read_csv(const std::string& path
 
 TEST(CmdStudy, QuickDetectionOnWall1) {
   const std::string out = testing::TempDir() + "/cmd_study_test_wall1";
+  // The half not run (--only detect) keeps what an earlier study wrote of it.
+  std::filesystem::create_directories(out);
+  std::ofstream(out + "/study_dynamics.csv") << "scene\nkept\n";
+  std::ofstream(out + "/study.json") << R"({"machine": "earlier", "detect": [], "dynamics": [{"scene": "kept"}]})";
   ASSERT_EQ(cmd_study({"--quick", "--only", "detect", "--scenes", "wall1", "--max-particles", "1000",
                        "--meshes", COLLIDO_TEST_DATA "/meshes", "--out", out, "--threads", "2"}),
             kExitOk);
@@ -71,7 +76,26 @@ TEST(CmdStudy, QuickDetectionOnWall1) {
   EXPECT_GT(float_wrong, 0) << "within 1e-4 r of touching, float precision should be caught out";
   EXPECT_EQ(autos, 2);  // one automatic choice per placement
   std::ifstream json(out + "/study.json");
-  EXPECT_TRUE(json.good());
+  ASSERT_TRUE(json.good());
+  std::stringstream doc;
+  doc << json.rdbuf();
+  EXPECT_NE(doc.str().find("\"kept\""), std::string::npos) << "the dynamics rows were kept";
+  EXPECT_NE(doc.str().find("\"wall1\""), std::string::npos) << "the detection rows were written";
+  std::ifstream dynamics(out + "/study_dynamics.csv");
+  std::stringstream kept;
+  kept << dynamics.rdbuf();
+  EXPECT_EQ(kept.str(), "scene\nkept\n");
+}
+
+// A scene name that matches nothing fails and names the scenes there are,
+// instead of writing empty tables over a study.
+TEST(CmdStudy, AnUnknownSceneIsAFailureThatNamesTheScenes) {
+  testing::internal::CaptureStderr();
+  EXPECT_EQ(cmd_study({"--quick", "--only", "detect", "--scenes", "teapot", "--meshes",
+                       COLLIDO_TEST_DATA "/meshes", "--out", testing::TempDir() + "/cmd_study_test_unknown"}),
+            kExitFailure);
+  const std::string said = testing::internal::GetCapturedStderr();
+  EXPECT_NE(said.find("no detection scene 'teapot' (wall1, wall2, teapot_trimesh)"), std::string::npos) << said;
 }
 
 TEST(CmdStudy, BadArgumentsExitTwo) {
