@@ -11,6 +11,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -22,6 +23,7 @@
 #include "job/child.h"
 #include "job/job.h"
 #include "job/run_dir.h"
+#include "job/subprocess.h"
 
 namespace collido::app {
 
@@ -264,6 +266,18 @@ int cmd_job_exec(const Args& args) {
   const std::string progress_file = p->get("progress-file", "");
   if (fd >= 0 && !progress_file.empty())
     return usage_error("job-exec", "--progress-fd and --progress-file: choose one");
+  // A job whose parent (a service worker) is gone must not run on beside the
+  // one the restarted service resumes in the same directory: it dies with its
+  // parent, leaving its last checkpoint; a parent that died before this call
+  // (while the libraries loaded) is caught by its pid, which the parent gave.
+  // Started by no one (a shell), no matter; on a cluster the scheduler owns
+  // the process.
+  if (fd >= 0 && progress_file.empty()) {
+    const char* given = std::getenv(job::kParentPidVariable);
+    const pid_t parent = given ? pid_t(std::atol(given)) : getppid();
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (getppid() != parent) return kExitFailure;  // the parent died before prctl
+  }
   if (!progress_file.empty()) {
     // Appended: a requeued job's lines follow its first attempt's.
     fd = ::open(progress_file.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
@@ -283,15 +297,6 @@ int cmd_job_exec(const Args& args) {
   if (p->has("threads")) spec->threads = p->get_int32("threads", 0, &err);
   if (!err.empty()) return usage_error("job-exec", err);
   if (p->has("resume") && job::holds_a_run(spec->out_dir)) spec->dir_policy = job::DirPolicy::kResume;
-  // A job whose parent (a service worker) is gone must not run on beside the
-  // one the restarted service resumes in the same directory: it dies with its
-  // parent, leaving its last checkpoint. Started by no one (a shell), no matter;
-  // on a cluster the scheduler owns the process.
-  if (fd >= 0 && progress_file.empty()) {
-    const pid_t parent = getppid();
-    prctl(PR_SET_PDEATHSIG, SIGKILL);
-    if (getppid() != parent) return kExitFailure;  // the parent died before prctl
-  }
   // A viewer closing a pipe must not kill the job; SIGTERM asks it to stop.
   std::signal(SIGPIPE, SIG_IGN);
   std::signal(SIGTERM, on_terminate);

@@ -75,7 +75,7 @@ Expected<std::unique_ptr<ChildJob>> ChildJob::start(const std::string& executabl
                                                     const std::vector<std::string>& env_overrides) {
   auto process = Subprocess::start(
       {executable, "job-exec", spec_path, "--progress-fd", std::to_string(kProgressFd)},
-      kProgressFd, log_path, env_overrides);
+      kProgressFd, log_path, env_overrides, /*own_group=*/true);
   if (!process) return process.status();
   return std::unique_ptr<ChildJob>(new ChildJob(std::move(*process)));
 }

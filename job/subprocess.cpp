@@ -18,8 +18,12 @@ namespace collido::job {
 namespace {
 // The child starts with default signal handling and nothing blocked: a
 // service ignores SIGPIPE and may block signals in its threads, and both
-// would otherwise pass through exec to the child.
-void init_spawn_attr(posix_spawnattr_t* attr) {
+// would otherwise pass through exec to the child. own_group: in a process
+// group of its own, out of the terminal's reach: Ctrl-C on `serve` reached a
+// job in the service's group and killed it (SIGINT's default) before the
+// service could stop it to resume later, so the job ended failed. Its parent
+// stops it (and PR_SET_PDEATHSIG, should the parent die).
+void init_spawn_attr(posix_spawnattr_t* attr, bool own_group) {
   posix_spawnattr_init(attr);
   sigset_t none, defaults;
   sigemptyset(&none);
@@ -27,7 +31,12 @@ void init_spawn_attr(posix_spawnattr_t* attr) {
   for (int sig : {SIGPIPE, SIGINT, SIGTERM, SIGHUP, SIGCHLD}) sigaddset(&defaults, sig);
   posix_spawnattr_setsigmask(attr, &none);
   posix_spawnattr_setsigdefault(attr, &defaults);
-  posix_spawnattr_setflags(attr, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
+  short flags = POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF;
+  if (own_group) {
+    posix_spawnattr_setpgroup(attr, 0);
+    flags |= POSIX_SPAWN_SETPGROUP;
+  }
+  posix_spawnattr_setflags(attr, flags);
 }
 }  // namespace
 
@@ -40,7 +49,10 @@ std::string describe(const ExitInfo& e) {
 Expected<std::unique_ptr<Subprocess>> Subprocess::start(const std::vector<std::string>& argv,
                                                         int report_fd,
                                                         const std::string& log_path,
-                                                        const std::vector<std::string>& env_overrides) {
+                                                        const std::vector<std::string>& given_env,
+                                                        bool own_group) {
+  std::vector<std::string> env_overrides = given_env;
+  env_overrides.push_back(std::string(kParentPidVariable) + "=" + std::to_string(getpid()));
   if (argv.empty()) return invalid_argument("no program to start");
   int fds[2];
   if (pipe2(fds, O_CLOEXEC) != 0) return io_error(std::string("pipe: ") + std::strerror(errno));
@@ -58,7 +70,7 @@ Expected<std::unique_ptr<Subprocess>> Subprocess::start(const std::vector<std::s
   // (its listening port, its clients) would otherwise stay open in every job.
   posix_spawn_file_actions_addclosefrom_np(&actions, report_fd + 1);
   posix_spawnattr_t attr;
-  init_spawn_attr(&attr);
+  init_spawn_attr(&attr, own_group);
   std::vector<std::string> args = argv;
   std::vector<char*> cargv;
   for (auto& a : args) cargv.push_back(a.data());
@@ -167,8 +179,11 @@ Expected<CommandOutput> run_command(const std::vector<std::string>& argv, double
   posix_spawn_file_actions_addopen(&actions, STDIN_FILENO, "/dev/null", O_RDONLY, 0);
   posix_spawn_file_actions_adddup2(&actions, out_pipe[1], STDOUT_FILENO);
   posix_spawn_file_actions_adddup2(&actions, err_pipe[1], STDERR_FILENO);
+  // Nothing else of the parent's: an sbatch or squeue still waiting on a slow
+  // controller when the service dies would keep its sockets and files open.
+  posix_spawn_file_actions_addclosefrom_np(&actions, STDERR_FILENO + 1);
   posix_spawnattr_t attr;
-  init_spawn_attr(&attr);
+  init_spawn_attr(&attr, /*own_group=*/false);
   std::vector<char*> cargv;
   for (const std::string& a : argv) cargv.push_back(const_cast<char*>(a.c_str()));
   cargv.push_back(nullptr);

@@ -34,16 +34,24 @@ struct ExitInfo {
 // "exit code N" or "killed by signal N (Name)", for messages.
 std::string describe(const ExitInfo& e);
 
+// The variable a child finds its parent's pid in (Subprocess::start sets it):
+// a child that must die with its parent checks it against getppid() after
+// PR_SET_PDEATHSIG, which a parent that died before that call escapes.
+inline constexpr const char* kParentPidVariable = "COLLIDO_PARENT_PID";
+
 class Subprocess {
  public:
   // Starts argv[0] (a path, not searched in PATH) with argv, the write end of
   // a pipe as report_fd and stdin from /dev/null; stdout and stderr go to
   // log_path (appended) when given, else to the parent's. The environment is
-  // the parent's with each "NAME=value" of env_overrides set.
+  // the parent's with each "NAME=value" of env_overrides set, and
+  // kParentPidVariable. own_group: in a process group of its own, which the
+  // terminal's Ctrl-C does not reach (a job the service stops and resumes).
   static Expected<std::unique_ptr<Subprocess>> start(const std::vector<std::string>& argv,
                                                      int report_fd = 3,
                                                      const std::string& log_path = "",
-                                                     const std::vector<std::string>& env_overrides = {});
+                                                     const std::vector<std::string>& env_overrides = {},
+                                                     bool own_group = false);
   ~Subprocess();  // a child still running is killed (SIGKILL) and reaped
   Subprocess(const Subprocess&) = delete;
   Subprocess& operator=(const Subprocess&) = delete;

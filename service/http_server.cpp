@@ -773,7 +773,9 @@ Expected<std::unique_ptr<Server>> Server::start(JobService* service, const Serve
     const size_t max_request = shared->max_request;
     auto opts = Http::Endpoint::options()
                     .threads(options.threads)
-                    .flags(Tcp::Options::ReuseAddr)
+                    // Close-on-exec: a child the service starts (sbatch, squeue) that
+                    // outlived it would keep the port, and a restart could not listen.
+                    .flags(Tcp::Options::ReuseAddr | Tcp::Options::CloseOnExec)
                     .maxRequestSize(max_request)
                     .maxResponseSize(size_t(1) << 30);
     impl->endpoint->init(opts);

@@ -21,6 +21,7 @@
 #include "job/calibrate.h"
 #include "job/cost_model.h"
 #include "job/job_log.h"
+#include "job/run_dir.h"
 #include "service/cost_trainer.h"
 #endif
 #include "sim/detect.h"
@@ -167,6 +168,22 @@ struct JobService::CostModels {
 struct JobService::CostModels {};
 #endif
 
+// The temporary files (common/atomic_file.h) in the data folder, its models
+// and each job's folder (not their run folders, which claim_run_dir clears).
+static void remove_stale_temporaries(const std::string& data_dir) {
+  std::error_code ec;
+  std::vector<fs::path> dirs = {data_dir, fs::path(data_dir) / "models"};
+  for (auto it = fs::directory_iterator(fs::path(data_dir) / "jobs", ec);
+       !ec && it != fs::directory_iterator(); it.increment(ec))
+    if (it->is_directory(ec)) dirs.push_back(it->path());
+  for (const fs::path& dir : dirs)
+    for (auto it = fs::directory_iterator(dir, ec); !ec && it != fs::directory_iterator(); it.increment(ec))
+      if (is_temp_name(it->path().filename().string()) && it->is_regular_file(ec)) {
+        std::error_code rm;
+        fs::remove(it->path(), rm);
+      }
+}
+
 Expected<std::unique_ptr<JobService>> JobService::open(const ServiceConfig& given) {
   if (!init_crypto()) return backend_error("libsodium did not start (no entropy source)");
   if (given.executor != "local" && given.executor != "slurm")
@@ -181,6 +198,10 @@ Expected<std::unique_ptr<JobService>> JobService::open(const ServiceConfig& give
     fs::create_directories(fs::path(config.data_dir) / sub, ec);
     if (ec) return io_error(config.data_dir + "/" + sub + ": " + ec.message());
   }
+  // A server killed while it wrote a spec, a batch script or an upload left
+  // its temporary file; nothing else removes those (the run folders clear
+  // their own). Not beside other replicas (Slurm), whose writes may be live.
+  if (config.executor == "local") remove_stale_temporaries(config.data_dir);
 #ifdef COLLIDO_HAVE_JOB_COST
   const std::string retrained_dir = (fs::path(config.data_dir) / "cost_models").string();
   std::vector<std::string> notes;
@@ -1323,7 +1344,10 @@ Expected<job::JobSpec> JobService::read_spec(const Job& j) {
 Expected<job::JobSpec> JobService::write_run_spec(const Job& j, int threads) {
   auto spec = read_spec(j);
   if (!spec) return spec;
-  if (j.attempts > 1) spec->dir_policy = job::DirPolicy::kResume;
+  // A later attempt continues the run it left, if it had started one: stopped
+  // while it prepared (the wall, the placement, the automatic choice), it has
+  // no run folder yet, and resuming would fail where starting over works.
+  if (j.attempts > 1 && job::holds_a_run(j.run_dir)) spec->dir_policy = job::DirPolicy::kResume;
   if (threads > 0) spec->threads = threads;
   const std::string path = (fs::path(job_dir(j.id)) / "spec.run.json").string();
   if (Status st = write_file_atomic(path, job::spec_to_json(*spec) + "\n"); !st) return st;

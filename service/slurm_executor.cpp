@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <cctype>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -129,7 +130,9 @@ SlurmRequest slurm_request(const SlurmConfig& c, const Job& j) {
     const double high = t.value("high", t.value("value", -1.0));
     if (high > 0 && std::isfinite(high)) limit_s = high * c.time_factor + c.time_margin_s;
   }
-  r.time_limit_min = std::max(1, int(std::ceil(limit_s / 60.0)));
+  // Whole minutes, at least one and at most a year (in double first: a model
+  // extrapolating far outside its training could overflow an int).
+  r.time_limit_min = int(std::clamp(std::ceil(limit_s / 60.0), 1.0, 365.0 * 24 * 60));
   const double bytes = double(j.predicted_host_bytes) * c.mem_factor + double(c.mem_margin_bytes);
   r.mem_mib = std::max<uint64_t>(1, uint64_t(std::ceil(bytes / double(1 << 20))));
   return r;
@@ -384,6 +387,12 @@ void SlurmExecutor::follow() {
     double progress = j.progress;
     if (phase == SlurmPhase::kWaiting) {
       stage = st.state == "REQUEUED" || f.last.elapsed_s > 0 ? "requeued" : "pending";
+      // Why it waits, where the scheduler says more than that it is next in
+      // line: a limit it can never meet (PartitionTimeLimit, JobHeldAdmin)
+      // would otherwise read as an ordinary wait for ever.
+      const std::string& why = st.reason;
+      if (!why.empty() && why != "None" && why != "Priority" && why != "Resources")
+        stage += " (" + why + ")";
     } else {
       stage = f.last.elapsed_s > 0 || f.last.total ? job::to_string(f.last.stage) : "prepare";
       if (f.last.total || f.last.stage == job::Stage::kDone) {

@@ -378,6 +378,26 @@ TEST(Job, AResumedRunRefusesAWallFileChangedSinceItStarted) {
   EXPECT_EQ(resumed.resumed_from_frame, 12u);
 }
 
+// A job's process (ChildJob starts it so) is in a group of its own: Ctrl-C on
+// the service's terminal reaches the service, which stops the job to resume
+// it later, not the job, which died failed. Other children stay in the
+// caller's group (Ctrl-C on calibrate stops its children). Each child is told
+// its parent's pid.
+TEST(Job, AJobsChildIsInAProcessGroupOfItsOwn) {
+  for (bool own : {true, false}) {
+    auto child = Subprocess::start(
+        {"/bin/sh", "-c", "cut -d' ' -f5 /proc/self/stat >&3; echo \"$COLLIDO_PARENT_PID\" >&3"}, 3,
+        "", {}, own);
+    ASSERT_TRUE(child) << child.status().message();
+    std::vector<std::string> lines;
+    const ExitInfo e = (*child)->wait([&](const std::string& l) { lines.push_back(l); });
+    EXPECT_EQ(e.exit_code, 0);
+    ASSERT_EQ(lines.size(), 2u);
+    EXPECT_EQ(std::stol(lines[0]) != long(getpgrp()), own);
+    EXPECT_EQ(lines[1], std::to_string(getpid()));
+  }
+}
+
 TEST(Job, ASpawnedChildGetsTheReportPipeAndNothingElseOfTheParent) {
   // A parent as the service is: SIGPIPE ignored, a descriptor without close-on-exec.
   struct sigaction old {};

@@ -695,6 +695,40 @@ TEST_F(ServiceTest, AJobThatCanNeverFitIsRefusedWithTheFigures) {
   EXPECT_EQ(predicted.body, r.body);
 }
 
+// A job the service was stopped on before its run began (while it prepared:
+// no run folder yet) starts over at the next start, where resuming would
+// fail with "no such run directory"; temporary files a cut write left go.
+TEST_F(ServiceTest, AJobStoppedBeforeItsRunBeganStartsOverAtTheNextStart) {
+  Client c = client();
+  c.sign_up("eve");
+  const std::string id = c.call_json("POST", "/api/v1/jobs", tiny_job("wall1"), 202)["id"];
+  ASSERT_EQ(c.wait_job(id)["state"], "done");
+  server_.reset();
+  svc_.reset();
+  {  // as a crash in its first attempt's preparation left it: running, no run folder
+    auto store = open_sqlite_store(dir_ + "/collidoscope.db");
+    ASSERT_TRUE(store) << store.status().message();
+    auto j = (*store)->job_by_id(id);
+    ASSERT_TRUE(j);
+    ASSERT_TRUE(*(*store)->delete_job(id));
+    j->state = "running", j->stage = "prepare", j->progress = 0, j->attempts = 1, j->finished_at = 0;
+    ASSERT_TRUE((*store)->insert_job(*j));
+    fs::remove_all(j->run_dir);
+  }
+  // A write the stop cut short left temporary files; the next start removes them.
+  const fs::path job_folder = fs::path(dir_) / "jobs" / id;
+  std::ofstream(job_folder / "spec.run.json.tmp-123-0") << "half";
+  std::ofstream(fs::path(dir_) / "models" / "7.stl.tmp-123-1") << "half";
+  start();
+  EXPECT_FALSE(fs::exists(job_folder / "spec.run.json.tmp-123-0"));
+  EXPECT_FALSE(fs::exists(fs::path(dir_) / "models" / "7.stl.tmp-123-1"));
+  EXPECT_TRUE(fs::exists(job_folder / "spec.json"));
+  Client back = client();
+  back.token = back.call_json("POST", "/api/v1/sessions", {{"name", "eve"}, {"password", "correct horse"}})["token"];
+  const json again = back.wait_job(id);
+  EXPECT_EQ(again["state"], "done") << again.dump();
+}
+
 TEST(OpenApi, DescribesEveryRouteAndNoOther) {
   const json doc = json::parse(openapi_document());
   ASSERT_EQ(doc["openapi"].get<std::string>().substr(0, 2), "3.");
@@ -712,8 +746,12 @@ TEST(OpenApi, DescribesEveryRouteAndNoOther) {
 
 // The server as its own process, killed with SIGKILL while a job runs: it
 // comes back with the job resumed and finished and the database intact.
-TEST(ServeProcess, KilledServerResumesItsJob) {
-  const std::string dir = temp_dir("serve_kill");
+// The server as its own process, stopped while a job runs: killed with
+// SIGKILL, or by Ctrl-C at its terminal (SIGINT to its whole process group,
+// which the job must not take for its own stop). It comes back with the job
+// resumed and finished and the database intact.
+void stopped_server_resumes_its_job(bool ctrl_c) {
+  const std::string dir = temp_dir(ctrl_c ? "serve_ctrl_c" : "serve_kill");
   auto start = [&](const std::string& log) {
     const std::string out = dir + "/" + log;
     posix_spawn_file_actions_t fa;
@@ -725,9 +763,15 @@ TEST(ServeProcess, KilledServerResumesItsJob) {
     std::vector<char*> argv;
     for (auto& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
+    // In a process group of its own, as at a terminal (the test is not in it).
+    posix_spawnattr_t attr;
+    posix_spawnattr_init(&attr);
+    posix_spawnattr_setpgroup(&attr, 0);
+    posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETPGROUP);
     pid_t pid = 0;
-    EXPECT_EQ(posix_spawn(&pid, COLLIDO_BINARY, &fa, nullptr, argv.data(), environ), 0);
+    EXPECT_EQ(posix_spawn(&pid, COLLIDO_BINARY, &fa, &attr, argv.data(), environ), 0);
     posix_spawn_file_actions_destroy(&fa);
+    posix_spawnattr_destroy(&attr);
     std::smatch m;
     for (int i = 0; i < 200; ++i) {
       const std::string text = read_file(out);
@@ -752,7 +796,10 @@ TEST(ServeProcess, KilledServerResumesItsJob) {
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   ASSERT_TRUE(fs::exists(checkpoint));
-  ::kill(pid, SIGKILL);
+  if (ctrl_c)
+    ::kill(-pid, SIGINT);
+  else
+    ::kill(pid, SIGKILL);
   ::waitpid(pid, nullptr, 0);
   std::this_thread::sleep_for(std::chrono::milliseconds(300));  // its job-exec child dies with it
   auto [pid2, base2] = start("serve2.log");
@@ -780,6 +827,9 @@ TEST(ServeProcess, KilledServerResumesItsJob) {
   ASSERT_TRUE(store);
   EXPECT_EQ(*(*store)->integrity_check(), "ok");
 }
+
+TEST(ServeProcess, KilledServerResumesItsJob) { stopped_server_resumes_its_job(false); }
+TEST(ServeProcess, CtrlCStopsTheServerAndItsJobResumes) { stopped_server_resumes_its_job(true); }
 
 }  // namespace
 }  // namespace collido::service
