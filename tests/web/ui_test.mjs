@@ -587,6 +587,18 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     assert.equal(await page.getByLabel('Share link').count(), 0);
   });
 
+  await step('a link to a job, opened signed out, leads there after signing in', async () => {
+    await page.click('#sign-out');
+    await page.waitForURL(/#\/signin$/);
+    await page.goto(`${base}/#/jobs/${jobId}`);
+    await page.waitForURL(/#\/signin$/);
+    await page.fill('#signin-name', USER.name);
+    await page.fill('#signin-password', USER.password);
+    await page.click('form:has(#signin-name) button[type=submit]');
+    await page.waitForURL(new RegExp(`#/jobs/${jobId}$`));
+    await page.getByRole('heading', { name: 'test cup: 40 particles', level: 1 }).waitFor();
+  });
+
   await step('jobs: live progress, would-wait warning, cancel and delete', async () => {
     // A long job, sent with the page's own session, to watch and cancel.
     const long = await page.evaluate(async (wall) => {
