@@ -227,6 +227,13 @@ Expected<std::unique_ptr<JobService>> JobService::open(const ServiceConfig& give
   // Local jobs a stopped server left running start again; cluster jobs run on
   // under the scheduler, and the Slurm executor follows them again.
   if (config.executor == "local") {
+    // Those cancelled while they ran, stopped with the server before they
+    // ended, end cancelled now: requeued, they would run after all.
+    auto running = svc->store_->running_jobs();
+    if (!running) return running.status();
+    for (const Job& j : *running)
+      if (j.executor_ref.empty() && j.cancel_requested)
+        svc->job_finished(j, "cancelled", "cancelled (the service stopped before the job did)", {}, 0);
     auto requeued = svc->store_->requeue_running_jobs();
     if (!requeued) return requeued.status();
   }
@@ -1018,6 +1025,9 @@ Reply JobService::cancel_job(const User& u, const std::string& id) {
   }
   if (!cancelled) {
     if (j->state != "running") return error_reply(409, "job '" + id + "' has ended (" + j->state + ")");
+    // Kept in the store first: a restart, another replica, or an executor not
+    // yet started ends it cancelled (in memory alone the request was lost).
+    if (Status st = store_->request_cancel(id); !st) return status_reply(st);
     if (workers_)
       workers_->cancel(*j);
     else

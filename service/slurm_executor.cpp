@@ -121,6 +121,14 @@ std::vector<SqueueRow> parse_squeue(const std::string& text) {
   return rows;
 }
 
+bool sbatch_outcome_unknown(const job::CommandOutput& out) {
+  if (out.timed_out || out.exit.signal != 0) return true;
+  for (const char* transient : {"timed out", "Unable to contact", "Socket", "Connection refused",
+                                "temporarily unable", "Resource temporarily unavailable"})
+    if (out.err.find(transient) != std::string::npos) return true;
+  return false;
+}
+
 SlurmRequest slurm_request(const SlurmConfig& c, const Job& j) {
   SlurmRequest r;
   double limit_s = c.default_time_limit_s;
@@ -251,6 +259,17 @@ void SlurmExecutor::submit(const Job& j) {
   auto out = job::run_command(args, config_.command_timeout_s);
   if (!out || !out->ok()) {
     const std::string why = out ? out->describe_failure() : out.status().message();
+    // A controller that did not answer in time may still have queued it (sbatch
+    // retries while the controller is busy, and a reply lost on the way back
+    // leaves a job behind): the job stays claimed with no Slurm id, and follow()
+    // takes it up by its name or submits it again after orphan_grace_s. Only a
+    // refusal ends it.
+    if (out && sbatch_outcome_unknown(*out)) {
+      std::fprintf(stderr, "collidoscope serve: sbatch for job %s did not answer (%s); it is looked "
+                   "for by name and submitted again if it is not there\n",
+                   j.id.c_str(), why.c_str());
+      return;
+    }
     service_->job_finished(j, "failed", "the scheduler refused the job (sbatch " + why + ")", {}, 0);
     return;
   }
@@ -344,6 +363,13 @@ void SlurmExecutor::follow() {
       if (auto it = by_name.find(kNamePrefix + j.id); it != by_name.end()) {
         service_->store().set_job_executor_ref(j.id, it->second.id);
         j.executor_ref = it->second.id;
+      } else if (cancels.count(j.id) || j.cancel_requested) {
+        // Cancelled before the scheduler took it (its submission went
+        // unanswered): nothing runs it, and none will (a late one by its name too).
+        job::run_command({"scancel", "--name=" + std::string(kNamePrefix) + j.id},
+                         config_.command_timeout_s);
+        service_->job_finished(j, "cancelled", "cancelled before the scheduler ran it", {}, 0);
+        continue;
       } else {
         // One replica submits it: the one whose claim moves its start.
         if (unix_now() - j.started_at > config_.orphan_grace_s) {
@@ -355,7 +381,8 @@ void SlurmExecutor::follow() {
     }
     Followed& f = followed_[j.id];
     read_progress(j);
-    const bool cancel = cancels.count(j.id) > 0;
+    // Asked here, or kept in the store (asked of another replica, or before a restart).
+    const bool cancel = cancels.count(j.id) > 0 || j.cancel_requested;
     if (cancel && !f.cancel_sent) {
       auto out = job::run_command({"scancel", j.executor_ref}, config_.command_timeout_s);
       f.cancel_sent = out && out->ok();

@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "job/job.h"
+#include "job/subprocess.h"
 #include "service/executor.h"
 
 namespace collido::service {
@@ -95,6 +96,11 @@ struct SlurmRequest {
   uint64_t mem_mib = 1;
 };
 SlurmRequest slurm_request(const SlurmConfig& c, const Job& j);
+
+// Whether an sbatch that failed may still have queued the job: it timed out,
+// was killed, or the controller did not answer (busy, restarting), as
+// opposed to a refusal (a bad account, partition or limit).
+bool sbatch_outcome_unknown(const job::CommandOutput& out);
 
 class SlurmExecutor final : public Executor {
  public:

@@ -103,6 +103,9 @@ CREATE TABLE logs (
     // 4: where a job runs outside the service (a Slurm job id), so a restarted
     // service finds its cluster jobs again instead of running them twice.
     "ALTER TABLE jobs ADD COLUMN executor_ref TEXT NOT NULL DEFAULT '';",
+    // 5: a cancel asked while the job ran, kept so that a restart (or another
+    // replica) ends it cancelled instead of running it again.
+    "ALTER TABLE jobs ADD COLUMN cancel_requested INTEGER NOT NULL DEFAULT 0;",
 };
 
 constexpr int kSchemaVersion = int(sizeof kMigrations / sizeof kMigrations[0]);
@@ -110,7 +113,7 @@ constexpr int kSchemaVersion = int(sizeof kMigrations / sizeof kMigrations[0]);
 const char* const kJobColumns =
     "id, owner_id, state, stage, progress, scene_json, scene_key, run_dir, prediction_json, "
     "cost_json, error, predicted_host_bytes, reused_from, created_at, started_at, finished_at, "
-    "attempts, executor_ref";
+    "attempts, executor_ref, cancel_requested";
 const char* const kModelColumns =
     "id, owner_id, name, kind, spec, params_json, stl_sha256, stl_bytes, triangles, created_at";
 const char* const kLogColumns =
@@ -319,12 +322,13 @@ class SqliteStore final : public Store {
   Status insert_job(const Job& j) override {
     std::lock_guard lock(mu_);
     Stmt s = stmt(std::string("INSERT INTO jobs(") + kJobColumns +
-                  ") VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)");
+                  ") VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)");
     s.bind(1, j.id).bind(2, j.owner_id).bind(3, j.state).bind(4, j.stage).bind(5, j.progress);
     s.bind(6, j.scene_json).bind(7, j.scene_key).bind(8, j.run_dir).bind(9, j.prediction_json);
     s.bind(10, j.cost_json).bind(11, j.error).bind(12, j.predicted_host_bytes);
     s.bind(13, j.reused_from).bind(14, j.created_at).bind(15, j.started_at);
     s.bind(16, j.finished_at).bind(17, j.attempts).bind(18, j.executor_ref);
+    s.bind(19, int64_t(j.cancel_requested ? 1 : 0));
     return s.step() == SQLITE_DONE ? Status::ok() : error("insert_job");
   }
 
@@ -444,6 +448,13 @@ class SqliteStore final : public Store {
     return ended;
   }
 
+  Status request_cancel(const std::string& id) override {
+    std::lock_guard lock(mu_);
+    Stmt s = stmt("UPDATE jobs SET cancel_requested = 1 WHERE id = ? AND state = 'running'");
+    s.bind(1, id);
+    return s.step() == SQLITE_DONE ? Status::ok() : error("request_cancel");
+  }
+
   Status set_job_executor_ref(const std::string& id, const std::string& ref) override {
     std::lock_guard lock(mu_);
     Stmt s = stmt("UPDATE jobs SET executor_ref = ? WHERE id = ?");
@@ -484,7 +495,8 @@ class SqliteStore final : public Store {
   Expected<std::vector<std::string>> requeue_running_jobs() override {
     std::lock_guard lock(mu_);
     Stmt s = stmt(
-        "UPDATE jobs SET state = 'queued' WHERE state = 'running' AND executor_ref = '' RETURNING id");
+        "UPDATE jobs SET state = 'queued' WHERE state = 'running' AND executor_ref = '' AND "
+        "cancel_requested = 0 RETURNING id");
     std::vector<std::string> ids;
     int rc;
     while ((rc = s.step()) == SQLITE_ROW) ids.push_back(s.text(0));
@@ -703,6 +715,7 @@ class SqliteStore final : public Store {
     j.finished_at = s.real(15);
     j.attempts = int(s.i64(16));
     j.executor_ref = s.text(17);
+    j.cancel_requested = s.i64(18) != 0;
     return j;
   }
 

@@ -57,6 +57,9 @@ struct Job {
   int attempts = 0;
   // Where it runs outside the service ("" for the local workers): the Slurm job id.
   std::string executor_ref;
+  // Cancelled while it ran: kept here, so a restarted service (or another
+  // replica) ends it cancelled rather than running it again or on.
+  bool cancel_requested = false;
 };
 
 // What of a job changes after submission, read without its documents (a status
@@ -155,6 +158,8 @@ class Store {
                                     double now, const LogRow* log) = 0;
   // Records where a job runs outside the service (its Slurm job id).
   virtual Status set_job_executor_ref(const std::string& id, const std::string& ref) = 0;
+  // Marks a running job cancelled-as-asked (Job::cancel_requested).
+  virtual Status request_cancel(const std::string& id) = 0;
   // Takes a claimed job that never got an executor ref (its submitter died) for
   // submitting again: true for the one caller that moved its start from
   // seen_started_at to now; another replica that saw the same start gets false.
@@ -164,9 +169,10 @@ class Store {
   virtual Expected<std::vector<Job>> running_jobs() = 0;
   // A queued job becomes cancelled at once; true when it was queued.
   virtual Expected<bool> cancel_queued_job(const std::string& id, double now) = 0;
-  // Local jobs left running by a server that stopped: queued again, in order.
-  // Cluster jobs (an executor_ref) are left alone: they run on under their
-  // scheduler, and the Slurm executor follows them.
+  // Local jobs left running by a server that stopped: queued again, in order,
+  // but those asked to cancel (the caller ends them). Cluster jobs (an
+  // executor_ref) are left alone: they run on under their scheduler, and the
+  // Slurm executor follows them.
   virtual Expected<std::vector<std::string>> requeue_running_jobs() = 0;
   // Deletes a job that is not running; false when it was running (a worker
   // may claim a queued job between the caller's look and this).

@@ -91,6 +91,26 @@ class ServiceTest : public ::testing::Test {
     ASSERT_TRUE(svc_->start_workers());
   }
   Client client() const { return Client(base_); }
+  // Runs a tiny job to its end, stops the service, and puts the job back as a
+  // service stopped in its first attempt would have left it: running, its run
+  // folder gone (stopped while it prepared), cancel asked or not.
+  std::string stopped_in_first_attempt(Client& c, bool cancel_requested) {
+    const std::string id = c.call_json("POST", "/api/v1/jobs", tiny_job("wall1"), 202)["id"];
+    EXPECT_EQ(c.wait_job(id)["state"], "done");
+    server_.reset();
+    svc_.reset();
+    auto store = open_sqlite_store(dir_ + "/collidoscope.db");
+    EXPECT_TRUE(store) << store.status().message();
+    auto j = (*store)->job_by_id(id);
+    EXPECT_TRUE(j);
+    EXPECT_TRUE(*(*store)->delete_job(id));
+    j->state = "running", j->stage = "prepare", j->progress = 0, j->attempts = 1, j->finished_at = 0;
+    EXPECT_TRUE((*store)->insert_job(*j));
+    if (cancel_requested) EXPECT_TRUE((*store)->request_cancel(id));
+    EXPECT_EQ((*store)->job_by_id(id)->cancel_requested, cancel_requested);
+    fs::remove_all(j->run_dir);
+    return id;
+  }
 
   std::string dir_, base_;
   std::unique_ptr<JobService> svc_;
@@ -701,20 +721,7 @@ TEST_F(ServiceTest, AJobThatCanNeverFitIsRefusedWithTheFigures) {
 TEST_F(ServiceTest, AJobStoppedBeforeItsRunBeganStartsOverAtTheNextStart) {
   Client c = client();
   c.sign_up("eve");
-  const std::string id = c.call_json("POST", "/api/v1/jobs", tiny_job("wall1"), 202)["id"];
-  ASSERT_EQ(c.wait_job(id)["state"], "done");
-  server_.reset();
-  svc_.reset();
-  {  // as a crash in its first attempt's preparation left it: running, no run folder
-    auto store = open_sqlite_store(dir_ + "/collidoscope.db");
-    ASSERT_TRUE(store) << store.status().message();
-    auto j = (*store)->job_by_id(id);
-    ASSERT_TRUE(j);
-    ASSERT_TRUE(*(*store)->delete_job(id));
-    j->state = "running", j->stage = "prepare", j->progress = 0, j->attempts = 1, j->finished_at = 0;
-    ASSERT_TRUE((*store)->insert_job(*j));
-    fs::remove_all(j->run_dir);
-  }
+  const std::string id = stopped_in_first_attempt(c, false);
   // A write the stop cut short left temporary files; the next start removes them.
   const fs::path job_folder = fs::path(dir_) / "jobs" / id;
   std::ofstream(job_folder / "spec.run.json.tmp-123-0") << "half";
@@ -727,6 +734,21 @@ TEST_F(ServiceTest, AJobStoppedBeforeItsRunBeganStartsOverAtTheNextStart) {
   back.token = back.call_json("POST", "/api/v1/sessions", {{"name", "eve"}, {"password", "correct horse"}})["token"];
   const json again = back.wait_job(id);
   EXPECT_EQ(again["state"], "done") << again.dump();
+}
+
+// A job cancelled while it ran, whose service stopped before the job did,
+// ends cancelled at the next start instead of running again (the request was
+// kept only in memory before).
+TEST_F(ServiceTest, ACancelAskedBeforeTheServiceStoppedIsKept) {
+  Client c = client();
+  c.sign_up("fay");
+  const std::string id = stopped_in_first_attempt(c, true);
+  start();
+  Client back = client();
+  back.token = back.call_json("POST", "/api/v1/sessions", {{"name", "fay"}, {"password", "correct horse"}})["token"];
+  const json j = back.call_json("GET", "/api/v1/jobs/" + id);
+  EXPECT_EQ(j["state"], "cancelled") << j.dump();
+  EXPECT_EQ(j["attempts"], 1);
 }
 
 TEST(OpenApi, DescribesEveryRouteAndNoOther) {

@@ -4,6 +4,8 @@
 // 127.0.0.1, port 0, and run as sbatch jobs on the node. Skipped, with the
 // reason, only where Slurm cannot start. Every wait is bounded.
 #include <gtest/gtest.h>
+
+#include <csignal>
 #include <unistd.h>
 
 #include <chrono>
@@ -373,6 +375,21 @@ TEST(SlurmOutcome, SqueueLinesAndRequestsAreReadAsWritten) {
   EXPECT_EQ(r.time_limit_min, 10);  // (2 * 150 + 300) / 60
   j.prediction_json = "not json";
   EXPECT_EQ(slurm_request(c, j).time_limit_min, 60);
+  // A model far outside its training: a year at most, not an overflowed int.
+  j.prediction_json = R"({"total_time_s": {"value": 1e300, "high": 1e300}})";
+  EXPECT_EQ(slurm_request(c, j).time_limit_min, 365 * 24 * 60);
+
+  // An sbatch that may have queued the job all the same is not taken for a refusal.
+  job::CommandOutput refused, busy, slow, killed;
+  refused.exit.exit_code = busy.exit.exit_code = 1;
+  refused.err = "sbatch: error: Batch job submission failed: Invalid account or account/partition combination specified\n";
+  busy.err = "sbatch: error: Batch job submission failed: Socket timed out on send/recv operation\n";
+  slow.timed_out = true;
+  killed.exit.signal = SIGKILL;
+  EXPECT_FALSE(sbatch_outcome_unknown(refused));
+  EXPECT_TRUE(sbatch_outcome_unknown(busy));
+  EXPECT_TRUE(sbatch_outcome_unknown(slow));
+  EXPECT_TRUE(sbatch_outcome_unknown(killed));
 }
 
 }  // namespace
