@@ -290,11 +290,11 @@ Status JobService::seed() {
 }
 
 Status JobService::start_workers() {
-  if (workers_) return Status::ok();
+  if (executor()) return Status::ok();
   if (config_.executor == "slurm") {
     auto slurm = SlurmExecutor::start(this, config_.slurm);
     if (!slurm) return slurm.status();
-    workers_ = std::move(*slurm);
+    std::atomic_store(&workers_, std::shared_ptr<Executor>(std::move(*slurm)));
     return Status::ok();
   }
   // One worker per visible GPU (a GPU is driven by one job at a time), else
@@ -302,17 +302,16 @@ Status JobService::start_workers() {
   const std::vector<std::string> gpus = visible_gpus();
   int n = config_.workers;
   if (n < 0) n = gpus.empty() ? 1 : int(gpus.size());
-  workers_ = std::make_unique<WorkerPool>(this, n, gpus);
+  std::atomic_store(&workers_, std::shared_ptr<Executor>(std::make_shared<WorkerPool>(this, n, gpus)));
   return Status::ok();
 }
 
 void JobService::stop_workers() {
-  if (workers_) workers_->stop();
-  workers_.reset();
+  if (auto w = std::atomic_exchange(&workers_, std::shared_ptr<Executor>())) w->stop();
 }
 
 void JobService::notify_queued() {
-  if (workers_) workers_->notify();
+  if (auto w = executor()) w->notify();
 }
 
 void JobService::set_public_url(const std::string& url) {
@@ -1028,8 +1027,8 @@ Reply JobService::cancel_job(const User& u, const std::string& id) {
     // Kept in the store first: a restart, another replica, or an executor not
     // yet started ends it cancelled (in memory alone the request was lost).
     if (Status st = store_->request_cancel(id); !st) return status_reply(st);
-    if (workers_)
-      workers_->cancel(*j);
+    if (auto w = executor())
+      w->cancel(*j);
     else
       cancel_flag(id)->store(true);  // no executor now: its next start sees the flag
   }
@@ -1274,7 +1273,7 @@ Reply JobService::health() {
   r.body = {{"status", users ? "ok" : "degraded"},
             {"schema_version", store_schema_version()},
             {"executor", config_.executor},
-            {"workers", workers_ ? workers_->size() : 0}};
+            {"workers", [&] { auto w = executor(); return w ? w->size() : 0; }()}};
   if (!users) r.status = 503;
   return r;
 }

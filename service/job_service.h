@@ -239,7 +239,11 @@ class JobService {
   struct CostModels;  // the loaded job cost models (none where the gvm module is left out)
   std::unique_ptr<CostModels> cost_;
   LoginThrottle throttle_;
-  std::unique_ptr<Executor> workers_;
+  // Set and reset by the main thread (start_workers, stop_workers) while the
+  // request threads read it: taken and swapped atomically, each use holding
+  // its own reference.
+  std::shared_ptr<Executor> workers_;
+  std::shared_ptr<Executor> executor() const { return std::atomic_load(&workers_); }
   mutable std::mutex url_mu_;
   std::mutex cancel_mu_;
   // What a job status poll needs without parsing and printing three JSON

@@ -106,7 +106,9 @@ class ServiceTest : public ::testing::Test {
     EXPECT_TRUE(*(*store)->delete_job(id));
     j->state = "running", j->stage = "prepare", j->progress = 0, j->attempts = 1, j->finished_at = 0;
     EXPECT_TRUE((*store)->insert_job(*j));
-    if (cancel_requested) EXPECT_TRUE((*store)->request_cancel(id));
+    if (cancel_requested) {
+      EXPECT_TRUE((*store)->request_cancel(id));
+    }
     EXPECT_EQ((*store)->job_by_id(id)->cancel_requested, cancel_requested);
     fs::remove_all(j->run_dir);
     return id;
