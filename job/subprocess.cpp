@@ -159,6 +159,7 @@ ExitInfo Subprocess::wait(const std::function<void(const std::string&)>& on_line
 
 std::string CommandOutput::describe_failure() const {
   if (timed_out) return "timed out";
+  if (truncated) return "wrote more than the 1 MiB read of it";
   std::string last = err.empty() ? out : err;
   while (!last.empty() && (last.back() == '\n' || last.back() == ' ')) last.pop_back();
   if (const size_t nl = last.rfind('\n'); nl != std::string::npos) last = last.substr(nl + 1);
@@ -226,7 +227,10 @@ Expected<CommandOutput> run_command(const std::vector<std::string>& argv, double
         --open_fds;
         continue;
       }
-      if (sinks[i]->size() < kMaxBytes) sinks[i]->append(chunk, size_t(n));
+      if (sinks[i]->size() < kMaxBytes)
+        sinks[i]->append(chunk, size_t(n));
+      else
+        r.truncated = true;
     }
   }
   for (const pollfd& p : fds)

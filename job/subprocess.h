@@ -81,7 +81,8 @@ struct CommandOutput {
   ExitInfo exit;
   std::string out, err;    // its stdout and stderr, each up to 1 MiB
   bool timed_out = false;  // killed at the time limit
-  bool ok() const { return !timed_out && exit.exit_code == 0; }
+  bool truncated = false;  // it wrote more than the 1 MiB kept: what was read is not all it said
+  bool ok() const { return !timed_out && !truncated && exit.exit_code == 0; }
   // "exit code N: <stderr's last line>" (or timed out), for messages.
   std::string describe_failure() const;
 };

@@ -121,7 +121,7 @@ std::vector<SqueueRow> parse_squeue(const std::string& text) {
   return rows;
 }
 
-bool sbatch_outcome_unknown(const job::CommandOutput& out) {
+bool scheduler_unreachable(const job::CommandOutput& out) {
   if (out.timed_out || out.exit.signal != 0) return true;
   for (const char* transient : {"timed out", "Unable to contact", "Socket", "Connection refused",
                                 "temporarily unable", "Resource temporarily unavailable"})
@@ -264,7 +264,7 @@ void SlurmExecutor::submit(const Job& j) {
     // leaves a job behind): the job stays claimed with no Slurm id, and follow()
     // takes it up by its name or submits it again after orphan_grace_s. Only a
     // refusal ends it.
-    if (out && sbatch_outcome_unknown(*out)) {
+    if (out && scheduler_unreachable(*out)) {
       std::fprintf(stderr, "collidoscope serve: sbatch for job %s did not answer (%s); it is looked "
                    "for by name and submitted again if it is not there\n",
                    j.id.c_str(), why.c_str());
@@ -307,11 +307,12 @@ void SlurmExecutor::read_progress(const Job& j) {
   }
 }
 
-SlurmJobState SlurmExecutor::ask_sacct(const std::string& id) {
+SlurmJobState SlurmExecutor::ask_sacct(const std::string& id, bool* answered) {
   SlurmJobState s;
   auto out = job::run_command({"sacct", "--noheader", "--parsable2", "--allocations", "--jobs=" + id,
                                "--format=State,Reason,ExitCode"},
                               config_.command_timeout_s);
+  *answered = !(out && !out->ok() && scheduler_unreachable(*out));
   if (!out || !out->ok()) return s;  // no accounting here: unknown
   std::istringstream in(out->out);
   std::string line;
@@ -391,7 +392,11 @@ void SlurmExecutor::follow() {
     if (auto it = by_id.find(j.executor_ref); it != by_id.end()) {
       st = it->second.state;
     } else {
-      st = ask_sacct(j.executor_ref);
+      bool answered = true;
+      st = ask_sacct(j.executor_ref, &answered);
+      // Out of squeue, and accounting did not answer: not a sign that it ended
+      // (unless the job said so itself, in its last status line).
+      if (!answered && !f.status) continue;
     }
     const SlurmPhase phase = slurm_phase(st.state);
     if (phase == SlurmPhase::kEnded || (phase == SlurmPhase::kUnknown && st.state.empty())) {

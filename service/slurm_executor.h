@@ -97,10 +97,11 @@ struct SlurmRequest {
 };
 SlurmRequest slurm_request(const SlurmConfig& c, const Job& j);
 
-// Whether an sbatch that failed may still have queued the job: it timed out,
-// was killed, or the controller did not answer (busy, restarting), as
-// opposed to a refusal (a bad account, partition or limit).
-bool sbatch_outcome_unknown(const job::CommandOutput& out);
+// Whether a Slurm command failed for want of an answer: it timed out, was
+// killed, or the controller or accounting daemon did not answer (busy,
+// restarting), as opposed to a refusal (a bad account, partition or limit; no
+// accounting). An sbatch so failed may have queued the job all the same.
+bool scheduler_unreachable(const job::CommandOutput& out);
 
 class SlurmExecutor final : public Executor {
  public:
@@ -121,7 +122,9 @@ class SlurmExecutor final : public Executor {
   // Reads what the job wrote to its progress file since the last look.
   void read_progress(const Job& j);
   // The state of a job the controller no longer lists (sacct, where accounting exists).
-  SlurmJobState ask_sacct(const std::string& id);
+  // The job's state from accounting; *answered false when sacct got no
+  // answer (the job may be alive: look again later).
+  SlurmJobState ask_sacct(const std::string& id, bool* answered);
   void end(const Job& j, const SlurmJobState& s);
 
   JobService* service_;

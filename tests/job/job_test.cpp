@@ -378,6 +378,29 @@ TEST(Job, AResumedRunRefusesAWallFileChangedSinceItStarted) {
   EXPECT_EQ(resumed.resumed_from_frame, 12u);
 }
 
+// A command's output past what is read of it is a failure, not a silent cut
+// (an squeue listing cut short would hide running jobs), and a command gets
+// no descriptor of the caller's but its pipes (a server's port among them).
+TEST(Job, ACommandsOutputIsWholeOrAFailureAndItInheritsNoDescriptor) {
+  auto small = run_command({"echo", "hi"}, 30);
+  ASSERT_TRUE(small);
+  EXPECT_TRUE(small->ok());
+  EXPECT_EQ(small->out, "hi\n");
+  auto big = run_command({"head", "-c", "3000000", "/dev/zero"}, 30);
+  ASSERT_TRUE(big);
+  EXPECT_TRUE(big->truncated);
+  EXPECT_FALSE(big->ok());
+  EXPECT_NE(big->describe_failure().find("1 MiB"), std::string::npos) << big->describe_failure();
+  const int opened = ::open("/dev/null", O_RDONLY);  // no close-on-exec
+  const int leaked = ::fcntl(opened, F_DUPFD, 20);
+  ::close(opened);
+  auto fds = run_command({"/bin/sh", "-c", "ls /proc/self/fd"}, 30);
+  ::close(leaked);
+  ASSERT_TRUE(fds && fds->ok());
+  std::istringstream listed(fds->out);
+  for (int fd; listed >> fd;) EXPECT_NE(fd, leaked) << fds->out;
+}
+
 // A job's process (ChildJob starts it so) is in a group of its own: Ctrl-C on
 // the service's terminal reaches the service, which stops the job to resume
 // it later, not the job, which died failed. Other children stay in the

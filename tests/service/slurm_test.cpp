@@ -386,10 +386,10 @@ TEST(SlurmOutcome, SqueueLinesAndRequestsAreReadAsWritten) {
   busy.err = "sbatch: error: Batch job submission failed: Socket timed out on send/recv operation\n";
   slow.timed_out = true;
   killed.exit.signal = SIGKILL;
-  EXPECT_FALSE(sbatch_outcome_unknown(refused));
-  EXPECT_TRUE(sbatch_outcome_unknown(busy));
-  EXPECT_TRUE(sbatch_outcome_unknown(slow));
-  EXPECT_TRUE(sbatch_outcome_unknown(killed));
+  EXPECT_FALSE(scheduler_unreachable(refused));
+  EXPECT_TRUE(scheduler_unreachable(busy));
+  EXPECT_TRUE(scheduler_unreachable(slow));
+  EXPECT_TRUE(scheduler_unreachable(killed));
 }
 
 }  // namespace
