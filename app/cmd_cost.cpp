@@ -144,7 +144,7 @@ int gvm_train_jobs(const ParsedArgs& p, const std::string& log_path) {
   auto rows = job::read_job_log(log_path);
   if (!rows) {
     std::fprintf(stderr, "collidoscope %s: %s\n", cmd, rows.status().message().c_str());
-    return kExitFailure;
+    return exit_code(rows.status());
   }
   if (rows->empty()) {
     std::fprintf(stderr, "collidoscope %s: %s holds no job\n", cmd, log_path.c_str());
@@ -299,7 +299,7 @@ int gvm_merge_jobs(const std::vector<std::string>& paths, const std::string& out
     auto rows = job::read_job_log(path);
     if (!rows) {
       std::fprintf(stderr, "collidoscope gvm merge: %s\n", rows.status().message().c_str());
-      return kExitFailure;
+      return exit_code(rows.status());
     }
     all.insert(all.end(), rows->begin(), rows->end());
   }
@@ -339,17 +339,18 @@ int gvm_replay(const Args& args) {
   }
   if (parsed->positional().size() != 1) return usage_error(cmd, "expects one JOBS.csv");
   if (!parsed->has("model")) return usage_error(cmd, "--model MODEL.json is required");
-  // A file that cannot be read, or a log the model prices none of, is a failure, not a usage error.
-  auto fail = [&](const std::string& why) {
-    std::fprintf(stderr, "collidoscope %s: %s\n", cmd, why.c_str());
-    return kExitFailure;
+  // A missing or malformed file is bad input (2), as for every command; a
+  // file that cannot be read, or a log the model prices none of, a failure (1).
+  auto fail = [&](const Status& why) {
+    std::fprintf(stderr, "collidoscope %s: %s\n", cmd, why.message().c_str());
+    return exit_code(why);
   };
   auto model = job::JobCostModel::load(parsed->get("model"));
-  if (!model) return fail(model.status().message());
+  if (!model) return fail(model.status());
   auto rows = job::read_job_log(parsed->positional()[0]);
-  if (!rows) return fail(rows.status().message());
+  if (!rows) return fail(rows.status());
   const job::PaceReplay r = job::replay_with_pace(*model, *rows);
-  if (r.jobs == 0) return fail("no job of the log could be priced by this model");
+  if (r.jobs == 0) return fail(backend_error("no job of the log could be priced by this model"));
   std::printf("%zu of %zu jobs priced; total time:\n", r.jobs, rows->size());
   std::printf("  model alone:        MAPE %5.1f %%, 10-90 %% interval holds %3.0f %%\n", r.mape,
               100 * r.holds);

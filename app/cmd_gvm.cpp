@@ -166,7 +166,7 @@ int gvm_train(const Args& args) {
   auto rows = g::read_run_log(log_path);
   if (!rows) {
     std::fprintf(stderr, "collidoscope %s: %s\n", cmd, rows.status().message().c_str());
-    return kExitFailure;
+    return exit_code(rows.status());
   }
   auto cmp = g::train_and_compare(*rows, opt);
   if (!cmp) {
@@ -370,7 +370,7 @@ int gvm_merge(const Args& args) {
     auto rows = g::read_run_log(path);
     if (!rows) {
       std::fprintf(stderr, "collidoscope %s: %s\n", cmd, rows.status().message().c_str());
-      return kExitFailure;
+      return exit_code(rows.status());
     }
     all.insert(all.end(), rows->begin(), rows->end());
   }
@@ -470,8 +470,8 @@ int cmd_predict(const Args& args) {
         "  area, wall bounding box grown by the radius; world units); optional\n"
         "  \"triangles_original\", \"device\", \"threads\" (default: the model's usual host).\n"
         "Each model file says which kind it is and refuses the other kind of input.\n"
-        "Exit codes: 0 predicted (even with warnings), 1 a file could not be read,\n"
-        "2 bad arguments or configuration values.",
+        "Exit codes: 0 predicted (even with warnings), 2 bad arguments, configuration\n"
+        "values or a missing or malformed file, 1 a file there that could not be read.",
         predict_flags());
     return kExitOk;
   }
@@ -481,7 +481,7 @@ int cmd_predict(const Args& args) {
   std::string text;
   if (!read_text(config_path, &text)) {
     std::fprintf(stderr, "collidoscope %s: cannot open %s\n", cmd, config_path.c_str());
-    return kExitFailure;
+    return exit_code(open_failure(config_path, "cannot open"));  // missing: 2
   }
 #ifdef COLLIDO_HAVE_JOB_COST
   {
@@ -500,7 +500,7 @@ int cmd_predict(const Args& args) {
   auto model = g::ResourcePredictor::load(parsed->get("model"));
   if (!model) {
     std::fprintf(stderr, "collidoscope %s: %s\n", cmd, model.status().message().c_str());
-    return exit_code(model.status()) == kExitUsage ? kExitUsage : kExitFailure;
+    return exit_code(model.status());
   }
   auto config = g::run_config_from_json(text, &*model);
   if (!config) return usage_error(cmd, config_path + ": " + config.status().message());

@@ -70,7 +70,7 @@ int cmd_study(const Args& args) {
   }
   auto failed = [](const Status& s) {
     std::fprintf(stderr, "collidoscope study: %s\n", s.message().c_str());
-    return kExitFailure;
+    return exit_code(s);  // a missing mesh folder or an unknown scene is bad input: 2
   };
   std::vector<study::DetectRow> detect;
   std::vector<study::DynamicsRow> dynamics;

@@ -16,7 +16,7 @@ int build_detect_setup(const ParsedArgs& args, const std::string& command, Detec
   auto wall = job::load_wall(out->wall_spec, &out->wall_report);
   if (!wall) {
     std::fprintf(stderr, "collidoscope %s: %s\n", command.c_str(), wall.status().message().c_str());
-    return kExitFailure;
+    return exit_code(wall.status());  // a missing file or a bad spec is bad input: 2
   }
   out->wall = std::move(*wall);
 
@@ -77,7 +77,7 @@ int build_detect_setup(const ParsedArgs& args, const std::string& command, Detec
     auto p = sim::load_particles_csv(pspec);
     if (!p) {
       std::fprintf(stderr, "collidoscope %s: %s\n", command.c_str(), p.status().message().c_str());
-      return kExitFailure;
+      return exit_code(p.status());
     }
     out->particles = std::move(*p);
     cfg.r_max = sim::max_radius(out->particles);

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -18,6 +19,15 @@
 #include "common/status.h"
 
 namespace collido {
+
+// Why a file could not be opened for reading: not_found where nothing is at
+// the path (bad input, which the command line answers with exit code 2), else
+// an I/O error (a file there that cannot be read).
+inline Status open_failure(const std::string& path, std::string message) {
+  struct stat st;
+  const bool missing = ::stat(path.c_str(), &st) != 0 && errno == ENOENT;
+  return missing ? not_found(std::move(message)) : io_error(std::move(message));
+}
 
 // "<path>.tmp-<pid>-<n>": unique among the writers of this process (n counts)
 // and of other live processes (the pid).

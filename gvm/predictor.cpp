@@ -336,7 +336,7 @@ Status ResourcePredictor::save(const std::string& path) const {
 
 Expected<ResourcePredictor> ResourcePredictor::load(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) return io_error("cannot open model '" + path + "'");
+  if (!in) return open_failure(path, "cannot open model '" + path + "'");
   std::ostringstream ss;
   ss << in.rdbuf();
   auto p = from_json(ss.str());

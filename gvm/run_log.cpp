@@ -245,7 +245,7 @@ std::vector<RunRecord> merge_repeats(const std::vector<RunRecord>& rows) {
 
 Expected<std::vector<RunRecord>> read_run_log(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) return io_error("cannot open run log '" + path + "'");
+  if (!in) return open_failure(path, "cannot open run log '" + path + "'");
   std::ostringstream ss;
   ss << in.rdbuf();
   auto rows = parse_run_log(ss.str());

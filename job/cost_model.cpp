@@ -1103,7 +1103,7 @@ Status JobCostModel::save(const std::string& path) const {
 
 Expected<JobCostModel> JobCostModel::load(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) return io_error("cannot open model '" + path + "'");
+  if (!in) return open_failure(path, "cannot open model '" + path + "'");
   std::ostringstream ss;
   ss << in.rdbuf();
   auto m = from_json(ss.str());

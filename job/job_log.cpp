@@ -433,7 +433,7 @@ std::string format_job_log(const std::vector<JobRecord>& rows) {
 
 Expected<std::vector<JobRecord>> read_job_log(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) return io_error("cannot open job log '" + path + "'");
+  if (!in) return open_failure(path, "cannot open job log '" + path + "'");
   std::ostringstream ss;
   ss << in.rdbuf();
   auto rows = parse_job_log(ss.str());

@@ -4,6 +4,8 @@
 #include <cstdlib>
 #include <fstream>
 
+#include "common/atomic_file.h"
+
 namespace collido::sim {
 
 Particles random_particles(size_t n, const Bounds3d& box, double r_min, double r_max, uint64_t seed) {
@@ -21,7 +23,7 @@ Particles random_particles(size_t n, const Bounds3d& box, double r_min, double r
 
 Expected<Particles> load_particles_csv(const std::string& path) {
   std::ifstream in(path);
-  if (!in) return io_error(path + ": cannot open for reading");
+  if (!in) return open_failure(path, path + ": cannot open for reading");
   Particles p;
   std::string line;
   size_t lineno = 0;

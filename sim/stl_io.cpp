@@ -191,7 +191,7 @@ Expected<TriangleMesh> parse_stl(const std::string& bytes, const std::string& na
 
 Expected<TriangleMesh> load_stl(const std::string& path, MeshReport* report) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) return io_error(path + ": cannot open for reading");
+  if (!in) return open_failure(path, path + ": cannot open for reading");
   std::ostringstream ss;
   ss << in.rdbuf();
   if (in.bad()) return io_error(path + ": read error");

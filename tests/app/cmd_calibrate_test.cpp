@@ -219,8 +219,10 @@ TEST(CmdCalibrate, JobSweepTrainAndPredictAScene) {
     EXPECT_NE(replay.find(s), std::string::npos) << s << "\n" << replay;
   EXPECT_EQ(cmd_gvm({"replay", jobs_log}), kExitUsage);                         // no --model
   EXPECT_EQ(cmd_gvm({"replay", "--model", model}), kExitUsage);                 // no log
-  EXPECT_EQ(cmd_gvm({"replay", tmp("absent.csv"), "--model", model}), kExitFailure);
-  EXPECT_EQ(cmd_gvm({"replay", jobs_log, "--model", tmp("absent.json")}), kExitFailure);
+  EXPECT_EQ(cmd_gvm({"replay", tmp("absent.csv"), "--model", model}), kExitUsage);  // missing: bad input
+  EXPECT_EQ(cmd_gvm({"replay", jobs_log, "--model", tmp("absent.json")}), kExitUsage);
+  EXPECT_EQ(cmd_gvm({"train", "--logs", tmp("absent.csv"), "--out", tmp("m.json")}), kExitUsage);
+  EXPECT_EQ(cmd_predict({tmp("absent-scene.json"), "--model", model}), kExitUsage);
 
   std::ofstream(scene) << R"({"wall": "wall1", "particles": {"count": 500, "radius": 1},
                               "placement": {"kind": "pour", "rate": 500}, "duration": 1,

@@ -89,11 +89,11 @@ TEST(CmdStudy, QuickDetectionOnWall1) {
 
 // A scene name that matches nothing fails and names the scenes there are,
 // instead of writing empty tables over a study.
-TEST(CmdStudy, AnUnknownSceneIsAFailureThatNamesTheScenes) {
+TEST(CmdStudy, AnUnknownSceneIsBadInputThatNamesTheScenes) {
   testing::internal::CaptureStderr();
   EXPECT_EQ(cmd_study({"--quick", "--only", "detect", "--scenes", "teapot", "--meshes",
                        COLLIDO_TEST_DATA "/meshes", "--out", testing::TempDir() + "/cmd_study_test_unknown"}),
-            kExitFailure);
+            kExitUsage);
   const std::string said = testing::internal::GetCapturedStderr();
   EXPECT_NE(said.find("no detection scene 'teapot' (wall1, wall2, teapot_trimesh)"), std::string::npos) << said;
 }
@@ -106,11 +106,11 @@ TEST(CmdStudy, BadArgumentsExitTwo) {
   EXPECT_EQ(cmd_study({"--out", "x", "--threads", "many"}), kExitUsage);
 }
 
-TEST(CmdStudy, AMissingMeshFolderIsAFailureThatSaysSo) {
+TEST(CmdStudy, AMissingMeshFolderIsBadInputThatSaysSo) {
   testing::internal::CaptureStderr();
   EXPECT_EQ(cmd_study({"--quick", "--only", "detect", "--meshes", "/nonexistent/meshes", "--out",
                        testing::TempDir() + "/cmd_study_test_missing"}),
-            kExitFailure);
+            kExitUsage);
   const std::string said = testing::internal::GetCapturedStderr();
   EXPECT_NE(said.find("cannot read the mesh folder /nonexistent/meshes"), std::string::npos) << said;
 }
