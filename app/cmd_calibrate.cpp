@@ -30,8 +30,8 @@ namespace {
 const std::vector<FlagSpec>& calibrate_flags() {
   static const std::vector<FlagSpec> specs = {
       {"out", true, "run log CSV to write (required; rewritten after every configuration)"},
-      {"backend", true, "cpu | cuda | auto (default auto: cuda when a GPU is usable)"},
-      {"configs", true, "number of configurations (default 300 on cpu, 200 on cuda, 6 with --quick)"},
+      {"backend", true, "cpu | cuda | auto (default auto: cuda when a GPU is usable; with --jobs, cpu, and auto is cpu)"},
+      {"configs", true, "number of configurations (default 300 on cpu, 200 on cuda, 6 with --quick; with --jobs 300, 150 on cuda, 4 with --quick)"},
       {"seed", true, "seed of the sweep and of the particles (default 1)"},
       {"radius", true,
        "largest particle radius, % of the wall's longest side: P, or LO:HI for one drawn "
@@ -45,7 +45,7 @@ const std::vector<FlagSpec>& calibrate_flags() {
        "cuda)"},
       {"budget", true,
        "seconds; start no run after this, keep the rows measured by then (default 0 = none on "
-       "cpu, 330 on cuda)"},
+       "cpu, 330 on cuda; with --jobs 480 on cuda)"},
       {"jobs", false,
        "sweep real jobs (job-exec children) into a job log instead of detection frames"},
       {"job-threads", true, "with --jobs: CPU threads of every job (default 1)"},

@@ -379,7 +379,9 @@ Expected<Scene> parse_scene(const std::string& text) {
   COLLIDO_TRY(r.number("time_step", &s.dynamics.time_step, 0, 1e3));
   COLLIDO_TRY(check_timing(s));  // again, with the time step
   // A length, or absent / negative for the automatic skin (0: the grid every step).
-  COLLIDO_TRY(r.number("neighbour_skin", &s.dynamics.neighbour_skin, -1, 1e9));
+  // Any negative value: automatic (held as -1, as when absent).
+  COLLIDO_TRY(r.number("neighbour_skin", &s.dynamics.neighbour_skin, -1e9, 1e9));
+  if (s.dynamics.neighbour_skin < 0) s.dynamics.neighbour_skin = -1;
   COLLIDO_TRY(r.integer("seed", &s.seed, 0, UINT64_MAX));
   if (r.has("output")) {
     ObjectReader o(r.at("output"), "output");

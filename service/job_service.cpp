@@ -600,13 +600,21 @@ Expected<JobService::PreparedJob> JobService::prepare(const User& u, const json&
       *wall = m->spec;
       wall_identity = "shape:" + m->spec;
     }
+  } else if (wall->is_object() && wall->size() == 1 && wall->contains("shape") &&
+             (*wall)["shape"].is_string() &&
+             job::is_shape_spec((*wall)["shape"].get<std::string>())) {
+    // {"shape": spec}, as a scene file (and the scene.json a run writes) may
+    // give it: held as the plain spec, so both forms are one scene to reuse.
+    const std::string spec = (*wall)["shape"].get<std::string>();
+    *wall = spec;
+    wall_identity = "shape:" + spec;
   } else if (wall->is_string() && job::is_shape_spec(wall->get<std::string>())) {
     wall_identity = "shape:" + wall->get<std::string>();
   } else {
     // Never a path on the server: that would read any file the service can.
     return invalid_argument(
-        "scene.wall: a shape (\"wall1\", \"cylinder:r=5,h=10\") or a model {\"model\": ID}; "
-        "upload a mesh as a model first");
+        "scene.wall: a shape (\"wall1\", \"cylinder:r=5,h=10\" or {\"shape\": ...}) or a model "
+        "{\"model\": ID}; upload a mesh as a model first");
   }
   job::JobSpec& spec = p.spec;
   spec.scene_json = run_scene.dump();

@@ -174,6 +174,10 @@ TEST(Scene, ErrorsNameTheKey) {
       "placement.rate");
   EXPECT_TRUE(parse_scene(R"({"wall": "wall1", "duration": 2, "placement": {"kind": "pour", "rate": 0.5}})"));
   EXPECT_TRUE(parse_scene(R"({"wall": "wall1", "duration": 2, "placement": {"kind": "pour", "rate": 0}})"));
+  // Any negative skin is the automatic one (docs/jobs.md), held as -1.
+  auto skin = parse_scene(R"({"wall": "wall1", "neighbour_skin": -2})");
+  ASSERT_TRUE(skin) << skin.status().message();
+  EXPECT_EQ(skin->dynamics.neighbour_skin, -1);
   expect_error(R"({"wall": {"shape": "wall1", "file": "a.stl"}})", "wall");
   expect_error(R"({"wall": {}})", "wall");
   expect_error(R"({"particles": {"count": 5}})", "wall");

@@ -510,6 +510,10 @@ TEST_F(ServiceTest, BadInputGetsClearErrorsAndTheServerGoesOn) {
   EXPECT_NE(path_wall.body.find("model"), std::string::npos);
   s = tiny_job({{"file", "/etc/passwd"}});
   EXPECT_EQ(c.call("POST", "/api/v1/jobs", s.dump()).status, 400);
+  // A shape as {"shape": spec}, as scene files (and a run's scene.json) write
+  // it, is the shape; a path in it is not.
+  EXPECT_EQ(c.call("POST", "/api/v1/predict", tiny_job({{"shape", "wall1"}}).dump()).status, 200);
+  EXPECT_EQ(c.call("POST", "/api/v1/predict", tiny_job({{"shape", "/etc/passwd"}}).dump()).status, 400);
   s = tiny_job("wall1");
   s["scene"]["colour"] = "red";
   EXPECT_EQ(c.call("POST", "/api/v1/jobs", s.dump()).status, 400);
