@@ -131,7 +131,7 @@ TEST(Stl, EmptyFilesAreErrors) {
   EXPECT_NE(none.status().message().find("no triangles"), std::string::npos);
   auto missing = load_stl("/nonexistent/none.stl");
   ASSERT_FALSE(missing);
-  EXPECT_EQ(missing.status().code(), ErrorCode::kIo);
+  EXPECT_EQ(missing.status().code(), ErrorCode::kNotFound);  // bad input, not an I/O failure
 }
 
 TEST(Stl, ZeroAreaTrianglesAreDroppedAndCounted) {
