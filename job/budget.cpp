@@ -77,22 +77,29 @@ WorkEstimate estimate_work(const sim::TriangleMesh& wall, const sim::DynamicsCon
     // Four-way splitting's count is a product per triangle. Bisection (gravity,
     // circumcircle) stops each piece as soon as it fits, 6 to 14 times fewer on
     // the calibration walls: counted exactly by walking the bisections (about
-    // 45 ns a piece on the 2-core VM, so at most 0.1 s) up to kCountedPieces,
-    // beyond which a sixth of four-way's count stands in (such a wall is refused
-    // by the usual budget anyway). The grid over piece centres costs work in
-    // proportion to the pieces, not cells.
+    // 45 ns a piece on the 2-core VM, so at most 0.1 s) up to kCountedPieces.
+    // Beyond, twice four-way's count bounds it from above (a box's faces give
+    // 0.5 to 1 times it, equilateral triangles 1 to 1.5 times: a sixth of it,
+    // which stood here, priced a wall at a sixth to a ninth of its pieces, and
+    // admitted runs that then ran out of memory). The grid over piece centres
+    // costs work in proportion to the pieces, not cells.
     constexpr double kCountedPieces = 2e6;
     const double m4 = sim::midpoint4_piece_count(wall, r_max);
     const sim::DivisionMethod how = sim::division_of(config.method);
     e.pieces = how == sim::DivisionMethod::kMidpoint4 ? m4
                : m4 / 6 <= kCountedPieces         ? sim::division_piece_count(wall, how, r_max)
-                                                  : m4 / 6;
+                                                  : 2 * m4;
   }
   const sim::WallFootprint f = sim::wall_footprint(wall, config.method, r_max, cell,
                                                    config.max_dense_cells, particles, e.pieces);
   e.bin_entries = f.bin_entries;
   e.wall_buckets = double(f.buckets);
-  e.host_bytes = double(particles) * bytes_per_particle(config) + e.pieces * 160 +
+  // A piece's bytes at the preparation's peak, when the divided mesh, its
+  // float and double triangles, the keys and the sorted copies are all alive:
+  // 606 B measured (wall1 at r = 0.2, gravity, 8.9e6 pieces: 5.42 GB resident,
+  // `run` on the CPU); 160 B, what stays afterwards, priced it at a quarter.
+  constexpr double kPieceBytes = 640;
+  e.host_bytes = double(particles) * bytes_per_particle(config) + e.pieces * kPieceBytes +
                  std::min(e.wall_cells, 1e12) * 12 + 64.0 * (1 << 20);
   return e;
 }

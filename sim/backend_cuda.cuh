@@ -24,6 +24,10 @@ namespace cuda_detail {
 struct MinOp {
   __device__ float operator()(float a, float b) const { return b < a ? b : a; }
 };
+// Sums 32-bit counts in 64 bits.
+struct Plus64 {
+  __host__ __device__ uint64_t operator()(uint64_t a, uint64_t b) const { return a + b; }
+};
 
 template <class F>
 __global__ void for_each_kernel(uint32_t n, F f) {
@@ -189,7 +193,12 @@ class CudaBackend {
   }
   template <class T>
   void fill(T* p, size_t n, T v) {
-    parallel_for(n, [=] __device__(uint32_t i) { p[i] = v; });
+    // In parts a launch can index (the statistics of 2^28 particles are 17 x 2^28 values).
+    constexpr size_t kPart = size_t(1) << 31;
+    for (size_t at = 0; at < n; at += kPart) {
+      T* q = p + at;
+      parallel_for(std::min(kPart, n - at), [=] __device__(uint32_t i) { q[i] = v; });
+    }
   }
   void copy(void* dst, const void* src, size_t bytes) {
     check(cudaMemcpyAsync(dst, src, bytes, cudaMemcpyDeviceToDevice), "cudaMemcpy D2D");
@@ -205,16 +214,25 @@ class CudaBackend {
 
   uint64_t exclusive_scan(uint32_t* d, size_t n) {
     if (n == 0) return 0;
+    // The total in 64 bits, before the scan: the 32-bit prefixes wrap past
+    // 2^32, and a total read from the last of them wrapped with them, so a
+    // caller's limit (a bin's 2^31 entries) was passed where the CPU's held.
+    resize(scalar_, 1);
+    uint64_t* total = reinterpret_cast<uint64_t*>(scalar_.data());
+    if (!cub_call("reduce", [&](void* t, size_t& bytes) {
+          return cub::DeviceReduce::Reduce(t, bytes, d, total, static_cast<int>(n), cuda_detail::Plus64{},
+                                           uint64_t(0));
+        }))
+      return 0;
+    uint64_t sum = 0;
+    to_host(&sum, total, sizeof sum);
     resize(scan_out_, n);
     if (!cub_call("scan", [&](void* t, size_t& bytes) {
           return cub::DeviceScan::ExclusiveSum(t, bytes, d, scan_out_.data(), static_cast<int>(n));
         }))
       return 0;
-    uint32_t last_in = 0, last_out = 0;
-    to_host(&last_in, d + n - 1, sizeof last_in);
-    to_host(&last_out, scan_out_.data() + n - 1, sizeof last_out);
     copy(d, scan_out_.data(), n * sizeof(uint32_t));
-    return uint64_t(last_out) + last_in;
+    return sum;
   }
 
   // Sum and maximum of n doubles (0 when n == 0); one small read-back each.
@@ -306,6 +324,11 @@ class CudaBackend {
   template <class F>
   void launch(void (*kernel)(uint32_t, F), size_t n, F f) {
     if (n == 0 || !ok_) return;
+    if (n > UINT32_MAX) {  // a 32-bit index would wrap: an error, not a loop over part of it
+      ok_ = false;
+      error_ = "a loop over " + std::to_string(n) + " elements is more than one launch indexes";
+      return;
+    }
     constexpr uint32_t kBlock = 256;
     const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
     kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f);

@@ -385,7 +385,19 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
   std::vector<double> reach(per_layer, 0), last_reach(per_layer, 0);
   Particles last;
   out->resize(0);
+  // Layers are searched until the count is placed, each costing two
+  // detections: a region that reaches far beyond the wall (millions of empty
+  // layers) would search for days. Bounded by what a fill of a few per cent
+  // of its region would look at.
+  const uint64_t most_searched = std::max<uint64_t>(uint64_t(1) << 26, 256 * ps.count);
+  uint64_t searched = 0;
   for (uint64_t k = 0; k < nz && out->size() < ps.count; ++k) {
+    if (searched > most_searched)
+      return invalid_argument(
+          "placement: the region's first " + std::to_string(searched) + " places held only " +
+          std::to_string(out->size()) + " of the " + std::to_string(ps.count) +
+          " particles: it lies mostly outside the wall; give a region around the wall's inside");
+    searched += per_layer;
     Particles layer;
     for (uint64_t j = 0; j < ny; ++j)
       for (uint64_t i = 0; i < nx; ++i) {

@@ -19,6 +19,11 @@
 
 namespace collido::sim {
 
+// The most cells a grid may have (their 64-bit keys, x + nx (y + ny z), stay unique).
+inline constexpr double kMaxGridCells = 4e18;
+// The most cells a divided wall's particle looks out in each direction.
+inline constexpr double kMaxReach = 8;
+
 // Neighbour cells a particle traversal visits: reach cells in each direction.
 inline int neighbour_reach(double search_radius, double cell) {
   // Contacts need centre distances strictly below search_radius; a distance
@@ -40,7 +45,11 @@ inline GridSpec make_grid(Vec3d lo, Vec3d hi, double cell, uint64_t max_dense_ce
     return static_cast<int>(std::min(n, 1e9));
   };
   g.nx = dim(ext.x), g.ny = dim(ext.y), g.nz = dim(ext.z);
-  const uint64_t cells = uint64_t(g.nx) * uint64_t(g.ny) * uint64_t(g.nz);
+  // In double first: three dimensions of up to 1e9 overflow 64 bits, and a
+  // count that wrapped to a few would have made a dense table far too small.
+  const double product = double(g.nx) * double(g.ny) * double(g.nz);
+  const uint64_t cells = product < 1.8e19 ? uint64_t(g.nx) * uint64_t(g.ny) * uint64_t(g.nz)
+                                          : UINT64_MAX;
   *cells_out = cells;
   if (cells <= max_dense_cells) {
     g.buckets = static_cast<uint32_t>(cells);
@@ -58,7 +67,12 @@ inline GridSpec make_grid(Vec3d lo, Vec3d hi, double cell, uint64_t max_dense_ce
 // The bin method's grid, in the wall's local frame (origin at its box's centre):
 // cells of edge `cell` over the box grown by r_max and a cell, hashed past
 // max_dense_cells; a triangle goes into every cell that its distance r_max
-// reaches, with `grow` padded for float rounding so no contact is missed.
+// reaches, with `grow` padded for float rounding so no contact is missed: the
+// particle's cell, the cells' centres and the triangles' corners are floats in
+// the local frame, each off by up to about 6e-8 of the largest coordinate, so
+// the pad holds a millionth of that beside the radius's own (padded by the
+// radius and the cell alone, a wall 10^4 radii across could leave a particle
+// that touched by a hair at a cell's face without that triangle in its list).
 // Shared by the preparation and by the footprint a run is priced with.
 struct BinLayout {
   GridSpec grid;
@@ -68,7 +82,12 @@ struct BinLayout {
 inline BinLayout bin_layout(const Bounds3d& box, Vec3d origin, double r_max, double cell,
                             uint64_t max_dense_cells, size_t triangles, size_t particles) {
   BinLayout b;
-  b.grow = r_max * (1 + 1e-5) + 1e-6 * cell;
+  const double coordinate =
+      std::max({std::fabs(box.lo.x - origin.x), std::fabs(box.hi.x - origin.x),
+                std::fabs(box.lo.y - origin.y), std::fabs(box.hi.y - origin.y),
+                std::fabs(box.lo.z - origin.z), std::fabs(box.hi.z - origin.z)}) +
+      2 * (r_max + cell);
+  b.grow = r_max * (1 + 1e-5) + 1e-6 * cell + 1e-6 * coordinate;
   const Vec3d pad{b.grow + cell, b.grow + cell, b.grow + cell};
   b.grid = make_grid(box.lo - origin - pad, box.hi - origin + pad, cell, max_dense_cells,
                      4 * uint64_t(triangles) + particles, &b.cells);
@@ -233,6 +252,19 @@ class WallIndex {
     max_dense_cells_ = max_dense_cells;
     particles_ = particles;
     const Bounds3d box = mesh_bounds(mesh);
+    // Grids whose cells a 64-bit key cannot number (a few hundred thousand
+    // cells per axis of a sparse wall reach it) are refused here, for
+    // detection and dynamics alike.
+    if (method != Method::kBvh) {
+      const Vec3d ext = box.extent();
+      const double span = 2 * (r_max + 2 * cell);
+      const double cells = (ext.x / cell + span / cell + 1) * (ext.y / cell + span / cell + 1) *
+                           (ext.z / cell + span / cell + 1);
+      if (!(cells < kMaxGridCells))
+        return invalid_argument("a grid length of " + std::to_string(cell) + " makes " +
+                                std::to_string(cells) + " cells over this wall's box, more than " +
+                                std::to_string(kMaxGridCells) + "; use a longer grid length");
+    }
     // The local frame's origin at the wall's centre keeps float precision for
     // walls far from the world origin (coordinates near 1e4 with r = 1).
     origin = box.center();
@@ -279,6 +311,13 @@ class WallIndex {
     const size_t m = dv.pieces.size();
     // Pad the reach for float rounding of centres and positions.
     const double search = (r_max_ + dv.max_sphere_radius) * (1 + 1e-6) + 1e-6 * r_max_;
+    // Each particle visits (2 reach + 1)^3 cells: a grid length far below the
+    // radius made that hundreds of thousands a step (and past int, wrong).
+    if (!(search / cell <= kMaxReach))
+      return invalid_argument("a grid length of " + std::to_string(cell) +
+                              " is more than " + std::to_string(kMaxReach) +
+                              " times below the pieces' reach (" + std::to_string(search) +
+                              "): each particle would visit too many cells; use a longer grid length");
     reach = neighbour_reach(search, cell);
     piece_search = static_cast<float>(search);
     info->reach = reach;

@@ -218,6 +218,34 @@ void slivers_and_zero_area() {
   for (const auto& c : r.contacts) EXPECT_NE(c.triangle % 11, 1u) << "a dropped triangle's id was reported";
 }
 
+// Grids the engine cannot number, or that would have each particle walk
+// hundreds of thousands of cells, are refused with the reason (a cell count
+// past 64 bits once wrapped to a dense table of no buckets; a reach past int
+// walked no cells on the CPU and every cell on the GPU).
+TEST(Detect, GridsTooFineToNumberOrWalkAreRefused) {
+  const std::vector<std::array<Vec3d, 3>> soup = {
+      {Vec3d{0, 0, 0}, Vec3d{1, 0, 0}, Vec3d{0, 1, 0}},
+      {Vec3d{4194300.5, 2097148.5, 2097148.5}, Vec3d{4194301.5, 2097148.5, 2097148.5},
+       Vec3d{4194300.5, 2097149.5, 2097148.5}}};
+  const TriangleMesh sparse = weld_soup(soup, {}, 0.0, nullptr);
+  DetectConfig cfg;
+  cfg.method = Method::kBin;
+  cfg.r_max = 0.5;
+  auto refused = Detector::create(sparse, cfg, 10);
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.status().message().find("cells over this wall's box"), std::string::npos)
+      << refused.status().message();
+  cfg.method = Method::kGravity;
+  cfg.r_max = 1;
+  cfg.grid_length = 0.05;  // the pieces' reach is about 40 cells
+  auto fine = Detector::create(make_cylinder(50, 100, 40), cfg, 10);
+  ASSERT_FALSE(fine);
+  EXPECT_NE(fine.status().message().find("times below the pieces' reach"), std::string::npos)
+      << fine.status().message();
+  cfg.grid_length = 0.5;  // half the radius: a reach of 4, allowed
+  EXPECT_TRUE(Detector::create(make_cylinder(50, 100, 40), cfg, 10));
+}
+
 void far_from_origin() {
   TriangleMesh wall = make_cylinder(10, 20, 24);
   translate(wall, {1e4, -1e4, 1e4});
