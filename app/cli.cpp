@@ -51,7 +51,8 @@ int64_t ParsedArgs::get_int(const std::string& name, int64_t fallback, std::stri
 int ParsedArgs::get_int32(const std::string& name, int fallback, std::string* error) const {
   int v = fallback;
   std::string e;
-  if (!get_int_in(name, fallback, INT32_MIN, INT32_MAX, &v, &e) && error && error->empty()) *error = e;
+  if (!get_int_in(name, fallback, INT32_MIN, INT32_MAX, &v, &e) && error && error->empty())
+    *error = e;
   return v;
 }
 

@@ -30,8 +30,12 @@ namespace {
 const std::vector<FlagSpec>& calibrate_flags() {
   static const std::vector<FlagSpec> specs = {
       {"out", true, "run log CSV to write (required; rewritten after every configuration)"},
-      {"backend", true, "cpu | cuda | auto (default auto: cuda when a GPU is usable; with --jobs, cpu, and auto is cpu)"},
-      {"configs", true, "number of configurations (default 300 on cpu, 200 on cuda, 6 with --quick; with --jobs 300, 150 on cuda, 4 with --quick)"},
+      {"backend", true,
+       "cpu | cuda | auto (default auto: cuda when a GPU is usable; with --jobs, cpu, and auto is "
+       "cpu)"},
+      {"configs", true,
+       "number of configurations (default 300 on cpu, 200 on cuda, 6 with --quick; with --jobs "
+       "300, 150 on cuda, 4 with --quick)"},
       {"seed", true, "seed of the sweep and of the particles (default 1)"},
       {"radius", true,
        "largest particle radius, % of the wall's longest side: P, or LO:HI for one drawn "
@@ -49,7 +53,9 @@ const std::vector<FlagSpec>& calibrate_flags() {
       {"jobs", false,
        "sweep real jobs (job-exec children) into a job log instead of detection frames"},
       {"job-threads", true, "with --jobs: CPU threads of every job (default 1)"},
-      {"settled", true, "with --jobs: share of jobs with gravity drawn long enough for their particles to land, fewer particles keeping them within ten times the usual work (default 0)"},
+      {"settled", true,
+       "with --jobs: share of jobs with gravity drawn long enough for their particles to land, "
+       "fewer particles keeping them within ten times the usual work (default 0)"},
       {"meshes", true,
        "with --jobs: folder of the sweep's STL walls (default tests/data/meshes, if there)"},
       {"work", true, "with --jobs: folder for the jobs' run directories (default OUT.work)"},

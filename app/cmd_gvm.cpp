@@ -84,7 +84,8 @@ const std::vector<FlagSpec>& train_flags() {
       {"logs", true, "run log or job log CSV to train on (required; see docs/gvm.md)"},
       {"out", true, "where to write the model JSON (required)"},
       {"hidden", true, "hidden neurons (default 16; a job log 12)"},
-      {"epochs", true, "epochs; one epoch = one proposal per parameter (default 2000; a job log 800)"},
+      {"epochs", true,
+       "epochs; one epoch = one proposal per parameter (default 2000; a job log 800)"},
       {"seed", true, "seed of the machine's signs, start and proposals (default 1)"},
       {"delta", true, "largest Monte Carlo step, fraction of a parameter's range (default 0.1)"},
       {"fixed-delta", false, "keep the step at --delta instead of adapting it per epoch"},
@@ -95,11 +96,13 @@ const std::vector<FlagSpec>& train_flags() {
       {"folds", true, "job log: machines per cost, one per fold held out (default 5)"},
       {"coverage", true, "job log: share of held-out runs the interval holds (default 0.8)"},
       {"splits", true, "job log: 70/30 splits scored, seeds split-seed.. (default 1)"},
-      {"resample", true, "job log: train the written model on this many of the log's rows, "
-                         "drawn without repeats (timing runs)"},
+      {"resample", true,
+       "job log: train the written model on this many of the log's rows, "
+       "drawn without repeats (timing runs)"},
       {"curve", true, "write every epoch's train/validation loss to this CSV"},
-      {"predictions", true, "write the validation rows with every model's predictions to this "
-                            "CSV (a job log: the first split's, with the GVM's p10, p50, p90)"},
+      {"predictions", true,
+       "write the validation rows with every model's predictions to this "
+       "CSV (a job log: the first split's, with the GVM's p10, p50, p90)"},
       {"mlp-epochs", true, "epochs of the back-propagation baseline (default 10000)"},
       {"help", false, "show this help"},
   };

@@ -296,7 +296,8 @@ int cmd_job_exec(const Args& args) {
                                                             spec.status().message()));
   if (p->has("threads")) spec->threads = p->get_int32("threads", 0, &err);
   if (!err.empty()) return usage_error("job-exec", err);
-  if (p->has("resume") && job::holds_a_run(spec->out_dir)) spec->dir_policy = job::DirPolicy::kResume;
+  if (p->has("resume") && job::holds_a_run(spec->out_dir))
+    spec->dir_policy = job::DirPolicy::kResume;
   // A viewer closing a pipe must not kill the job; SIGTERM asks it to stop.
   std::signal(SIGPIPE, SIG_IGN);
   std::signal(SIGTERM, on_terminate);

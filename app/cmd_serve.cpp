@@ -37,7 +37,9 @@ const std::vector<FlagSpec>& serve_flags() {
       {"port", true, "port (default 8080; 0 = a free one, printed)"},
       {"data", true, "folder of the database, models and results (default var/)"},
       {"threads", true, "HTTP reactor threads (default 2)"},
-      {"workers", true, "job workers (default: one per visible GPU, each job on its own; one without a GPU, a job taking every CPU)"},
+      {"workers", true,
+       "job workers (default: one per visible GPU, each job on its own; one without a GPU, a job "
+       "taking every CPU)"},
       {"job-threads", true, "CPU threads per job (default: all it may use)"},
       {"max-upload-mb", true, "largest STL upload, MiB (default 64)"},
       {"max-queued", true, "queued jobs a user may have (default 8)"},

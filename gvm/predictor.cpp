@@ -330,7 +330,8 @@ Expected<ResourcePredictor> ResourcePredictor::from_json(const std::string& text
 }
 
 Status ResourcePredictor::save(const std::string& path) const {
-  // Write then rename, so a reader never sees half a model (and a failed write leaves no temporary file).
+  // Write then rename, so a reader never sees half a model (and a failed write leaves no temporary
+  // file).
   return write_file_atomic(path, to_json() + "\n");
 }
 

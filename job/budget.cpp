@@ -87,8 +87,8 @@ WorkEstimate estimate_work(const sim::TriangleMesh& wall, const sim::DynamicsCon
     const double m4 = sim::midpoint4_piece_count(wall, r_max);
     const sim::DivisionMethod how = sim::division_of(config.method);
     e.pieces = how == sim::DivisionMethod::kMidpoint4 ? m4
-               : m4 / 6 <= kCountedPieces         ? sim::division_piece_count(wall, how, r_max)
-                                                  : 2 * m4;
+               : m4 / 6 <= kCountedPieces             ? sim::division_piece_count(wall, how, r_max)
+                                                      : 2 * m4;
   }
   const sim::WallFootprint f = sim::wall_footprint(wall, config.method, r_max, cell,
                                                    config.max_dense_cells, particles, e.pieces);

@@ -160,7 +160,9 @@ Status validate(const JobMeasure& m) {
   for (const auto& [name, v] : {std::pair<const char*, double>{"total_s", m.total_s},
                                 {"per_frame_s", m.per_frame_s},
                                 {"peak_host_bytes", m.peak_host_bytes}})
-    if (!(v > 0)) return invalid_argument(std::string(name) + " must be > 0 (a job that ran took time and memory)");
+    if (!(v > 0))
+      return invalid_argument(std::string(name) +
+                              " must be > 0 (a job that ran took time and memory)");
   const std::pair<const char*, double> notes[] = {{"active_steps", m.active_steps},
                                                   {"wall_contact_steps", m.wall_contact_steps},
                                                   {"pair_contact_steps", m.pair_contact_steps}};
@@ -345,7 +347,8 @@ Expected<JobMeasure> job_measure_from_manifest(const std::string& result_json,
     m.simulate_s = c.at("simulate_s").get<double>();
     m.render_s = c.at("render_s").get<double>();
     const double frames = c.at("frames").get<double>();
-    if (!(frames > 0)) return invalid_argument("the job wrote no frame: no cost per frame to learn from");
+    if (!(frames > 0))
+      return invalid_argument("the job wrote no frame: no cost per frame to learn from");
     m.per_frame_s = (m.simulate_s + m.render_s) / frames;
     m.peak_host_bytes = c.at("peak_host_bytes").get<double>();
     m.peak_device_bytes = c.at("peak_device_bytes").get<double>();

@@ -497,7 +497,9 @@ static Status publish_outputs(const fs::path& staging, const fs::path& out_dir,
       const fs::path to = out_dir / sub / it->path().filename();
       std::error_code mv;
       fs::rename(it->path(), to, mv);
-      if (mv) return io_error("cannot move " + it->path().string() + " to " + to.string() + ": " + mv.message());
+      if (mv)
+        return io_error("cannot move " + it->path().string() + " to " + to.string() + ": " +
+                        mv.message());
     }
     if (ec) return io_error((staging / sub).string() + ": " + ec.message());
   }

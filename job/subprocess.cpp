@@ -47,8 +47,7 @@ std::string describe(const ExitInfo& e) {
 }
 
 Expected<std::unique_ptr<Subprocess>> Subprocess::start(const std::vector<std::string>& argv,
-                                                        int report_fd,
-                                                        const std::string& log_path,
+                                                        int report_fd, const std::string& log_path,
                                                         const std::vector<std::string>& given_env,
                                                         bool own_group) {
   std::vector<std::string> env_overrides = given_env;

@@ -47,11 +47,9 @@ class Subprocess {
   // the parent's with each "NAME=value" of env_overrides set, and
   // kParentPidVariable. own_group: in a process group of its own, which the
   // terminal's Ctrl-C does not reach (a job the service stops and resumes).
-  static Expected<std::unique_ptr<Subprocess>> start(const std::vector<std::string>& argv,
-                                                     int report_fd = 3,
-                                                     const std::string& log_path = "",
-                                                     const std::vector<std::string>& env_overrides = {},
-                                                     bool own_group = false);
+  static Expected<std::unique_ptr<Subprocess>> start(
+      const std::vector<std::string>& argv, int report_fd = 3, const std::string& log_path = "",
+      const std::vector<std::string>& env_overrides = {}, bool own_group = false);
   ~Subprocess();  // a child still running is killed (SIGKILL) and reaped
   Subprocess(const Subprocess&) = delete;
   Subprocess& operator=(const Subprocess&) = delete;

@@ -25,7 +25,7 @@ struct VideoOptions {
   // Size of the images given to add_frame when it differs from the output
   // (they are scaled); 0 = the same as width x height.
   int source_width = 0, source_height = 0;
-  int fps = 30;      // frames per second of the output, divided by fps_divisor:
+  int fps = 30;         // frames per second of the output, divided by fps_divisor:
   int fps_divisor = 1;  // a GIF keeping every few frames of a 25 fps clip plays 25/2 a second
   // Constant quality: x264 CRF (0..51, 18 looks lossless, 23 default) or VP9 CRF
   // (0..63). Negative picks the codec's default for this renderer.

@@ -36,7 +36,8 @@ Status check_timing(const Scene& s) {
     return invalid_argument("placement.rate: " + number_text(pl.rate) +
                             " particles/s may release no particle within the scene's " +
                             number_text(s.duration) + " s; give at least " +
-                            number_text(1 / s.duration) + " particles/s (or 0: as fast as the inlet clears)");
+                            number_text(1 / s.duration) +
+                            " particles/s (or 0: as fast as the inlet clears)");
   return Status::ok();
 }
 

@@ -177,7 +177,8 @@ static void remove_stale_temporaries(const std::string& data_dir) {
        !ec && it != fs::directory_iterator(); it.increment(ec))
     if (it->is_directory(ec)) dirs.push_back(it->path());
   for (const fs::path& dir : dirs)
-    for (auto it = fs::directory_iterator(dir, ec); !ec && it != fs::directory_iterator(); it.increment(ec))
+    for (auto it = fs::directory_iterator(dir, ec); !ec && it != fs::directory_iterator();
+         it.increment(ec))
       if (is_temp_name(it->path().filename().string()) && it->is_regular_file(ec)) {
         std::error_code rm;
         fs::remove(it->path(), rm);
@@ -233,7 +234,8 @@ Expected<std::unique_ptr<JobService>> JobService::open(const ServiceConfig& give
     if (!running) return running.status();
     for (const Job& j : *running)
       if (j.executor_ref.empty() && j.cancel_requested)
-        svc->job_finished(j, "cancelled", "cancelled (the service stopped before the job did)", {}, 0);
+        svc->job_finished(j, "cancelled", "cancelled (the service stopped before the job did)", {},
+                          0);
     auto requeued = svc->store_->requeue_running_jobs();
     if (!requeued) return requeued.status();
   }
@@ -302,7 +304,8 @@ Status JobService::start_workers() {
   const std::vector<std::string> gpus = visible_gpus();
   int n = config_.workers;
   if (n < 0) n = gpus.empty() ? 1 : int(gpus.size());
-  std::atomic_store(&workers_, std::shared_ptr<Executor>(std::make_shared<WorkerPool>(this, n, gpus)));
+  std::atomic_store(&workers_,
+                    std::shared_ptr<Executor>(std::make_shared<WorkerPool>(this, n, gpus)));
   return Status::ok();
 }
 
@@ -1281,7 +1284,10 @@ Reply JobService::health() {
   r.body = {{"status", users ? "ok" : "degraded"},
             {"schema_version", store_schema_version()},
             {"executor", config_.executor},
-            {"workers", [&] { auto w = executor(); return w ? w->size() : 0; }()}};
+            {"workers", [&] {
+               auto w = executor();
+               return w ? w->size() : 0;
+             }()}};
   if (!users) r.status = 503;
   return r;
 }

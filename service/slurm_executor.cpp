@@ -3,8 +3,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <cctype>
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -265,7 +265,8 @@ void SlurmExecutor::submit(const Job& j) {
     // takes it up by its name or submits it again after orphan_grace_s. Only a
     // refusal ends it.
     if (out && scheduler_unreachable(*out)) {
-      std::fprintf(stderr, "collidoscope serve: sbatch for job %s did not answer (%s); it is looked "
+      std::fprintf(stderr,
+                   "collidoscope serve: sbatch for job %s did not answer (%s); it is looked "
                    "for by name and submitted again if it is not there\n",
                    j.id.c_str(), why.c_str());
       return;

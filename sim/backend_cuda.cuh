@@ -220,8 +220,8 @@ class CudaBackend {
     resize(scalar_, 1);
     uint64_t* total = reinterpret_cast<uint64_t*>(scalar_.data());
     if (!cub_call("reduce", [&](void* t, size_t& bytes) {
-          return cub::DeviceReduce::Reduce(t, bytes, d, total, static_cast<int>(n), cuda_detail::Plus64{},
-                                           uint64_t(0));
+          return cub::DeviceReduce::Reduce(t, bytes, d, total, static_cast<int>(n),
+                                           cuda_detail::Plus64{}, uint64_t(0));
         }))
       return 0;
     uint64_t sum = 0;

@@ -107,8 +107,7 @@ TriangleMesh weld_soup(const std::vector<std::array<Vec3d, 3>>& soup,
     // about 1e-16 times its longest edge squared (make_planar's test of a
     // segment). Not relative to the mesh: one stray facet far away would make
     // every small real triangle count as zero area.
-    const double longest2 =
-        std::max({norm2(s[1] - s[0]), norm2(s[2] - s[1]), norm2(s[0] - s[2])});
+    const double longest2 = std::max({norm2(s[1] - s[0]), norm2(s[2] - s[1]), norm2(s[0] - s[2])});
     if (!(length(cross(s[1] - s[0], s[2] - s[0])) > 1e-14 * longest2)) {
       ++dropped;
       continue;

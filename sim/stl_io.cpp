@@ -210,9 +210,9 @@ std::string stl_bytes(const TriangleMesh& mesh) {
     Vec3d nrm = cross(b - a, c - a);
     double len = length(nrm);
     if (len > 0) nrm = nrm * (1.0 / len);
-    const float rec[12] = {float(nrm.x), float(nrm.y), float(nrm.z), float(a.x), float(a.y),
-                           float(a.z),   float(b.x),   float(b.y),   float(b.z), float(c.x),
-                           float(c.y),   float(c.z)};
+    const float rec[12] = {float(nrm.x), float(nrm.y), float(nrm.z), float(a.x),
+                           float(a.y),   float(a.z),   float(b.x),   float(b.y),
+                           float(b.z),   float(c.x),   float(c.y),   float(c.z)};
     out.append(reinterpret_cast<const char*>(rec), sizeof rec);
     out.append(2, '\0');  // attribute bytes
   }

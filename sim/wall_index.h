@@ -48,8 +48,8 @@ inline GridSpec make_grid(Vec3d lo, Vec3d hi, double cell, uint64_t max_dense_ce
   // In double first: three dimensions of up to 1e9 overflow 64 bits, and a
   // count that wrapped to a few would have made a dense table far too small.
   const double product = double(g.nx) * double(g.ny) * double(g.nz);
-  const uint64_t cells = product < 1.8e19 ? uint64_t(g.nx) * uint64_t(g.ny) * uint64_t(g.nz)
-                                          : UINT64_MAX;
+  const uint64_t cells =
+      product < 1.8e19 ? uint64_t(g.nx) * uint64_t(g.ny) * uint64_t(g.nz) : UINT64_MAX;
   *cells_out = cells;
   if (cells <= max_dense_cells) {
     g.buckets = static_cast<uint32_t>(cells);
@@ -314,10 +314,10 @@ class WallIndex {
     // Each particle visits (2 reach + 1)^3 cells: a grid length far below the
     // radius made that hundreds of thousands a step (and past int, wrong).
     if (!(search / cell <= kMaxReach))
-      return invalid_argument("a grid length of " + std::to_string(cell) +
-                              " is more than " + std::to_string(kMaxReach) +
-                              " times below the pieces' reach (" + std::to_string(search) +
-                              "): each particle would visit too many cells; use a longer grid length");
+      return invalid_argument(
+          "a grid length of " + std::to_string(cell) + " is more than " +
+          std::to_string(kMaxReach) + " times below the pieces' reach (" + std::to_string(search) +
+          "): each particle would visit too many cells; use a longer grid length");
     reach = neighbour_reach(search, cell);
     piece_search = static_cast<float>(search);
     info->reach = reach;

@@ -61,7 +61,8 @@ Status run_detect_study(const StudyOptions& o, std::vector<DetectRow>* rows) {
   if (!scenes) return scenes.status();
   // A name that matches no scene is a mistake, not a study of nothing.
   for (const std::string& want : o.scenes)
-    if (std::none_of(scenes->begin(), scenes->end(), [&](const Scene& sc) { return sc.name == want; })) {
+    if (std::none_of(scenes->begin(), scenes->end(),
+                     [&](const Scene& sc) { return sc.name == want; })) {
       std::string known;
       for (const Scene& sc : *scenes) known += (known.empty() ? "" : ", ") + sc.name;
       return invalid_argument("study: no detection scene '" + want + "' (" + known + ")");

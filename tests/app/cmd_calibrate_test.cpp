@@ -205,9 +205,10 @@ TEST(CmdCalibrate, JobSweepTrainAndPredictAScene) {
                      "--out", model, "--ensemble", "3"}),
             kExitUsage);
   for (const char* hidden : {"4294967297", "1e30", "inf"})
-    EXPECT_EQ(cmd_gvm({"train", "--logs", std::string(COLLIDO_SOURCE_DIR) + "/bench/data/jobs_cpu.csv",
-                       "--out", model, "--hidden", hidden}),
-              kExitUsage)
+    EXPECT_EQ(
+        cmd_gvm({"train", "--logs", std::string(COLLIDO_SOURCE_DIR) + "/bench/data/jobs_cpu.csv",
+                 "--out", model, "--hidden", hidden}),
+        kExitUsage)
         << hidden;
 
   // The model replayed on its log in the log's order, alone and at the machine's pace.
@@ -219,7 +220,8 @@ TEST(CmdCalibrate, JobSweepTrainAndPredictAScene) {
     EXPECT_NE(replay.find(s), std::string::npos) << s << "\n" << replay;
   EXPECT_EQ(cmd_gvm({"replay", jobs_log}), kExitUsage);                         // no --model
   EXPECT_EQ(cmd_gvm({"replay", "--model", model}), kExitUsage);                 // no log
-  EXPECT_EQ(cmd_gvm({"replay", tmp("absent.csv"), "--model", model}), kExitUsage);  // missing: bad input
+  EXPECT_EQ(cmd_gvm({"replay", tmp("absent.csv"), "--model", model}),
+            kExitUsage);  // missing: bad input
   EXPECT_EQ(cmd_gvm({"replay", jobs_log, "--model", tmp("absent.json")}), kExitUsage);
   EXPECT_EQ(cmd_gvm({"train", "--logs", tmp("absent.csv"), "--out", tmp("m.json")}), kExitUsage);
   EXPECT_EQ(cmd_predict({tmp("absent-scene.json"), "--model", model}), kExitUsage);

@@ -44,7 +44,8 @@ TEST(CmdStudy, QuickDetectionOnWall1) {
   // The half not run (--only detect) keeps what an earlier study wrote of it.
   std::filesystem::create_directories(out);
   std::ofstream(out + "/study_dynamics.csv") << "scene\nkept\n";
-  std::ofstream(out + "/study.json") << R"({"machine": "earlier", "detect": [], "dynamics": [{"scene": "kept"}]})";
+  std::ofstream(out + "/study.json")
+      << R"({"machine": "earlier", "detect": [], "dynamics": [{"scene": "kept"}]})";
   ASSERT_EQ(cmd_study({"--quick", "--only", "detect", "--scenes", "wall1", "--max-particles", "1000",
                        "--meshes", COLLIDO_TEST_DATA "/meshes", "--out", out, "--threads", "2"}),
             kExitOk);
@@ -92,10 +93,13 @@ TEST(CmdStudy, QuickDetectionOnWall1) {
 TEST(CmdStudy, AnUnknownSceneIsBadInputThatNamesTheScenes) {
   testing::internal::CaptureStderr();
   EXPECT_EQ(cmd_study({"--quick", "--only", "detect", "--scenes", "teapot", "--meshes",
-                       COLLIDO_TEST_DATA "/meshes", "--out", testing::TempDir() + "/cmd_study_test_unknown"}),
+                       COLLIDO_TEST_DATA "/meshes", "--out",
+                       testing::TempDir() + "/cmd_study_test_unknown"}),
             kExitUsage);
   const std::string said = testing::internal::GetCapturedStderr();
-  EXPECT_NE(said.find("no detection scene 'teapot' (wall1, wall2, teapot_trimesh)"), std::string::npos) << said;
+  EXPECT_NE(said.find("no detection scene 'teapot' (wall1, wall2, teapot_trimesh)"),
+            std::string::npos)
+      << said;
 }
 
 TEST(CmdStudy, BadArgumentsExitTwo) {

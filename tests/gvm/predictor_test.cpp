@@ -194,7 +194,8 @@ TEST(Predictor, CorruptModelFilesAreErrors) {
   ASSERT_FALSE(r);
   EXPECT_NE(r.status().message().find("feature"), std::string::npos) << r.status().message();
   // Missing: not found (bad input), told from a file there that cannot be read.
-  EXPECT_EQ(ResourcePredictor::load("/nonexistent/model.json").status().code(), ErrorCode::kNotFound);
+  EXPECT_EQ(ResourcePredictor::load("/nonexistent/model.json").status().code(),
+            ErrorCode::kNotFound);
 }
 
 // Integer fields holding floats too large for the type (UBSan caught a plain

@@ -110,15 +110,15 @@ TEST_F(RenderCliTest, ARenderReplacesThePreviousOne) {
 // it was: not the frame images it drew before failing, nor a half set of videos.
 TEST_F(RenderCliTest, AFailedRenderLeavesThePreviousOne) {
   write_run(4);
-  ASSERT_EQ(cmd_render({run(), "--out", out(), "--width", "96", "--height", "64", "--png-every",
-                        "1"}),
-            kExitOk);
+  ASSERT_EQ(
+      cmd_render({run(), "--out", out(), "--width", "96", "--height", "64", "--png-every", "1"}),
+      kExitOk);
   render::Image before;
   ASSERT_TRUE(render::read_png(out() + "/poster.png", &before));
   std::ofstream(sim::snapshot_path(run(), 3), std::ios::trunc) << "not a snapshot";
-  EXPECT_NE(cmd_render({run(), "--out", out(), "--width", "160", "--height", "120",
-                        "--png-every", "1"}),
-            kExitOk);
+  EXPECT_NE(
+      cmd_render({run(), "--out", out(), "--width", "160", "--height", "120", "--png-every", "1"}),
+      kExitOk);
   render::Image after;
   ASSERT_TRUE(render::read_png(out() + "/poster.png", &after));
   EXPECT_EQ(after.width, 96) << "the previous poster";

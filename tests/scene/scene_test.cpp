@@ -172,8 +172,10 @@ TEST(Scene, ErrorsNameTheKey) {
   expect_error(
       R"({"wall": "wall1", "duration": 1, "placement": {"kind": "jet", "rate": 0.5, "velocity": [0, 0, -1]}})",
       "placement.rate");
-  EXPECT_TRUE(parse_scene(R"({"wall": "wall1", "duration": 2, "placement": {"kind": "pour", "rate": 0.5}})"));
-  EXPECT_TRUE(parse_scene(R"({"wall": "wall1", "duration": 2, "placement": {"kind": "pour", "rate": 0}})"));
+  EXPECT_TRUE(parse_scene(
+      R"({"wall": "wall1", "duration": 2, "placement": {"kind": "pour", "rate": 0.5}})"));
+  EXPECT_TRUE(
+      parse_scene(R"({"wall": "wall1", "duration": 2, "placement": {"kind": "pour", "rate": 0}})"));
   // Any negative skin is the automatic one (docs/jobs.md), held as -1.
   auto skin = parse_scene(R"({"wall": "wall1", "neighbour_skin": -2})");
   ASSERT_TRUE(skin) << skin.status().message();

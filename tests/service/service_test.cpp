@@ -104,7 +104,8 @@ class ServiceTest : public ::testing::Test {
     auto j = (*store)->job_by_id(id);
     EXPECT_TRUE(j);
     EXPECT_TRUE(*(*store)->delete_job(id));
-    j->state = "running", j->stage = "prepare", j->progress = 0, j->attempts = 1, j->finished_at = 0;
+    j->state = "running", j->stage = "prepare", j->progress = 0, j->attempts = 1,
+    j->finished_at = 0;
     EXPECT_TRUE((*store)->insert_job(*j));
     if (cancel_requested) {
       EXPECT_TRUE((*store)->request_cancel(id));
@@ -513,7 +514,8 @@ TEST_F(ServiceTest, BadInputGetsClearErrorsAndTheServerGoesOn) {
   // A shape as {"shape": spec}, as scene files (and a run's scene.json) write
   // it, is the shape; a path in it is not.
   EXPECT_EQ(c.call("POST", "/api/v1/predict", tiny_job({{"shape", "wall1"}}).dump()).status, 200);
-  EXPECT_EQ(c.call("POST", "/api/v1/predict", tiny_job({{"shape", "/etc/passwd"}}).dump()).status, 400);
+  EXPECT_EQ(c.call("POST", "/api/v1/predict", tiny_job({{"shape", "/etc/passwd"}}).dump()).status,
+            400);
   s = tiny_job("wall1");
   s["scene"]["colour"] = "red";
   EXPECT_EQ(c.call("POST", "/api/v1/jobs", s.dump()).status, 400);
@@ -737,7 +739,8 @@ TEST_F(ServiceTest, AJobStoppedBeforeItsRunBeganStartsOverAtTheNextStart) {
   EXPECT_FALSE(fs::exists(fs::path(dir_) / "models" / "7.stl.tmp-123-1"));
   EXPECT_TRUE(fs::exists(job_folder / "spec.json"));
   Client back = client();
-  back.token = back.call_json("POST", "/api/v1/sessions", {{"name", "eve"}, {"password", "correct horse"}})["token"];
+  back.token = back.call_json("POST", "/api/v1/sessions",
+                              {{"name", "eve"}, {"password", "correct horse"}})["token"];
   const json again = back.wait_job(id);
   EXPECT_EQ(again["state"], "done") << again.dump();
 }
@@ -751,7 +754,8 @@ TEST_F(ServiceTest, ACancelAskedBeforeTheServiceStoppedIsKept) {
   const std::string id = stopped_in_first_attempt(c, true);
   start();
   Client back = client();
-  back.token = back.call_json("POST", "/api/v1/sessions", {{"name", "fay"}, {"password", "correct horse"}})["token"];
+  back.token = back.call_json("POST", "/api/v1/sessions",
+                              {{"name", "fay"}, {"password", "correct horse"}})["token"];
   const json j = back.call_json("GET", "/api/v1/jobs/" + id);
   EXPECT_EQ(j["state"], "cancelled") << j.dump();
   EXPECT_EQ(j["attempts"], 1);
@@ -856,8 +860,12 @@ void stopped_server_resumes_its_job(bool ctrl_c) {
   EXPECT_EQ(*(*store)->integrity_check(), "ok");
 }
 
-TEST(ServeProcess, KilledServerResumesItsJob) { stopped_server_resumes_its_job(false); }
-TEST(ServeProcess, CtrlCStopsTheServerAndItsJobResumes) { stopped_server_resumes_its_job(true); }
+TEST(ServeProcess, KilledServerResumesItsJob) {
+  stopped_server_resumes_its_job(false);
+}
+TEST(ServeProcess, CtrlCStopsTheServerAndItsJobResumes) {
+  stopped_server_resumes_its_job(true);
+}
 
 }  // namespace
 }  // namespace collido::service

@@ -5,8 +5,8 @@
 // reason, only where Slurm cannot start. Every wait is bounded.
 #include <gtest/gtest.h>
 
-#include <csignal>
 #include <unistd.h>
+#include <csignal>
 
 #include <chrono>
 #include <cstdlib>
@@ -382,8 +382,11 @@ TEST(SlurmOutcome, SqueueLinesAndRequestsAreReadAsWritten) {
   // An sbatch that may have queued the job all the same is not taken for a refusal.
   job::CommandOutput refused, busy, slow, killed;
   refused.exit.exit_code = busy.exit.exit_code = 1;
-  refused.err = "sbatch: error: Batch job submission failed: Invalid account or account/partition combination specified\n";
-  busy.err = "sbatch: error: Batch job submission failed: Socket timed out on send/recv operation\n";
+  refused.err =
+      "sbatch: error: Batch job submission failed: Invalid account or account/partition "
+      "combination specified\n";
+  busy.err =
+      "sbatch: error: Batch job submission failed: Socket timed out on send/recv operation\n";
   slow.timed_out = true;
   killed.exit.signal = SIGKILL;
   EXPECT_FALSE(scheduler_unreachable(refused));

@@ -152,7 +152,7 @@ TEST(Stl, ZeroAreaTrianglesAreDroppedAndCounted) {
 TEST(Stl, ZeroAreaIsRelativeToTheTriangleNotTheMesh) {
   auto tris = kQuad;
   for (auto& t : tris)
-    for (float& c : t) c *= 1e-3f;                      // a 1 mm square
+    for (float& c : t) c *= 1e-3f;                                        // a 1 mm square
   tris.push_back({1e4f, 1e4f, 0, 1e4f + 1, 1e4f, 0, 1e4f, 1e4f + 1, 0});  // a stray facet
   tris.push_back({1e4f, 0, 0, 1e4f + 1, 0, 0, 1e4f + 2, 0, 0});           // collinear, far out
   MeshReport rep;
