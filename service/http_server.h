@@ -5,9 +5,11 @@
 //   checking its limit: a guard reads each request's headers as they arrive
 //   and answers 413 to a Content-Length over the route's limit (411 to a
 //   chunked body) before Pistache's parser sees it;
-// - its serveFile always answers 200 through sendfile() without MSG_NOSIGNAL:
-//   files are answered here (200, 206, 416, Accept-Ranges), and SIGPIPE is
-//   ignored for the whole process when the server starts;
+// - its serveFile always answers 200 through sendfile() without MSG_NOSIGNAL,
+//   and keeps the file open when the viewer stops a download: files are
+//   answered here (200, 206, 416, Accept-Ranges), sent in slices from the
+//   open file, and SIGPIPE is ignored for the whole process when the server
+//   starts;
 // - its Rest::Router may insert into a shared map from several threads: we
 //   route ourselves, from a table that is never written after start-up;
 // - it answers a request without a Connection header "Connection: Close":

@@ -631,6 +631,103 @@ TEST_F(ServiceTest, AnHttp11ConnectionWithoutAConnectionHeaderStaysOpen) {
   ::close(fd);
 }
 
+// The open descriptors of this process (the server runs in it).
+size_t open_descriptors() {
+  size_t n = 0;
+  for ([[maybe_unused]] const auto& e : fs::directory_iterator("/proc/self/fd")) ++n;
+  return n;
+}
+
+// Reads one answer to a GET from a raw connection: its head and a body of the
+// Content-Length it states. Empty on a closed or silent connection.
+std::pair<std::string, std::string> read_answer(int fd) {
+  std::string got;
+  char buf[65536];
+  size_t head_end = std::string::npos, length = 0;
+  while (true) {
+    if (head_end == std::string::npos && (head_end = got.find("\r\n\r\n")) != std::string::npos) {
+      const size_t at = got.find("Content-Length: ");
+      if (at == std::string::npos || at > head_end) return {};
+      length = std::stoull(got.substr(at + 16));
+      head_end += 4;
+    }
+    if (head_end != std::string::npos && got.size() >= head_end + length) break;
+    const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
+    if (n <= 0) return {};
+    got.append(buf, size_t(n));
+  }
+  return {got.substr(0, head_end), got.substr(head_end, length)};
+}
+
+// A large file is sent in slices from the open file, never read whole: it
+// arrives byte for byte, with its headers, whole or by any range, and the
+// connection serves the next request after it. Downloads stopped part way
+// leave no descriptor behind (Pistache's serveFile kept one open each).
+TEST_F(ServiceTest, LargeFilesGoOutInSlicesAndStoppedDownloadsCloseTheirFile) {
+  const std::string web = dir_ + "/web";
+  fs::create_directories(web);
+  std::string big(5'000'000, '\0');
+  uint32_t x = 12345;
+  for (char& ch : big) ch = char((x = x * 1664525u + 1013904223u) >> 24);
+  ASSERT_TRUE(collido::write_file_atomic(web + "/big.bin", big));
+  ASSERT_TRUE(collido::write_file_atomic(web + "/index.html", "<!doctype html><title>t</title>"));
+  ServerOptions o;
+  o.port = 0;
+  o.web_dir = web;
+  auto server = Server::start(svc_.get(), o);
+  ASSERT_TRUE(server) << server.status().message();
+  const std::string base = "http://127.0.0.1:" + std::to_string((*server)->port());
+
+  auto whole = http("GET", base + "/ui/big.bin");
+  ASSERT_EQ(whole.status, 200);
+  EXPECT_TRUE(whole.body == big) << whole.body.size() << " bytes";
+  EXPECT_EQ(whole.headers["content-length"], std::to_string(big.size()));
+  EXPECT_EQ(whole.headers["accept-ranges"], "bytes");
+  EXPECT_EQ(whole.headers["x-content-type-options"], "nosniff");
+  EXPECT_EQ(whole.headers["cache-control"], "no-cache");
+  auto from = http("GET", base + "/ui/big.bin", "", {"Range: bytes=1000-"});
+  EXPECT_EQ(from.status, 206);
+  EXPECT_TRUE(from.body == big.substr(1000)) << from.body.size() << " bytes";
+  EXPECT_EQ(from.headers["content-range"],
+            "bytes 1000-" + std::to_string(big.size() - 1) + "/" + std::to_string(big.size()));
+  auto empty_page = http("GET", base + "/");
+  EXPECT_EQ(empty_page.status, 200);
+  EXPECT_EQ(empty_page.headers["content-type"], "text/html; charset=utf-8");
+
+  // Two answers on one connection: the file, then the page.
+  const int fd = connect_loopback((*server)->port());
+  ASSERT_GE(fd, 0);
+  timeval tv{10, 0};
+  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+  for (const std::string path : {"/ui/big.bin", "/"}) {
+    const std::string req = "GET " + path + " HTTP/1.1\r\nHost: x\r\n\r\n";
+    ASSERT_EQ(::send(fd, req.data(), req.size(), MSG_NOSIGNAL), ssize_t(req.size()));
+    auto [head, body] = read_answer(fd);
+    EXPECT_EQ(head.compare(0, 15, "HTTP/1.1 200 OK"), 0) << path << ": " << head;
+    EXPECT_EQ(body.size(), path == "/" ? 31u : big.size()) << path;
+  }
+  ::close(fd);
+
+  // Twenty downloads stopped after their first bytes.
+  const size_t before = open_descriptors();
+  for (int i = 0; i < 20; ++i) {
+    const int d = connect_loopback((*server)->port());
+    ASSERT_GE(d, 0);
+    const std::string req = "GET /ui/big.bin HTTP/1.1\r\nHost: x\r\n\r\n";
+    ASSERT_EQ(::send(d, req.data(), req.size(), MSG_NOSIGNAL), ssize_t(req.size()));
+    char buf[4096];
+    ASSERT_GT(::recv(d, buf, sizeof buf, 0), 0);
+    ::close(d);
+  }
+  size_t after = open_descriptors();
+  for (int wait = 0; wait < 100 && after > before; ++wait) {  // the server sees the closes
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    after = open_descriptors();
+  }
+  EXPECT_LE(after, before) << "descriptors left open by stopped downloads";
+  EXPECT_TRUE(http("GET", base + "/ui/big.bin").body == big);
+}
+
 TEST_F(ServiceTest, AdmissionQueueLimitAndCancel) {
   Client c = client();
   c.sign_up("busy");
