@@ -605,8 +605,8 @@ class Router : public Http::Handler {
     } catch (...) {
       writer.headers().add(std::make_shared<NamedHeader>("Content-Type", out.mime));
     }
-    if (out.file) {
-      send_file(http, writer, mime, out);
+    if (out.file || http.method() == Http::Method::Head) {
+      send_head_and_file(http, writer, mime, out);
       return;
     }
     writer.send(static_cast<Http::Code>(out.status), out.body.data(), out.body.size(), mime);
@@ -614,9 +614,9 @@ class Router : public Http::Handler {
 
  private:
   // The status line and headers as ResponseWriter::send writes them, then
-  // the file's part through a FileSender.
-  static void send_file(const Http::Request& http, Http::ResponseWriter& writer,
-                        const Http::Mime::MediaType& mime, const Response& out) {
+  // the file's part through a FileSender; to a HEAD request, the head alone.
+  static void send_head_and_file(const Http::Request& http, Http::ResponseWriter& writer,
+                                 const Http::Mime::MediaType& mime, const Response& out) {
     if (mime.isValid()) writer.headers().add<Http::Header::ContentType>(mime);
     std::ostringstream head;
     const auto code = static_cast<Http::Code>(out.status);
@@ -627,7 +627,13 @@ class Router : public Http::Handler {
       h->write(head);
       head << "\r\n";
     }
-    head << "Content-Length: " << out.file->count << "\r\n\r\n";
+    head << "Content-Length: " << (out.file ? out.file->count : out.body.size()) << "\r\n\r\n";
+    if (http.method() == Http::Method::Head) {
+      std::string text = head.str();
+      const size_t length = text.size();
+      writer.peer()->send(RawBuffer(std::move(text), length));
+      return;
+    }
     std::make_shared<FileSender>(head.str(), *out.file, writer.peer())->send_next();
   }
 
@@ -640,11 +646,16 @@ class Router : public Http::Handler {
       req.segments.push_back(percent_decode(part, &ok));
       if (!ok) return error_response(404, "no such resource");
     }
-    bool path_known = false;
+    // HEAD is GET without the body (RFC 9110 9.3.2): the GET route answers it
+    // and onRequest sends the head alone.
+    const std::string method = req.method == "HEAD" ? "GET" : req.method;
+    std::string allowed;  // the path's methods, for a 405's Allow
     for (const Route& route : shared_->routes) {
       if (!match(route, req)) continue;
-      path_known = true;
-      if (route.method != req.method) continue;
+      if (allowed.find(route.method) == std::string::npos)
+        allowed +=
+            (allowed.empty() ? "" : ", ") + route.method + (route.method == "GET" ? ", HEAD" : "");
+      if (route.method != method) continue;
       if (route.auth != Auth::kNone) {
         req.token = session_token(http);
         auto user = shared_->service->authenticate(req.token);
@@ -659,7 +670,11 @@ class Router : public Http::Handler {
         return error_response(500, std::string("internal error: ") + e.what());
       }
     }
-    if (path_known) return error_response(405, "method " + req.method + " is not allowed here");
+    if (!allowed.empty()) {
+      Response out = error_response(405, "method " + req.method + " is not allowed here");
+      out.set_header("Allow", allowed);
+      return out;
+    }
     return error_response(404, "no such resource");
   }
 

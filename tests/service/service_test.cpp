@@ -693,7 +693,6 @@ TEST_F(ServiceTest, LargeFilesGoOutInSlicesAndStoppedDownloadsCloseTheirFile) {
   auto empty_page = http("GET", base + "/");
   EXPECT_EQ(empty_page.status, 200);
   EXPECT_EQ(empty_page.headers["content-type"], "text/html; charset=utf-8");
-
   // Two answers on one connection: the file, then the page.
   const int fd = connect_loopback((*server)->port());
   ASSERT_GE(fd, 0);
@@ -726,6 +725,61 @@ TEST_F(ServiceTest, LargeFilesGoOutInSlicesAndStoppedDownloadsCloseTheirFile) {
   }
   EXPECT_LE(after, before) << "descriptors left open by stopped downloads";
   EXPECT_TRUE(http("GET", base + "/ui/big.bin").body == big);
+}
+
+// HEAD is GET without the body, files and JSON alike; a method the path does
+// not take gets 405 with the ones it does.
+TEST_F(ServiceTest, HeadAnswersLikeGetWithoutTheBodyAnd405SaysWhatIsAllowed) {
+  const std::string web = dir_ + "/web";
+  fs::create_directories(web);
+  const std::string big(1'000'000, 'x');
+  ASSERT_TRUE(collido::write_file_atomic(web + "/big.bin", big));
+  ServerOptions o;
+  o.port = 0;
+  o.web_dir = web;
+  auto server = Server::start(svc_.get(), o);
+  ASSERT_TRUE(server) << server.status().message();
+  const std::string base = "http://127.0.0.1:" + std::to_string((*server)->port());
+  auto head = http("HEAD", base + "/ui/big.bin");
+  EXPECT_EQ(head.status, 200);
+  EXPECT_EQ(head.headers["content-length"], std::to_string(big.size()));
+  EXPECT_EQ(head.headers["accept-ranges"], "bytes");
+  EXPECT_TRUE(head.body.empty());
+  auto head_part = http("HEAD", base + "/ui/big.bin", "", {"Range: bytes=0-9"});
+  EXPECT_EQ(head_part.status, 206);
+  EXPECT_EQ(head_part.headers["content-length"], "10");
+  auto head_json = http("HEAD", base + "/api/v1/health");
+  EXPECT_EQ(head_json.status, 200);
+  EXPECT_EQ(head_json.headers["content-length"],
+            std::to_string(http("GET", base + "/api/v1/health").body.size()));
+  EXPECT_TRUE(head_json.body.empty());
+  // A method the path does not take: 405 with the ones it does.
+  auto wrong = http("DELETE", base + "/api/v1/health");
+  EXPECT_EQ(wrong.status, 405);
+  EXPECT_EQ(wrong.headers["allow"], "GET, HEAD");
+  EXPECT_EQ(http("PUT", base + "/api/v1/jobs").headers["allow"], "POST, GET, HEAD");
+
+  // On one connection, the answer after a HEAD's starts where the head ends.
+  const int fd = connect_loopback((*server)->port());
+  ASSERT_GE(fd, 0);
+  timeval tv{10, 0};
+  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+  const std::string head_req = "HEAD /ui/big.bin HTTP/1.1\r\nHost: x\r\n\r\n";
+  ASSERT_EQ(::send(fd, head_req.data(), head_req.size(), MSG_NOSIGNAL), ssize_t(head_req.size()));
+  std::string got;
+  char buf[4096];
+  while (got.find("\r\n\r\n") == std::string::npos) {
+    const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
+    ASSERT_GT(n, 0) << got;
+    got.append(buf, size_t(n));
+  }
+  EXPECT_EQ(got.size(), got.find("\r\n\r\n") + 4) << "bytes after a HEAD's head";
+  const std::string get_req = "GET /api/v1/health HTTP/1.1\r\nHost: x\r\n\r\n";
+  ASSERT_EQ(::send(fd, get_req.data(), get_req.size(), MSG_NOSIGNAL), ssize_t(get_req.size()));
+  auto [next_head, next_body] = read_answer(fd);
+  EXPECT_EQ(next_head.compare(0, 15, "HTTP/1.1 200 OK"), 0) << next_head;
+  EXPECT_EQ(next_body.front(), '{') << next_body;
+  ::close(fd);
 }
 
 TEST_F(ServiceTest, AdmissionQueueLimitAndCancel) {
