@@ -1,7 +1,8 @@
 // Request heads, Range headers and path segments into the parsers the
 // server's guard and router use before (or beside) Pistache's. Invariants: a
 // head the guard passes keeps its Content-Length through the header cleaning,
-// a range lies inside the file, and a decoded segment holds no NUL.
+// a range lies inside the file, a decoded segment holds no NUL, an HTTP date
+// reads back to itself, and a file's own entity tag matches it at the head of any list.
 #include <cstdint>
 #include <string>
 
@@ -29,6 +30,16 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     const std::string decoded = percent_decode(segment, &ok);
     if (ok && decoded.find('\0') != std::string::npos) __builtin_trap();
   }
+  // The same line as an HTTP date, and as If-None-Match and If-Range lists: a
+  // date read back writes the same text, and a list that starts with a file's
+  // own tag matches it, whatever follows.
+  if (auto date = parse_http_date(line);
+      date && http_date(*date) != line && parse_http_date(http_date(*date)) != date)
+    __builtin_trap();
+  const FileValidators v = file_validators(size, int64_t(size) * 7, 3);
+  (void)range_applies(v, line);
+  (void)not_modified(v, line, line);
+  if (!not_modified(v, v.etag + ", " + line, "") || !range_applies(v, v.etag)) __builtin_trap();
   (void)html_escape(text);
   return 0;
 }

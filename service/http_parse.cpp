@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cstdio>
+#include <ctime>
 #include <filesystem>
 
 namespace collido::service {
@@ -92,6 +94,99 @@ std::string without_unparsable_headers(const std::string& head) {
     first = false;
   }
   return out;
+}
+
+FileValidators file_validators(uint64_t size, int64_t mtime_s, int64_t mtime_ns) {
+  char tag[64];
+  std::snprintf(tag, sizeof tag, "\"%llx-%llx\"", static_cast<unsigned long long>(size),
+                static_cast<unsigned long long>(mtime_s) * 1000000000ull +
+                    static_cast<unsigned long long>(mtime_ns));
+  return {tag, mtime_s};
+}
+
+std::string http_date(int64_t unix_s) {
+  const time_t t = time_t(unix_s);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char out[64];
+  std::strftime(out, sizeof out, "%a, %d %b %Y %H:%M:%S GMT", &tm);
+  return out;
+}
+
+std::optional<int64_t> parse_http_date(const std::string& text) {
+  // Parsed by hand: strptime's names follow the locale.
+  static const char* kDays[] = {"Sun", "Mon", "Tue", "Wed", "Thu", "Fri", "Sat"};
+  static const char* kMonths[] = {"Jan", "Feb", "Mar", "Apr", "May", "Jun",
+                                  "Jul", "Aug", "Sep", "Oct", "Nov", "Dec"};
+  if (text.size() != 29 || text.compare(3, 2, ", ") != 0 || text.compare(25, 4, " GMT") != 0 ||
+      std::find_if(std::begin(kDays), std::end(kDays),
+                   [&](const char* d) { return text.compare(0, 3, d) == 0; }) == std::end(kDays))
+    return std::nullopt;
+  auto digits = [&](size_t at, size_t n, int* v) {
+    *v = 0;
+    for (size_t i = at; i < at + n; ++i) {
+      if (!std::isdigit(static_cast<unsigned char>(text[i]))) return false;
+      *v = *v * 10 + (text[i] - '0');
+    }
+    return true;
+  };
+  int day, year, hour, minute, second;
+  const auto month = std::find_if(std::begin(kMonths), std::end(kMonths),
+                                  [&](const char* m) { return text.compare(8, 3, m) == 0; });
+  if (month == std::end(kMonths) || text[7] != ' ' || text[11] != ' ' || text[16] != ' ' ||
+      text[19] != ':' || text[22] != ':' || !digits(5, 2, &day) || !digits(12, 4, &year) ||
+      !digits(17, 2, &hour) || !digits(20, 2, &minute) || !digits(23, 2, &second) || day < 1 ||
+      day > 31 || hour > 23 || minute > 59 || second > 60)
+    return std::nullopt;
+  std::tm tm{};
+  tm.tm_year = year - 1900, tm.tm_mon = int(month - std::begin(kMonths)), tm.tm_mday = day;
+  tm.tm_hour = hour, tm.tm_min = minute, tm.tm_sec = second;
+  return int64_t(timegm(&tm));
+}
+
+namespace {
+// The entity tags of an If-None-Match or If-Range list, W/ kept.
+std::vector<std::string> entity_tags(const std::string& list) {
+  std::vector<std::string> tags;
+  size_t i = 0;
+  while (i < list.size()) {
+    while (i < list.size() && (list[i] == ' ' || list[i] == '\t' || list[i] == ',')) ++i;
+    if (i >= list.size()) break;
+    const size_t start = i;
+    if (list.compare(i, 2, "W/") == 0) i += 2;
+    if (i < list.size() && list[i] == '"') {
+      const size_t close = list.find('"', i + 1);
+      if (close == std::string::npos) break;
+      i = close + 1;
+    } else {
+      while (i < list.size() && list[i] != ',') ++i;
+    }
+    tags.push_back(list.substr(start, i - start));
+  }
+  return tags;
+}
+std::string opaque(const std::string& tag) {
+  return tag.compare(0, 2, "W/") == 0 ? tag.substr(2) : tag;
+}
+}  // namespace
+
+bool not_modified(const FileValidators& v, const std::string& if_none_match,
+                  const std::string& if_modified_since) {
+  if (!if_none_match.empty()) {
+    for (const std::string& tag : entity_tags(if_none_match))
+      if (tag == "*" || opaque(tag) == v.etag) return true;
+    return false;
+  }
+  if (if_modified_since.empty()) return false;
+  const auto since = parse_http_date(if_modified_since);
+  return since && v.modified_s <= *since;
+}
+
+bool range_applies(const FileValidators& v, const std::string& if_range) {
+  if (if_range.empty()) return true;
+  if (if_range.front() == '"') return if_range == v.etag;  // strong comparison
+  const auto date = parse_http_date(if_range);
+  return date && *date == v.modified_s;
 }
 
 std::optional<std::pair<uint64_t, uint64_t>> parse_range(const std::string& header, uint64_t size,

@@ -41,6 +41,26 @@ std::string without_unparsable_headers(const std::string& head);
 std::optional<std::pair<uint64_t, uint64_t>> parse_range(const std::string& header, uint64_t size,
                                                          bool* unsatisfiable);
 
+// Conditional requests (RFC 9110 13) on a file, whose validators are an
+// entity tag of its size and modification time and its Last-Modified date.
+struct FileValidators {
+  std::string etag;        // "\"<size hex>-<mtime ns hex>\"": a new file, a new tag
+  int64_t modified_s = 0;  // the modification time, whole seconds since 1970 (UTC)
+};
+FileValidators file_validators(uint64_t size, int64_t mtime_s, int64_t mtime_ns);
+// An IMF-fixdate ("Sun, 06 Nov 1994 08:49:37 GMT"), and back: nullopt for
+// any other text (the obsolete formats are not read; the date is then ignored).
+std::string http_date(int64_t unix_s);
+std::optional<int64_t> parse_http_date(const std::string& text);
+// Whether a GET may be answered 304: If-None-Match (a list of tags or "*",
+// compared weakly) decides when present, else If-Modified-Since. Empty
+// strings stand for absent headers.
+bool not_modified(const FileValidators& v, const std::string& if_none_match,
+                  const std::string& if_modified_since);
+// Whether a Range applies under If-Range (absent: yes): only to the very file
+// the client holds part of, its strong tag or its exact date.
+bool range_applies(const FileValidators& v, const std::string& if_range);
+
 // %XX decoding of one path segment; *ok = false on a malformed escape or a NUL.
 std::string percent_decode(const std::string& s, bool* ok);
 // The non-empty segments of a path ("/a//b/" -> {"a", "b"}).

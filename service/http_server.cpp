@@ -100,13 +100,27 @@ Response file_response(const std::string& path, const Http::Request& req) {
   if (file->fd < 0 || ::fstat(file->fd, &st) != 0 || !S_ISREG(st.st_mode))
     return error_response(404, "no such file");
   const uint64_t size = uint64_t(st.st_size);
+  const FileValidators validators =
+      file_validators(size, int64_t(st.st_mtim.tv_sec), int64_t(st.st_mtim.tv_nsec));
+  auto header = [&](const char* name) {
+    auto h = req.headers().tryGetRaw(name);
+    return h ? h->value() : std::string();
+  };
   Response out;
   out.mime = job::mime_type(path);
   out.headers.emplace_back("Accept-Ranges", "bytes");
   out.headers.emplace_back("Cache-Control", "private, max-age=60");
+  // A browser revalidates what it cached (the UI's files at every load, a
+  // video after a minute) and gets 304 instead of the file again.
+  out.headers.emplace_back("ETag", validators.etag);
+  out.headers.emplace_back("Last-Modified", http_date(validators.modified_s));
+  if (not_modified(validators, header("If-None-Match"), header("If-Modified-Since"))) {
+    out.status = 304;
+    return out;
+  }
   uint64_t first = 0, count = size;
   auto range_header = req.headers().tryGetRaw("Range");
-  if (range_header) {
+  if (range_header && range_applies(validators, header("If-Range"))) {
     bool unsatisfiable = false;
     auto range = parse_range(range_header->value(), size, &unsatisfiable);
     if (unsatisfiable) {
@@ -605,7 +619,7 @@ class Router : public Http::Handler {
     } catch (...) {
       writer.headers().add(std::make_shared<NamedHeader>("Content-Type", out.mime));
     }
-    if (out.file || http.method() == Http::Method::Head) {
+    if (out.file || out.status == 304 || http.method() == Http::Method::Head) {
       send_head_and_file(http, writer, mime, out);
       return;
     }
@@ -614,7 +628,8 @@ class Router : public Http::Handler {
 
  private:
   // The status line and headers as ResponseWriter::send writes them, then
-  // the file's part through a FileSender; to a HEAD request, the head alone.
+  // the file's part through a FileSender; to a HEAD request, or as a 304, the
+  // head alone.
   static void send_head_and_file(const Http::Request& http, Http::ResponseWriter& writer,
                                  const Http::Mime::MediaType& mime, const Response& out) {
     if (mime.isValid()) writer.headers().add<Http::Header::ContentType>(mime);
@@ -627,8 +642,11 @@ class Router : public Http::Handler {
       h->write(head);
       head << "\r\n";
     }
-    head << "Content-Length: " << (out.file ? out.file->count : out.body.size()) << "\r\n\r\n";
-    if (http.method() == Http::Method::Head) {
+    // A 304 has no content and says no length (RFC 9110 8.6).
+    if (out.status != 304)
+      head << "Content-Length: " << (out.file ? out.file->count : out.body.size()) << "\r\n";
+    head << "\r\n";
+    if (out.status == 304 || http.method() == Http::Method::Head) {
       std::string text = head.str();
       const size_t length = text.size();
       writer.peer()->send(RawBuffer(std::move(text), length));

@@ -663,7 +663,7 @@ std::pair<std::string, std::string> read_answer(int fd) {
 // arrives byte for byte, with its headers, whole or by any range, and the
 // connection serves the next request after it. Downloads stopped part way
 // leave no descriptor behind (Pistache's serveFile kept one open each).
-TEST_F(ServiceTest, LargeFilesGoOutInSlicesAndStoppedDownloadsCloseTheirFile) {
+TEST_F(ServiceTest, FilesGoOutInSlicesRevalidateAndStoppedDownloadsCloseThem) {
   const std::string web = dir_ + "/web";
   fs::create_directories(web);
   std::string big(5'000'000, '\0');
@@ -693,6 +693,35 @@ TEST_F(ServiceTest, LargeFilesGoOutInSlicesAndStoppedDownloadsCloseTheirFile) {
   auto empty_page = http("GET", base + "/");
   EXPECT_EQ(empty_page.status, 200);
   EXPECT_EQ(empty_page.headers["content-type"], "text/html; charset=utf-8");
+
+  // Revalidated: 304 while the file is the same, the file again once replaced;
+  // a range of another version of it is the whole new file.
+  const std::string tag = whole.headers["etag"];
+  ASSERT_FALSE(tag.empty());
+  auto same = http("GET", base + "/ui/big.bin", "", {"If-None-Match: " + tag});
+  EXPECT_EQ(same.status, 304);
+  EXPECT_TRUE(same.body.empty());
+  EXPECT_EQ(same.headers["etag"], tag);
+  EXPECT_EQ(same.headers.count("content-length"), 0u);
+  EXPECT_EQ(http("GET", base + "/ui/big.bin", "",
+                 {"If-Modified-Since: " + whole.headers["last-modified"]})
+                .status,
+            304);
+  EXPECT_EQ(http("GET", base + "/ui/big.bin", "", {"Range: bytes=0-9", "If-Range: " + tag}).status,
+            206);
+  std::string changed = big;
+  changed[0] ^= 1;
+  changed += "more";
+  ASSERT_TRUE(collido::write_file_atomic(web + "/big.bin", changed));
+  auto fresh = http("GET", base + "/ui/big.bin", "", {"If-None-Match: " + tag});
+  EXPECT_EQ(fresh.status, 200);
+  EXPECT_TRUE(fresh.body == changed);
+  EXPECT_NE(fresh.headers["etag"], tag);
+  auto stale_range =
+      http("GET", base + "/ui/big.bin", "", {"Range: bytes=0-9", "If-Range: " + tag});
+  EXPECT_EQ(stale_range.status, 200);
+  EXPECT_TRUE(stale_range.body == changed);
+  ASSERT_TRUE(collido::write_file_atomic(web + "/big.bin", big));
   // Two answers on one connection: the file, then the page.
   const int fd = connect_loopback((*server)->port());
   ASSERT_GE(fd, 0);

@@ -75,6 +75,40 @@ TEST(HttpParse, RangesWithinTheFileOrWhole) {
   EXPECT_TRUE(unsat);
 }
 
+TEST(HttpParse, ConditionalRequestsOnAFilesTagAndDate) {
+  // RFC 9110's example date, both ways; other formats and nonsense are not dates.
+  EXPECT_EQ(http_date(784111777), "Sun, 06 Nov 1994 08:49:37 GMT");
+  EXPECT_EQ(parse_http_date("Sun, 06 Nov 1994 08:49:37 GMT"), 784111777);
+  for (const char* t : {"Sunday, 06-Nov-94 08:49:37 GMT", "Sun Nov  6 08:49:37 1994", "",
+                        "Sun, 06 Nov 1994 08:49:37 UTC", "Sun, 32 Nov 1994 08:49:37 GMT",
+                        "Sun, 06 Nov 1994 08:4x:37 GMT", "Xyz, 06 Nov 1994 08:49:37 GMT"})
+    EXPECT_FALSE(parse_http_date(t)) << t;
+
+  const FileValidators v = file_validators(1000, 784111777, 5);
+  EXPECT_EQ(v.etag, "\"3e8-ae1b981bc490a05\"");
+  EXPECT_NE(file_validators(1001, 784111777, 5).etag, v.etag);  // another size
+  EXPECT_NE(file_validators(1000, 784111777, 6).etag, v.etag);  // rewritten in the same second
+  // If-None-Match: any tag of the list, weakly; "*"; it decides over the date.
+  EXPECT_TRUE(not_modified(v, v.etag, ""));
+  EXPECT_TRUE(not_modified(v, "\"x\", W/" + v.etag, ""));
+  EXPECT_TRUE(not_modified(v, "*", ""));
+  EXPECT_FALSE(not_modified(v, "\"x\"", ""));
+  EXPECT_FALSE(not_modified(v, "\"x\"", "Sun, 06 Nov 1994 08:49:37 GMT"));
+  // If-Modified-Since: modified at or before the date; an unreadable date is ignored.
+  EXPECT_TRUE(not_modified(v, "", "Sun, 06 Nov 1994 08:49:37 GMT"));
+  EXPECT_TRUE(not_modified(v, "", "Mon, 07 Nov 1994 00:00:00 GMT"));
+  EXPECT_FALSE(not_modified(v, "", "Sun, 06 Nov 1994 08:49:36 GMT"));
+  EXPECT_FALSE(not_modified(v, "", "yesterday"));
+  EXPECT_FALSE(not_modified(v, "", ""));
+  // If-Range: the strong tag or the exact date, else the whole file.
+  EXPECT_TRUE(range_applies(v, ""));
+  EXPECT_TRUE(range_applies(v, v.etag));
+  EXPECT_FALSE(range_applies(v, "W/" + v.etag));
+  EXPECT_FALSE(range_applies(v, "\"x\""));
+  EXPECT_TRUE(range_applies(v, "Sun, 06 Nov 1994 08:49:37 GMT"));
+  EXPECT_FALSE(range_applies(v, "Sun, 06 Nov 1994 08:49:38 GMT"));
+}
+
 TEST(HttpParse, PathsDecodeAndRefuseNul) {
   bool ok = true;
   EXPECT_EQ(percent_decode("%2e%2E", &ok), "..");
