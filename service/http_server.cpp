@@ -205,6 +205,12 @@ class FileSender : public std::enable_shared_from_this<FileSender> {
 
 // ---- routes -----------------------------------------------------------------
 
+// A query's count (limit=, an id): its digits, or dflt for anything else.
+int64_t query_count(const std::string& s, int64_t dflt) {
+  if (s.empty() || s.size() > 18 || !std::all_of(s.begin(), s.end(), ::isdigit)) return dflt;
+  return std::stoll(s);
+}
+
 enum class Auth { kNone, kUser, kAdmin };
 
 struct Route {
@@ -437,7 +443,10 @@ std::vector<Route> make_routes(JobService* svc, const ServerOptions& opt) {
     auto b = json_body(q, &e);
     return b ? reply(svc->submit(*q.user, *b)) : e;
   });
-  add("GET", "/api/v1/jobs", Auth::kUser, [=](Request& q) { return reply(svc->list_jobs(*q.user)); });
+  add("GET", "/api/v1/jobs", Auth::kUser, [=](Request& q) {
+    return reply(svc->list_jobs(*q.user, size_t(query_count(q.query("limit"), kDefaultJobsAPage)),
+                                q.query("before")));
+  });
   add("GET", "/api/v1/jobs/{id}", Auth::kUser,
       [=](Request& q) { return reply(svc->get_job(*q.user, q.params["id"])); });
   add("DELETE", "/api/v1/jobs/{id}", Auth::kUser,
@@ -514,12 +523,8 @@ std::vector<Route> make_routes(JobService* svc, const ServerOptions& opt) {
     return path ? file_response(*path, *q.http) : error_response(404, "no such file");
   });
   add("GET", "/api/v1/admin/logs", Auth::kAdmin, [=](Request& q) {
-    const std::string limit = q.query("limit"), before = q.query("before");
-    auto num = [](const std::string& s, int64_t dflt) -> int64_t {
-      if (s.empty() || s.size() > 18 || !std::all_of(s.begin(), s.end(), ::isdigit)) return dflt;
-      return std::stoll(s);
-    };
-    return reply(svc->admin_logs(*q.user, size_t(num(limit, 100)), num(before, 0)));
+    return reply(svc->admin_logs(*q.user, size_t(query_count(q.query("limit"), 100)),
+                                 query_count(q.query("before"), 0)));
   });
   add("GET", "/api/v1/admin/predictor", Auth::kAdmin,
       [=](Request& q) { return reply(svc->admin_predictor(*q.user)); });

@@ -3,9 +3,11 @@
 #include <sys/stat.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -989,9 +991,43 @@ std::shared_ptr<const std::string> JobService::job_view(const Job& j) {
   return text;
 }
 
-Reply JobService::list_jobs(const User& u) {
-  auto jobs = store_->jobs_of(u.id, 200);
+std::string job_cursor_text(const JobCursor& c) {
+  uint64_t bits;
+  std::memcpy(&bits, &c.created_at, sizeof bits);
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(bits));
+  return std::string(hex) + "." + c.id;
+}
+
+std::optional<JobCursor> parse_job_cursor(const std::string& text) {
+  if (text.size() < 18 || text.size() > 17 + 64 || text[16] != '.') return std::nullopt;
+  uint64_t bits = 0;
+  for (size_t i = 0; i < 16; ++i) {
+    const char c = text[i];
+    const int digit = c >= '0' && c <= '9' ? c - '0' : c >= 'a' && c <= 'f' ? c - 'a' + 10 : -1;
+    if (digit < 0) return std::nullopt;
+    bits = bits << 4 | uint64_t(digit);
+  }
+  JobCursor c;
+  std::memcpy(&c.created_at, &bits, sizeof bits);
+  c.id = text.substr(17);
+  if (!std::isfinite(c.created_at) || !std::all_of(c.id.begin(), c.id.end(), [](char ch) {
+        return std::isalnum(static_cast<unsigned char>(ch)) || ch == '-' || ch == '_';
+      }))
+    return std::nullopt;
+  return c;
+}
+
+Reply JobService::list_jobs(const User& u, size_t limit, const std::string& before) {
+  limit = std::clamp<size_t>(limit, 1, kMaxJobsAPage);
+  std::optional<JobCursor> after;
+  if (!before.empty() && !(after = parse_job_cursor(before)))
+    return error_reply(400,
+                       "'before' is not a place in the job list (take it from the Link header)");
+  auto jobs = store_->jobs_of(u.id, limit + 1, after);  // one more: is there a next page?
   if (!jobs) return status_reply(jobs.status());
+  const bool more = jobs->size() > limit;
+  if (more) jobs->pop_back();
   std::string text = "[";
   for (size_t i = 0; i < jobs->size(); ++i) {
     if (i) text += ",";
@@ -1000,6 +1036,12 @@ Reply JobService::list_jobs(const User& u) {
   text += "]\n";
   Reply r;
   r.serialized = std::make_shared<const std::string>(std::move(text));
+  if (more) {
+    const Job& last = jobs->back();
+    r.headers.emplace_back("Link", "</api/v1/jobs?limit=" + std::to_string(limit) +
+                                       "&before=" + job_cursor_text({last.created_at, last.id}) +
+                                       ">; rel=\"next\"");
+  }
   return r;
 }
 

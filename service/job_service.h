@@ -72,6 +72,13 @@ struct Reply {
   std::string text() const;
 };
 Reply error_reply(int status, const std::string& message);
+
+inline constexpr size_t kDefaultJobsAPage = 200, kMaxJobsAPage = 1000;
+// A place in a job list as the API writes it in its next-page links: the
+// job's creation time (its double's bits in hex, exact) and id; nullopt for
+// text that is not one.
+std::string job_cursor_text(const JobCursor& c);
+std::optional<JobCursor> parse_job_cursor(const std::string& text);
 // The HTTP status of a library error (400, 404, 409, 422, 500, ...).
 int http_status_of(const Status& st);
 
@@ -135,7 +142,10 @@ class JobService {
   // and a note that says so.
   static constexpr uint64_t kStartPlacedMost = 200000;
   Reply submit(const User& u, const json& body);
-  Reply list_jobs(const User& u);
+  // A page of the user's jobs, newest first: at most `limit` (1..kMaxJobsAPage)
+  // older than the place `before` names (empty: from the newest). A page
+  // with more after it says where they start in a Link header (rel="next").
+  Reply list_jobs(const User& u, size_t limit = kDefaultJobsAPage, const std::string& before = "");
   Reply get_job(const User& u, const std::string& id);
   Reply cancel_job(const User& u, const std::string& id);
   Reply delete_job(const User& u, const std::string& id);

@@ -362,11 +362,14 @@ class SqliteStore final : public Store {
     return j;
   }
 
-  Expected<std::vector<Job>> jobs_of(int64_t owner_id, size_t limit) override {
+  Expected<std::vector<Job>> jobs_of(int64_t owner_id, size_t limit,
+                                     const std::optional<JobCursor>& after) override {
     std::lock_guard lock(mu_);
     Stmt s = stmt(std::string("SELECT ") + kJobColumns +
-                  " FROM jobs WHERE owner_id = ? ORDER BY created_at DESC, rowid DESC LIMIT ?");
-    s.bind(1, owner_id).bind(2, uint64_t(limit));
+                  " FROM jobs WHERE owner_id = ?1 AND (?2 IS NULL OR created_at < ?2 OR "
+                  "(created_at = ?2 AND id < ?3)) ORDER BY created_at DESC, id DESC LIMIT ?4");
+    s.bind(1, owner_id).bind(4, uint64_t(limit));
+    if (after) s.bind(2, after->created_at).bind(3, after->id);
     std::vector<Job> out;
     int rc;
     while ((rc = s.step()) == SQLITE_ROW) out.push_back(job_of(s));

@@ -39,6 +39,12 @@ struct Model {
 
 // Job states: queued -> running -> done | failed | cancelled (and running ->
 // queued again when the server restarts under a running job).
+// A place in a user's job list (newest first): a job's creation time and id.
+struct JobCursor {
+  double created_at = 0;
+  std::string id;
+};
+
 struct Job {
   std::string id;
   int64_t owner_id = 0;
@@ -140,7 +146,10 @@ class Store {
   virtual Status insert_job(const Job& j) = 0;
   virtual Expected<Job> job_by_id(const std::string& id) = 0;
   virtual Expected<JobStatus> job_status(const std::string& id) = 0;
-  virtual Expected<std::vector<Job>> jobs_of(int64_t owner_id, size_t limit) = 0;
+  // A user's jobs, newest first (ties by id), at most `limit`; with `after`,
+  // only those older than that place in the list.
+  virtual Expected<std::vector<Job>> jobs_of(int64_t owner_id, size_t limit,
+                                             const std::optional<JobCursor>& after) = 0;
   virtual Expected<uint64_t> count_jobs(int64_t owner_id, const std::string& state) = 0;
   // The newest finished job with this key, to reuse its result.
   virtual Expected<std::optional<Job>> done_job_with_key(const std::string& key) = 0;

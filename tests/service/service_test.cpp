@@ -811,6 +811,44 @@ TEST_F(ServiceTest, HeadAnswersLikeGetWithoutTheBodyAnd405SaysWhatIsAllowed) {
   ::close(fd);
 }
 
+// GET /jobs in pages: each full page names the next in a Link header, and
+// the pages together are the whole list, newest first.
+TEST_F(ServiceTest, TheJobListComesInPagesLinkedOneToTheNext) {
+  Client c = client();
+  c.sign_up("pages");
+  const std::string first = c.call_json("POST", "/api/v1/jobs", tiny_job("wall1"), 202)["id"];
+  ASSERT_EQ(c.wait_job(first)["state"], "done");
+  for (int k = 0; k < 4; ++k)  // the same scene: reused at once, a row each
+    c.call_json("POST", "/api/v1/jobs", tiny_job("wall1"), 200);
+  const json all = c.call_json("GET", "/api/v1/jobs");
+  ASSERT_EQ(all.size(), 5u);
+  EXPECT_EQ(all.back()["id"], first);
+  EXPECT_EQ(c.call("GET", "/api/v1/jobs").headers.count("link"), 0u);  // one page holds them
+
+  json paged = json::array();
+  std::string next = "/api/v1/jobs?limit=2";
+  for (int page = 0; page < 5 && !next.empty(); ++page) {
+    const HttpResponse r = c.call("GET", next);
+    ASSERT_EQ(r.status, 200) << r.body;
+    for (const json& j : json::parse(r.body)) paged.push_back(j["id"]);
+    next.clear();
+    if (r.headers.count("link")) {
+      const std::string link = r.headers.at("link");
+      ASSERT_EQ(link.front(), '<') << link;
+      ASSERT_NE(link.find(">; rel=\"next\""), std::string::npos) << link;
+      next = link.substr(1, link.find('>') - 1);
+    }
+  }
+  json ids = json::array();
+  for (const json& j : all) ids.push_back(j["id"]);
+  EXPECT_EQ(paged, ids);
+  EXPECT_TRUE(next.empty()) << "a last page that still links on: " << next;
+  // A limit is held to 1..1000; a place that is not one is refused.
+  EXPECT_EQ(c.call_json("GET", "/api/v1/jobs?limit=0").size(), 1u);
+  EXPECT_EQ(c.call_json("GET", "/api/v1/jobs?limit=99999").size(), 5u);
+  EXPECT_EQ(c.call("GET", "/api/v1/jobs?before=yesterday").status, 400);
+}
+
 TEST_F(ServiceTest, AdmissionQueueLimitAndCancel) {
   Client c = client();
   c.sign_up("busy");

@@ -7,6 +7,7 @@
 #include <filesystem>
 
 #include "service/http_parse.h"
+#include "service/job_service.h"
 #include "service/store.h"
 #include "service/workers.h"
 
@@ -137,6 +138,55 @@ TEST(Workers, VisibleGpusFollowCudaVisibleDevices) {
 
 // A restart requeues only local jobs (cluster jobs run on under their
 // scheduler), and a job ends once however many executors end it.
+// A user's job list in pages: newest first, ties in creation time by id, each
+// page starting after the last one's place, none twice, another user's never.
+TEST(Store, JobListPagesFollowOneAnotherWithoutGapsOrRepeats) {
+  const auto dir =
+      std::filesystem::temp_directory_path() / ("store_pages_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  auto store = open_sqlite_store((dir / "db.sqlite").string());
+  ASSERT_TRUE(store) << store.status().message();
+  Store& st = **store;
+  std::vector<std::string> expected;  // newest first
+  const double times[] = {100.25, 100.5, 100.5, 100.5, 101, 99, 100.5};
+  for (int k = 0; k < 7; ++k) {
+    Job j;
+    j.id = "job" + std::to_string(k);
+    j.owner_id = 1;
+    j.created_at = times[k];
+    j.scene_json = j.prediction_json = j.cost_json = "{}";
+    ASSERT_TRUE(st.insert_job(j));
+    j.id = "other" + std::to_string(k);
+    j.owner_id = 2;
+    ASSERT_TRUE(st.insert_job(j));
+  }
+  expected = {"job4", "job6", "job3", "job2", "job1", "job0", "job5"};
+  for (size_t page = 1; page <= 8; ++page) {
+    std::vector<std::string> got;
+    std::optional<JobCursor> after;
+    while (true) {
+      auto jobs = st.jobs_of(1, page, after);
+      ASSERT_TRUE(jobs) << jobs.status().message();
+      ASSERT_LE(jobs->size(), page);
+      for (const Job& j : *jobs) got.push_back(j.id);
+      if (jobs->size() < page) break;
+      after = JobCursor{jobs->back().created_at, jobs->back().id};
+      // The place survives its text form.
+      const auto again = parse_job_cursor(job_cursor_text(*after));
+      ASSERT_TRUE(again);
+      EXPECT_EQ(again->created_at, after->created_at);
+      EXPECT_EQ(again->id, after->id);
+    }
+    EXPECT_EQ(got, expected) << "pages of " << page;
+  }
+  for (const char* bad :
+       {"", "zz", "0000000000000000", "00000000000000000x", "0000000000000000.a b",
+        "7ff0000000000000.job1", "000000000000000g.job1", "0000000000000000.a/b"})
+    EXPECT_FALSE(parse_job_cursor(bad)) << bad;
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Store, RestartsRequeueLocalJobsOnlyAndJobsEndOnce) {
   const auto dir = std::filesystem::temp_directory_path() / ("store_units_" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);

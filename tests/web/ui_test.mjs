@@ -641,6 +641,47 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     await doneRow.waitFor();
   });
 
+  await step('jobs: the newest 50, older ones behind a button', async () => {
+    // 50 more jobs: one tiny scene run once, then submitted again (reused at once).
+    const made = await page.evaluate(async () => {
+      const body = JSON.stringify({ scene: { wall: 'wall1', particles: { count: 40, radius: 0.5 }, placement: { kind: 'pour' },
+        duration: 0.3, fps: 10 }, render: { width: 160, height: 96, formats: ['gif'] } });
+      const post = async () => {
+        const r = await fetch('/api/v1/jobs', { method: 'POST', headers: { 'Content-Type': 'application/json' }, body });
+        return { status: r.status, body: await r.json() };
+      };
+      const first = await post();
+      if (first.status !== 202) return { error: JSON.stringify(first) };
+      for (let t = 0; ; ++t) {
+        const j = await (await fetch(`/api/v1/jobs/${first.body.id}`)).json();
+        if (j.state === 'done') break;
+        if (j.state !== 'queued' && j.state !== 'running') return { error: JSON.stringify(j) };
+        if (t > 1200) return { error: 'the tiny job did not finish in 2 minutes' };
+        await new Promise((ok) => setTimeout(ok, 100));
+      }
+      const statuses = [];
+      for (let k = 0; k < 49; ++k) statuses.push((await post()).status);
+      const total = (await (await fetch('/api/v1/jobs?limit=1000')).json()).length;
+      return { statuses, total };
+    });
+    assert.ok(!made.error, made.error);
+    assert.ok(made.statuses.every((st) => st === 200), `resubmissions answered ${made.statuses}`);
+    assert.ok(made.total > 50, `${made.total} jobs`);
+    await page.reload();  // the list on screen stopped polling when its jobs ended
+    await page.getByRole('heading', { name: 'Jobs', level: 1 }).waitFor();
+    const rows = page.locator('table tbody tr');
+    const older = page.getByRole('button', { name: 'Show older jobs' });
+    await older.waitFor();
+    assert.equal(await rows.count(), 50);
+    await shot(page, '06-jobs-older');
+    await older.click();
+    await page.waitForFunction((n) => document.querySelectorAll('table tbody tr').length === n, made.total);
+    assert.ok(await older.isHidden(), 'the button stays after the last page');
+    assert.ok(await page.evaluate(() => document.activeElement?.closest('tr') ===
+      document.querySelectorAll('table tbody tr')[50]), 'the focus went to the first job the last page showed');
+    await checkA11y(page, 'jobs, two pages');
+  });
+
   await step('phone width: every page fits', async () => {
     await page.setViewportSize(PHONE);
     for (const [hash, heading, name] of [['#/jobs/' + jobId, 'test cup: 40 particles', '10-phone-result'],

@@ -15,7 +15,7 @@ export function setUnauthorizedHandler(fn) { onUnauthorized = fn; }
 // One request. body: an object (sent as JSON), a Blob/File (sent raw, as
 // contentType) or undefined. Answers the parsed JSON, null for 204, or throws ApiError with
 // the server's {"error": "..."} message.
-export async function api(method, path, body, { signal, quiet401 = false, contentType } = {}) {
+export async function api(method, path, body, { signal, quiet401 = false, contentType, onResponse } = {}) {
   const init = { method, credentials: 'same-origin', signal, headers: {} };
   if (body instanceof Blob) {
     init.body = body;
@@ -31,6 +31,7 @@ export async function api(method, path, body, { signal, quiet401 = false, conten
     if (e.name === 'AbortError') throw e;
     throw new ApiError(0, 'The server cannot be reached: ' + e.message);
   }
+  if (onResponse && res.ok) onResponse(res);
   if (res.status === 204) return null;
   const text = await res.text();
   let data = null;
@@ -47,6 +48,16 @@ export async function api(method, path, body, { signal, quiet401 = false, conten
 }
 
 export const get = (path, opts) => api('GET', path, undefined, opts);
+// A GET of a list that comes in pages: { items, next }, next the path of the
+// page after (from the Link header's rel="next"), or null on the last.
+export async function getPage(path, opts) {
+  let next = null;
+  const items = await api('GET', path, undefined, { ...opts, onResponse: (res) => {
+    const m = /<([^>]*)>\s*;\s*rel="next"/.exec(res.headers.get('Link') || '');
+    next = m ? m[1] : null;
+  } });
+  return { items, next };
+}
 export const post = (path, body, opts) => api('POST', path, body, opts);
 export const put = (path, body, opts) => api('PUT', path, body, opts);
 export const del = (path, opts) => api('DELETE', path, undefined, opts);

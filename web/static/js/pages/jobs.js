@@ -1,8 +1,11 @@
 // Your jobs, newest first, with progress; polled while any is queued or running.
-import { get, post, del } from '../api.js';
+import { get, getPage, post, del } from '../api.js';
 import { h, tableBox, errorBox, showError, fmtDate, wallLabel } from '../dom.js';
 
 export const POLL_MS = 1500;
+// Jobs a page; "Show older jobs" shows another page, up to the API's 1,000 a request.
+export const PAGE = 50;
+export const MOST_SHOWN = 1000;
 export const isActive = (j) => j.state === 'queued' || j.state === 'running';
 
 // A progress bar with its label, for a job in any state.
@@ -32,6 +35,19 @@ export async function render(main) {
   // cell alone, so a focused link or button is not replaced under the
   // keyboard (or a click) every tick.
   let rows = new Map();  // id -> {tr, state, progress}
+  // The newest `shown` jobs, all read by each poll: a job submitted meanwhile
+  // pushes the others down without a gap between pages.
+  let shown = PAGE;
+  const olderNote = h('p', { class: 'hint', hidden: true },
+    `The newest ${MOST_SHOWN.toLocaleString()} jobs are shown; older ones keep their links, and the API lists them (GET /api/v1/jobs, its Link header).`);
+  const older = h('button', { type: 'button', class: 'secondary', hidden: true, onclick: async () => {
+    const before = tbody.children.length;
+    shown = Math.min(shown + PAGE, MOST_SHOWN);
+    older.disabled = true;
+    await refresh();
+    // The last page hides the button: the keyboard goes on at the first job it showed.
+    if (older.hidden) tbody.children[before]?.querySelector('a')?.focus();
+  } }, 'Show older jobs');
 
   function row(j) {
     const s = j.scene || {};
@@ -59,9 +75,14 @@ export async function render(main) {
   }
 
   async function refresh() {
-    let jobs;
-    try { jobs = await get('/api/v1/jobs'); } catch (e) { showError(error, e); schedule(true); return; }
+    let jobs, nextPage;
+    try {
+      ({ items: jobs, next: nextPage } = await getPage(`/api/v1/jobs?limit=${shown}`));
+    } catch (e) { older.disabled = false; showError(error, e); schedule(true); return; }
     if (stopped) return;
+    older.disabled = false;
+    older.hidden = !nextPage || shown >= MOST_SHOWN;
+    olderNote.hidden = !(nextPage && shown >= MOST_SHOWN);
     showError(error, null);
     empty.hidden = jobs.length > 0;
     // Screen readers hear when a job ends, not every tick of its progress.
@@ -101,7 +122,8 @@ export async function render(main) {
       h('caption', { class: 'visually-hidden' }, 'Your jobs, newest first'),
       h('thead', {}, h('tr', {}, ['Job', 'Submitted', 'Wall', 'Particles', 'State', 'Progress', 'Actions']
         .map((t) => h('th', { scope: 'col', class: t === 'Particles' ? 'num' : undefined }, t)))),
-      tbody)));
+      tbody)),
+    h('div', { class: 'actions' }, older), olderNote);
   try { modelsById = new Map((await get('/api/v1/models')).map((m) => [m.id, m])); } catch { /* ids are shown instead */ }
   await refresh();
   return () => { stopped = true; clearTimeout(timer); };
