@@ -189,6 +189,43 @@ bool range_applies(const FileValidators& v, const std::string& if_range) {
   return date && *date == v.modified_s;
 }
 
+bool accepts_gzip(const std::string& accept_encoding) {
+  bool named = false, star = false, named_zero = false;
+  size_t at = 0;
+  while (at <= accept_encoding.size()) {
+    size_t end = accept_encoding.find(',', at);
+    if (end == std::string::npos) end = accept_encoding.size();
+    std::string item = accept_encoding.substr(at, end - at);
+    at = end + 1;
+    const size_t semi = item.find(';');
+    std::string coding = item.substr(0, semi),
+                params = semi == std::string::npos ? "" : item.substr(semi + 1);
+    auto trim = [](std::string t) {
+      const size_t a = t.find_first_not_of(" \t"), b = t.find_last_not_of(" \t");
+      return a == std::string::npos ? std::string() : t.substr(a, b - a + 1);
+    };
+    coding = trim(coding);
+    std::transform(coding.begin(), coding.end(), coding.begin(),
+                   [](unsigned char c) { return char(std::tolower(c)); });
+    // q=0 (0, 0.0, 0.00, 0.000) refuses the coding; anything else takes it.
+    bool zero = false;
+    params = trim(params);
+    if ((params.size() > 2) && (params[0] == 'q' || params[0] == 'Q') && params[1] == '=') {
+      const std::string q = trim(params.substr(2));
+      zero = !q.empty() && q.find_first_not_of("0.") == std::string::npos;
+    }
+    if (coding == "gzip" || coding == "x-gzip") {
+      if (zero)
+        named_zero = true;
+      else
+        named = true;
+    } else if (coding == "*" && !zero) {
+      star = true;
+    }
+  }
+  return named || (star && !named_zero);
+}
+
 std::optional<std::pair<uint64_t, uint64_t>> parse_range(const std::string& header, uint64_t size,
                                                          bool* unsatisfiable) {
   *unsatisfiable = false;

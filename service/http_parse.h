@@ -61,6 +61,10 @@ bool not_modified(const FileValidators& v, const std::string& if_none_match,
 // the client holds part of, its strong tag or its exact date.
 bool range_applies(const FileValidators& v, const std::string& if_range);
 
+// Whether an Accept-Encoding header takes gzip: named, or "*", with a q
+// above 0 (RFC 9110 12.5.3).
+bool accepts_gzip(const std::string& accept_encoding);
+
 // %XX decoding of one path segment; *ok = false on a malformed escape or a NUL.
 std::string percent_decode(const std::string& s, bool* ok);
 // The non-empty segments of a path ("/a//b/" -> {"a", "b"}).

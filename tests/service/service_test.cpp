@@ -756,6 +756,44 @@ TEST_F(ServiceTest, FilesGoOutInSlicesRevalidateAndStoppedDownloadsCloseThem) {
   EXPECT_TRUE(http("GET", base + "/ui/big.bin").body == big);
 }
 
+// The UI's libraries go out gzipped to a browser that takes it, from the copy
+// install-web.sh makes, unless the file changed after the copy was made.
+TEST_F(ServiceTest, UiLibrariesGoOutGzippedWhereTheBrowserTakesIt) {
+  const std::string web = dir_ + "/web";
+  fs::create_directories(web);
+  const std::string js = "export const x = 1;\n", gz = "not really gzip, but what the copy holds";
+  ASSERT_TRUE(collido::write_file_atomic(web + "/lib.js", js));
+  ASSERT_TRUE(collido::write_file_atomic(web + "/lib.js.gz", gz));
+  fs::last_write_time(web + "/lib.js",
+                      fs::last_write_time(web + "/lib.js.gz") - std::chrono::seconds(5));
+  ServerOptions o;
+  o.port = 0;
+  o.web_dir = web;
+  auto server = Server::start(svc_.get(), o);
+  ASSERT_TRUE(server) << server.status().message();
+  const std::string url = "http://127.0.0.1:" + std::to_string((*server)->port()) + "/ui/lib.js";
+
+  auto zipped = http("GET", url, "", {"Accept-Encoding: gzip, deflate, br"});
+  EXPECT_EQ(zipped.status, 200);
+  EXPECT_EQ(zipped.body, gz);
+  EXPECT_EQ(zipped.headers["content-encoding"], "gzip");
+  EXPECT_EQ(zipped.headers["content-type"], "text/javascript; charset=utf-8");
+  EXPECT_EQ(zipped.headers["vary"], "Accept-Encoding");
+  auto plain = http("GET", url);
+  EXPECT_EQ(plain.body, js);
+  EXPECT_EQ(plain.headers.count("content-encoding"), 0u);
+  EXPECT_EQ(plain.headers["vary"], "Accept-Encoding");
+  EXPECT_NE(plain.headers["etag"], zipped.headers["etag"]);  // two representations, two tags
+  EXPECT_EQ(http("GET", url, "", {"Accept-Encoding: gzip;q=0"}).body, js);
+  // Edited after its copy was made: the file itself.
+  ASSERT_TRUE(collido::write_file_atomic(web + "/lib.js", js + "// edited\n"));
+  fs::last_write_time(web + "/lib.js",
+                      fs::last_write_time(web + "/lib.js.gz") + std::chrono::seconds(5));
+  auto edited = http("GET", url, "", {"Accept-Encoding: gzip"});
+  EXPECT_EQ(edited.body, js + "// edited\n");
+  EXPECT_EQ(edited.headers.count("content-encoding"), 0u);
+}
+
 // HEAD is GET without the body, files and JSON alike; a method the path does
 // not take gets 405 with the ones it does.
 TEST_F(ServiceTest, HeadAnswersLikeGetWithoutTheBodyAnd405SaysWhatIsAllowed) {

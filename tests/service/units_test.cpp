@@ -110,6 +110,15 @@ TEST(HttpParse, ConditionalRequestsOnAFilesTagAndDate) {
   EXPECT_FALSE(range_applies(v, "Sun, 06 Nov 1994 08:49:38 GMT"));
 }
 
+TEST(HttpParse, AcceptEncodingTakesGzipUnlessRefused) {
+  for (const char* yes : {"gzip", "gzip, deflate, br, zstd", "br;q=1.0, GZIP;q=0.5", "*",
+                          "deflate, *;q=0.1", " x-gzip ", "gzip;q=0.001"})
+    EXPECT_TRUE(accepts_gzip(yes)) << yes;
+  for (const char* no : {"", "identity", "br, deflate", "gzip;q=0", "gzip; q=0.000, *", "*;q=0",
+                         "gzipx", "*;q=0, br"})
+    EXPECT_FALSE(accepts_gzip(no)) << no;
+}
+
 TEST(HttpParse, PathsDecodeAndRefuseNul) {
   bool ok = true;
   EXPECT_EQ(percent_decode("%2e%2E", &ok), "..");

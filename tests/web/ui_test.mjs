@@ -221,6 +221,10 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
       const type = res.headers.get('content-type') || '';
       assert.ok(type.includes(want), `GET ${p} answered Content-Type "${type}", not ${want}: browsers download or refuse it`);
     }
+    // The libraries go out gzipped (install-web.sh makes the copies), and unpack whole.
+    const lib = await fetch(base + '/ui/vendor/three/three.core.js', { headers: { 'Accept-Encoding': 'gzip' } });
+    assert.equal(lib.headers.get('content-encoding'), 'gzip', 'three.js went out as it is, 1.5 MB');
+    assert.ok((await lib.text()).length > 1e6, 'three.js unpacked short');
     // The page runs no inline script (a strict Content-Security-Policy can forbid them).
     const html = await (await fetch(base + '/')).text();
     assert.doesNotMatch(html, /<script(?![^>]*\bsrc=)[^>]*>/i, 'index.html has an inline script');
