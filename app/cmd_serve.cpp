@@ -44,6 +44,9 @@ const std::vector<FlagSpec>& serve_flags() {
       {"max-upload-mb", true, "largest STL upload, MiB (default 64)"},
       {"max-queued", true, "queued jobs a user may have (default 8)"},
       {"memory-gb", true, "memory the jobs may use in all, GiB (default: this machine's)"},
+      {"disk-reserve-gb", true,
+       "disk kept free on the data folder's file system; a job whose predicted files would "
+       "eat into it is refused (default 1)"},
       {"public-url", true, "base URL of share links (default http://HOST:PORT)"},
       {"web", true, "folder of the browser UI (default web/static when present)"},
       {"cost-model", true,
@@ -104,6 +107,7 @@ int cmd_serve(const Args& args) {
   const int64_t upload_mb = parsed->get_int("max-upload-mb", 64, &error);
   const int64_t max_queued = parsed->get_int("max-queued", 8, &error);
   const double memory_gb = parsed->get_double("memory-gb", 0, &error);
+  const double disk_reserve_gb = parsed->get_double("disk-reserve-gb", 1, &error);
   const int64_t retrain_every = parsed->get_int("retrain-every", 25, &error);
   const int64_t slurm_cpus = parsed->get_int("slurm-cpus", 4, &error);
   const double slurm_minutes = parsed->get_double("slurm-time-limit", 60, &error);
@@ -126,6 +130,8 @@ int cmd_serve(const Args& args) {
   if (upload_mb < 1 || upload_mb > 4096) return usage_error(cmd, "--max-upload-mb must be in 1..4096");
   if (max_queued < 1 || max_queued > 10000) return usage_error(cmd, "--max-queued must be in 1..10000");
   if (memory_gb < 0 || memory_gb > 1e6) return usage_error(cmd, "--memory-gb must be in [0, 1e6]");
+  if (!(disk_reserve_gb >= 0 && disk_reserve_gb <= 1e6))
+    return usage_error(cmd, "--disk-reserve-gb must be in [0, 1e6]");
 
   service::ServiceConfig config;
   config.data_dir = parsed->get("data", "var");
@@ -135,6 +141,7 @@ int cmd_serve(const Args& args) {
   config.max_upload_bytes = uint64_t(upload_mb) << 20;
   config.max_queued_per_user = int(max_queued);
   config.host_bytes = uint64_t(memory_gb * double(1ull << 30));
+  config.disk_reserve_bytes = uint64_t(disk_reserve_gb * double(1ull << 30));
   config.retrain_every = int(retrain_every);
   config.executor = executor;
   config.slurm.partition = parsed->get("slurm-partition", "");

@@ -5,6 +5,7 @@
 
 #include "job/wall_source.h"
 #include "sim/shapes.h"
+#include "sim/snapshot.h"
 
 namespace collido::job {
 
@@ -68,6 +69,15 @@ Expected<sim::TriangleMesh> load_scene_wall(scene::Scene* scene) {
     scene->motion_center_auto = false;
   }
   return std::move(*wall);
+}
+
+double output_bytes_estimate(const JobAssessment& a) {
+  const double frames = double(a.frames) + 1;  // the initial one too
+  const double particles = double(a.particles);
+  return 256.0 * 1024 + 84 + 50 * double(a.triangles) + 1024 * particles +
+         frames * (double(sim::kSnapshotHeaderBytes) +
+                   double(sim::kSnapshotBytesPerParticle) * particles) +
+         frames * double(a.render_pixels);
 }
 
 Expected<JobAssessment> assess_job(const JobSpec& spec) {

@@ -54,6 +54,16 @@ struct JobAssessment {
   sim::TriangleMesh wall;  // as the run loads it (m), kept for what else is asked before it runs
 };
 
+// What an assessed job's files may take on disk, estimated from its counts:
+// the frames' snapshots (29 bytes a particle), the checkpoint (1 KiB a
+// particle; 660 measured for a pour of 1,500), the wall's copy, a fixed 256
+// KiB for the documents and logs, and where it renders 1 byte a pixel of
+// every frame for the PNG frames and videos together (the CPU job log's 613
+// rendered jobs wrote at most 0.45). Admission uses it where no job cost
+// model prices the output, and beside the model's where the job lies
+// outside what the model was trained on.
+double output_bytes_estimate(const JobAssessment& a);
+
 // Resolves, loads and checks the job without running it. The same errors as
 // run_job() gives for the same spec before its first frame, except those of
 // placement (a placement that cannot fit is only found by placing).

@@ -1,6 +1,7 @@
 #include "service/job_service.h"
 
 #include <sys/stat.h>
+#include <sys/statvfs.h>
 
 #include <algorithm>
 #include <cctype>
@@ -695,7 +696,7 @@ Expected<JobService::PreparedJob> JobService::prepare(const User& u, const json&
                               {"wall", spec.render_settings.wall}}}};
   key_doc["scene"].erase("wall");
   p.key = sha256_hex(key_doc.dump());
-  p.prediction = price(a, p.assessment, &p.host_bytes);
+  p.prediction = price(a, p.assessment, &p.host_bytes, &p.output_bytes);
   p.assessed = std::move(*assessed);
   return p;
 }
@@ -707,12 +708,18 @@ Expected<JobService::PreparedJob> JobService::prepare(const User& u, const json&
 // interval's top inside the trained range; outside it, by the larger of that and
 // the engine's own estimate (job/budget.h), which is also the whole answer where
 // no model is loaded.
-json JobService::price(const job::JobAssessment& a, const json& assessment,
-                       uint64_t* admit_bytes) const {
+json JobService::price(const job::JobAssessment& a, const json& assessment, uint64_t* admit_bytes,
+                       uint64_t* admit_output) const {
   const uint64_t analytic = uint64_t(a.work.host_bytes);
+  const uint64_t output_estimate = uint64_t(std::ceil(job::output_bytes_estimate(a)));
   *admit_bytes = analytic;
+  *admit_output = output_estimate;
   json p = {{"basis", "analytic"},
             {"peak_host_bytes", {{"value", analytic}, {"analytic", analytic}}},
+            {"output_bytes",
+             {{"value", output_estimate},
+              {"estimate", output_estimate},
+              {"admitted_by", output_estimate}}},
             {"total_time_s", nullptr},
             {"inputs", assessment}};
   const scene::Scene& sc = a.resolved.scene;
@@ -740,6 +747,10 @@ json JobService::price(const job::JobAssessment& a, const json& assessment,
       p["time_per_frame_s"] = iv(job::paced(c->per_frame_s, pace));
       if (pace.jobs > 0) p["pace"] = {{"factor", pace.factor}, {"jobs", pace.jobs}};
       p["output_bytes"] = iv(c->output_bytes);
+      const uint64_t output_high = uint64_t(std::ceil(c->output_bytes.p90));
+      *admit_output = c->outside_training ? std::max(output_high, output_estimate) : output_high;
+      p["output_bytes"]["estimate"] = output_estimate;
+      p["output_bytes"]["admitted_by"] = *admit_output;
       if (backend == "cuda") {
         p["peak_device_bytes"] = iv(c->peak_device_bytes);
         p["gpu_load"] = iv(c->gpu_load);
@@ -784,11 +795,41 @@ std::optional<Reply> JobService::over_memory(uint64_t host_bytes) {
   return error_reply(409, text);
 }
 
+uint64_t JobService::disk_free() const {
+  if (config_.disk_free_bytes) return config_.disk_free_bytes;
+  struct statvfs fs_stat {};
+  if (::statvfs(config_.data_dir.c_str(), &fs_stat) != 0) return 0;
+  return uint64_t(fs_stat.f_bavail) * uint64_t(fs_stat.f_frsize);
+}
+
+std::optional<Reply> JobService::over_disk(uint64_t output_bytes) {
+  const uint64_t free_bytes = disk_free();
+  if (free_bytes == 0) return std::nullopt;  // unknown: the job's own writes will tell
+  const uint64_t room =
+      free_bytes > config_.disk_reserve_bytes ? free_bytes - config_.disk_reserve_bytes : 0;
+  if (output_bytes <= room) return std::nullopt;
+  auto size = [](uint64_t bytes) {
+    char t[32];
+    if (bytes >= (1ull << 30))
+      std::snprintf(t, sizeof t, "%.2f GiB", double(bytes) / double(1ull << 30));
+    else
+      std::snprintf(t, sizeof t, "%.1f MiB", double(bytes) / double(1ull << 20));
+    return std::string(t);
+  };
+  return error_reply(507, "the job's files, " + size(output_bytes) +
+                              " by its prediction, do not fit in the " + size(room) +
+                              " this server has free for results (" +
+                              size(config_.disk_reserve_bytes) +
+                              " is kept free); use fewer frames, a smaller render or fewer "
+                              "particles, or delete finished jobs");
+}
+
 Reply JobService::predict(const User& u, const json& body) {
   auto p = prepare(u, body);
   if (!p) return status_reply(p.status());
   // What submitting it would answer: the form says so before the user submits.
   if (auto refused = over_memory(p->host_bytes)) return *refused;
+  if (auto refused = over_disk(p->output_bytes)) return *refused;
   Reply r;
   r.body = p->prediction;
   return r;
@@ -892,6 +933,7 @@ Reply JobService::submit(const User& u, const json& body) {
     }
   }
   if (auto refused = over_memory(p->host_bytes)) return *refused;
+  if (auto refused = over_disk(p->output_bytes)) return *refused;
   auto queued = store_->count_jobs(u.id, "queued");
   if (!queued) return status_reply(queued.status());
   if (*queued >= uint64_t(config_.max_queued_per_user))

@@ -41,6 +41,11 @@ struct ServiceConfig {
   // Memory the jobs of this machine may use in all (0 = its physical memory):
   // a job predicted above it is refused, one above what is free now waits.
   uint64_t host_bytes = 0;
+  // Disk for results: a job whose files, by its prediction, would not fit in
+  // what the data folder's file system has free, less the reserve, is refused
+  // (507). disk_free_bytes 0 = measure it (statvfs); tests set it.
+  uint64_t disk_free_bytes = 0;
+  uint64_t disk_reserve_bytes = 1ull << 30;  // kept for the database, logs and running jobs
   job::RenderSettings render = job::job_render_defaults();
   // Job cost model files (`collidoscope gvm train` on a job log; one per backend, or
   // one trained on both). Without one, time is not predicted and memory is the
@@ -105,6 +110,9 @@ class JobService {
   // The memory the jobs of this machine may use in all (ServiceConfig::host_bytes,
   // else the machine's): what a job is admitted against.
   uint64_t memory_for_jobs() const;
+  // What the data folder's file system has free (ServiceConfig::disk_free_bytes
+  // where set); 0 when it cannot be read.
+  uint64_t disk_free() const;
   Store& store() { return *store_; }
 
   // Accounts and sessions.
@@ -218,6 +226,7 @@ class JobService {
     json assessment;       // what is known before it runs
     json prediction;       // its cost, as the predict route answers
     uint64_t host_bytes = 0;  // the memory the job is admitted by (waits and fits)
+    uint64_t output_bytes = 0;    // the disk its files are admitted by
     job::JobAssessment assessed;  // with its wall loaded: a start preview places on it
     std::string model_sha256;     // an uploaded model's wall: the STL the key names
   };
@@ -226,8 +235,10 @@ class JobService {
   // spec at it; false when the file no longer holds the STL the job was priced on.
   Expected<bool> pin_model_wall(PreparedJob* p, const std::string& job_dir);
   Expected<PreparedJob> prepare(const User& u, const json& body);
-  // The predicted cost of an assessed job; *admit_bytes: the memory it is admitted by.
-  json price(const job::JobAssessment& a, const json& assessment, uint64_t* admit_bytes) const;
+  // The predicted cost of an assessed job; *admit_bytes: the memory it is
+  // admitted by, *admit_output: the disk its files are.
+  json price(const job::JobAssessment& a, const json& assessment, uint64_t* admit_bytes,
+             uint64_t* admit_output) const;
   json job_json(const Job& j);
   // A finished job as a one-row job log (cost_trainer.h); "" when it cannot be made.
   std::string job_record_of(const Job& j, const json& prediction, const json& manifest);
@@ -238,6 +249,8 @@ class JobService {
   std::shared_ptr<const std::string> job_view(const Job& j);
   json share_view(const Share& sh);
   std::optional<Reply> over_memory(uint64_t host_bytes);
+  // The 507 for a job whose files would not fit on the results' disk, or none.
+  std::optional<Reply> over_disk(uint64_t output_bytes);
   // The view made for a job in this state, if one is kept; null otherwise.
   std::shared_ptr<const std::string> cached_view(const JobStatus& s);
   json links_of(const std::string& base, const Job& j);

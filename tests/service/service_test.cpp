@@ -74,6 +74,8 @@ class ServiceTest : public ::testing::Test {
     c.job_threads = 1;
     c.max_upload_bytes = 1 << 20;
     c.host_bytes = host_bytes;
+    c.disk_free_bytes = disk_free_;  // 0: the temp folder's, less no reserve
+    c.disk_reserve_bytes = 0;
     c.max_queued_per_user = max_queued;
     c.cost_models = std::move(cost_models);
     c.retrain_every = 0;  // retrained only when a test asks
@@ -116,6 +118,7 @@ class ServiceTest : public ::testing::Test {
   }
 
   std::string dir_, base_;
+  uint64_t disk_free_ = 0;
   std::unique_ptr<JobService> svc_;
   std::unique_ptr<Server> server_;
 };
@@ -885,6 +888,37 @@ TEST_F(ServiceTest, TheJobListComesInPagesLinkedOneToTheNext) {
   EXPECT_EQ(c.call_json("GET", "/api/v1/jobs?limit=0").size(), 1u);
   EXPECT_EQ(c.call_json("GET", "/api/v1/jobs?limit=99999").size(), 5u);
   EXPECT_EQ(c.call("GET", "/api/v1/jobs?before=yesterday").status, 400);
+}
+
+// A job whose files would not fit on the results' disk is refused with the
+// figures, at the prediction and at submission; a small one still runs.
+TEST_F(ServiceTest, AJobWhoseFilesWouldNotFitOnTheDiskIsRefused) {
+  server_.reset();
+  svc_.reset();
+  disk_free_ = 4 << 20;  // 4 MiB free
+  start();
+  Client c = client();
+  c.sign_up("disk");
+  json big = tiny_job("wall1", 40, 2.0);
+  big["scene"]["fps"] = 25;
+  big["render"]["width"] = 1280, big["render"]["height"] = 720;
+  for (const char* route : {"/api/v1/predict", "/api/v1/jobs"}) {
+    const HttpResponse r = c.call("POST", route, big.dump());
+    EXPECT_EQ(r.status, 507) << route << ": " << r.body;
+    EXPECT_NE(r.body.find("do not fit in the 4.0 MiB"), std::string::npos) << r.body;
+    EXPECT_NE(r.body.find("fewer frames"), std::string::npos) << r.body;
+  }
+  const json small = c.call_json("POST", "/api/v1/predict", tiny_job("wall1"));
+  EXPECT_LT(small["output_bytes"]["admitted_by"].get<double>(), 4 << 20) << small.dump();
+  const std::string id = c.call_json("POST", "/api/v1/jobs", tiny_job("wall1"), 202)["id"];
+  const json done = c.wait_job(id);
+  ASSERT_EQ(done["state"], "done");
+  // The estimate holds what the job wrote.
+  uint64_t written = 0;
+  for (const auto& e : fs::recursive_directory_iterator(svc_->store().job_by_id(id)->run_dir))
+    if (e.is_regular_file()) written += e.file_size();
+  EXPECT_GT(written, 0u);
+  EXPECT_GE(small["output_bytes"]["estimate"].get<double>(), double(written));
 }
 
 TEST_F(ServiceTest, AdmissionQueueLimitAndCancel) {

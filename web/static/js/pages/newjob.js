@@ -331,6 +331,7 @@ export async function render(main, ctx, modelParam) {
         // With the initial frame, as the result page counts them.
         ...fact('Frames', i.frames == null ? null : (i.frames + 1).toLocaleString()),
         ...fact('Particles', i.particles?.toLocaleString()),
+        ...fact('Files written', estimateText(p.output_bytes, fmtBytes)),
         ...fact('Wall triangles', i.triangles?.toLocaleString()),
         ...fact('Pieces after division', i.pieces?.toLocaleString()),
         ...fact('Method', i.method),
@@ -345,12 +346,14 @@ export async function render(main, ctx, modelParam) {
     } catch (e) {
       if (e.name === 'AbortError' || inflight !== me) return;
       clearFigures();
-      // 409: the server would refuse the job as it stands (too much memory).
-      const text = e.status === 409 ? `This job would be refused: ${e.message}.`
+      // 409 or 507: the server would refuse the job as it stands (too much
+      // memory, or files that would not fit on its disk).
+      const refused = e.status === 409 || e.status === 507;
+      const text = refused ? `This job would be refused: ${e.message}.`
         : e.status === 400 ? `Check the form: ${e.message}.` : `No prediction: ${e.message}`;
       showWarnings([{ level: 'error', text }]);
-      predStatus.textContent = e.status === 409 ? 'Would be refused.' : 'Not predicted.';
-      mini(`${e.status === 409 ? 'This job would be refused' : 'No prediction'}. Show why ↑`);
+      predStatus.textContent = refused ? 'Would be refused.' : 'Not predicted.';
+      mini(`${refused ? 'This job would be refused' : 'No prediction'}. Show why ↑`);
     }
   }
 
