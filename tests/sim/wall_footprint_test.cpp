@@ -42,6 +42,23 @@ TEST(WallFootprint, BinEntriesAndBucketsAreThoseThePreparationStores) {
   }
 }
 
+// The entries are remembered per wall and grid, the particles' table is not:
+// asked again with other counts, or for a wall that differs by one vertex,
+// each answer is still the preparation's.
+TEST(WallFootprint, AWallPricedAgainAnswersAsItsPreparation) {
+  TriangleMesh mesh = shape("cone:r1=20,r2=5,h=30,segments=32");
+  const double r = 0.45;
+  for (int round = 0; round < 2; ++round) {
+    for (const size_t particles : {size_t(500), size_t(200000), size_t(500)}) {
+      const PrepareInfo info = prepared(mesh, Method::kBin, r, 2000, particles);
+      const WallFootprint f = wall_footprint(mesh, Method::kBin, r, 2 * r, 2000, particles, 0);
+      EXPECT_EQ(f.bin_entries, double(info.bin_entries)) << "round " << round << ", " << particles;
+      EXPECT_EQ(f.buckets, info.buckets) << "round " << round << ", " << particles;
+    }
+    mesh.vertices[0] = mesh.vertices[0] + Vec3d{0, 0, 7.5};  // a spike: more cells
+  }
+}
+
 TEST(WallFootprint, ASampleOfALargeWallEstimatesItsEntries) {
   const TriangleMesh mesh = shape("sphere:r=10,subdivisions=5");  // 20,480 triangles
   const double r = 0.05;
