@@ -366,6 +366,14 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
   DetectConfig dc;
   dc.r_max = closed ? wide : clear;
   dc.time_stages = false;
+  // Below kFillTreeBelow particles a tree over the wall's own triangles: bin's
+  // grid at the particles' size costs its build whatever the sites (a fill
+  // of 5,000 into wall1 at r = 0.5: `run` 0.44 -> 0.35 s, and every start
+  // preview the new-job form asks for 70 ms less); from 200,000 on, bin's
+  // faster queries pay for it (1.13 against 1.18-1.21 s). Both are exact:
+  // the same sites either way.
+  constexpr uint64_t kFillTreeBelow = 50000;
+  if (ps.count < kFillTreeBelow) dc.method = Method::kBvh;
   auto detector = Detector::create(wall, dc, std::max<uint64_t>(nx * ny, 1));
   if (!detector) return detector.status();
   // Runs the detector on the layer at radius `radius`: per site, touching or not.
