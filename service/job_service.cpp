@@ -805,8 +805,11 @@ uint64_t JobService::disk_free() const {
 std::optional<Reply> JobService::over_disk(uint64_t output_bytes) {
   const uint64_t free_bytes = disk_free();
   if (free_bytes == 0) return std::nullopt;  // unknown: the job's own writes will tell
-  const uint64_t room =
-      free_bytes > config_.disk_reserve_bytes ? free_bytes - config_.disk_reserve_bytes : 0;
+  // The queued jobs will write theirs first (a running job's files are
+  // already partly in what is used).
+  auto queued = store_->queued_output_bytes();
+  const uint64_t taken = config_.disk_reserve_bytes + (queued ? *queued : 0);
+  const uint64_t room = free_bytes > taken ? free_bytes - taken : 0;
   if (output_bytes <= room) return std::nullopt;
   auto size = [](uint64_t bytes) {
     char t[32];
@@ -816,12 +819,13 @@ std::optional<Reply> JobService::over_disk(uint64_t output_bytes) {
       std::snprintf(t, sizeof t, "%.1f MiB", double(bytes) / double(1ull << 20));
     return std::string(t);
   };
-  return error_reply(507, "the job's files, " + size(output_bytes) +
-                              " by its prediction, do not fit in the " + size(room) +
-                              " this server has free for results (" +
-                              size(config_.disk_reserve_bytes) +
-                              " is kept free); use fewer frames, a smaller render or fewer "
-                              "particles, or delete finished jobs");
+  return error_reply(
+      507, "the job's files, " + size(output_bytes) + " by its prediction, do not fit in the " +
+               size(room) + " this server has free for results (" +
+               size(config_.disk_reserve_bytes) + " is kept free" +
+               (queued && *queued ? ", " + size(*queued) + " is for the queued jobs" : "") +
+               "); use fewer frames, a smaller render or fewer particles, or "
+               "delete finished jobs");
 }
 
 Reply JobService::predict(const User& u, const json& body) {

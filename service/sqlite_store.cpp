@@ -377,6 +377,15 @@ class SqliteStore final : public Store {
     return out;
   }
 
+  Expected<uint64_t> queued_output_bytes() override {
+    std::lock_guard lock(mu_);
+    Stmt s = stmt(
+        "SELECT COALESCE(SUM(json_extract(prediction_json, '$.output_bytes.admitted_by')), 0) "
+        "FROM jobs WHERE state = 'queued' AND json_valid(prediction_json)");
+    if (s.step() != SQLITE_ROW) return error("queued_output_bytes");
+    return uint64_t(std::max(0.0, s.real(0)));
+  }
+
   Expected<uint64_t> count_jobs(int64_t owner_id, const std::string& state) override {
     std::lock_guard lock(mu_);
     Stmt s = stmt("SELECT COUNT(*) FROM jobs WHERE owner_id = ? AND state = ?");

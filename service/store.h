@@ -151,6 +151,9 @@ class Store {
   virtual Expected<std::vector<Job>> jobs_of(int64_t owner_id, size_t limit,
                                              const std::optional<JobCursor>& after) = 0;
   virtual Expected<uint64_t> count_jobs(int64_t owner_id, const std::string& state) = 0;
+  // The disk the queued jobs were admitted by, summed (their predictions'
+  // output_bytes.admitted_by; 0 for jobs priced before it was kept).
+  virtual Expected<uint64_t> queued_output_bytes() = 0;
   // The newest finished job with this key, to reuse its result.
   virtual Expected<std::optional<Job>> done_job_with_key(const std::string& key) = 0;
   // Marks the oldest queued job whose predicted memory fits `host_bytes_free`

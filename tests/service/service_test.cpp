@@ -70,7 +70,7 @@ class ServiceTest : public ::testing::Test {
     ServiceConfig c;
     c.data_dir = dir_;
     c.job_executable = COLLIDO_BINARY;
-    c.workers = 1;
+    c.workers = workers_;
     c.job_threads = 1;
     c.max_upload_bytes = 1 << 20;
     c.host_bytes = host_bytes;
@@ -119,6 +119,7 @@ class ServiceTest : public ::testing::Test {
 
   std::string dir_, base_;
   uint64_t disk_free_ = 0;
+  int workers_ = 1;
   std::unique_ptr<JobService> svc_;
   std::unique_ptr<Server> server_;
 };
@@ -919,6 +920,24 @@ TEST_F(ServiceTest, AJobWhoseFilesWouldNotFitOnTheDiskIsRefused) {
     if (e.is_regular_file()) written += e.file_size();
   EXPECT_GT(written, 0u);
   EXPECT_GE(small["output_bytes"]["estimate"].get<double>(), double(written));
+
+  // Jobs waiting for a worker hold their share: with room for two and a half
+  // jobs' files, two wait and the third is refused.
+  server_.reset();
+  svc_.reset();
+  const double each = small["output_bytes"]["admitted_by"].get<double>();
+  disk_free_ = uint64_t(2.5 * each);
+  workers_ = 0;
+  start();
+  Client w = client();
+  w.sign_up("waits");
+  json fresh = tiny_job("wall1");
+  fresh["fresh"] = true;  // not the finished one's result again
+  w.call_json("POST", "/api/v1/jobs", fresh, 202);
+  w.call_json("POST", "/api/v1/jobs", fresh, 202);
+  const HttpResponse third = w.call("POST", "/api/v1/jobs", fresh.dump());
+  EXPECT_EQ(third.status, 507) << third.body;
+  EXPECT_NE(third.body.find("is for the queued jobs"), std::string::npos) << third.body;
 }
 
 TEST_F(ServiceTest, AdmissionQueueLimitAndCancel) {
