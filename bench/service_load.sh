@@ -89,15 +89,18 @@ end
 LUA
 submit_lua() {  # TOKEN -> a wrk script submitting, as that user, scenes not seen before
   cat <<LUA
--- Each request a scene not seen before: particle counts from a per-thread range.
+-- Each request a scene not seen before: durations from a per-thread range,
+-- 1 s and a few microseconds. Small jobs: the queue they build (10,000 and
+-- more) is admitted by its files' disk as well as its memory, and a million
+-- particles' jobs (the counts this used to vary) take 1.8 GB of disk each.
 local next_id = 1
 local counter = 0
 setup = function(thread) thread:set("base", next_id * 1000000); next_id = next_id + 1 end
 request = function()
   counter = counter + 1
-  local body = string.format('{"scene":{"wall":"wall1","particles":{"count":%d,"radius":0.5},'
-      .. '"placement":{"kind":"pour"},"duration":1,"fps":24},"render":{"width":640,"height":360}}',
-      (base or 0) + counter)
+  local body = string.format('{"scene":{"wall":"wall1","particles":{"count":2000,"radius":0.5},'
+      .. '"placement":{"kind":"pour"},"duration":%.9f,"fps":24},"render":{"width":160,"height":96}}',
+      1 + ((base or 0) + counter) * 1e-9)
   return wrk.format("POST", "/api/v1/jobs", {["Authorization"] = "Bearer $1",
                                               ["Content-Type"] = "application/json"}, body)
 end

@@ -912,6 +912,7 @@ Reply JobService::submit(const User& u, const json& body) {
   j.scene_key = p->key;
   j.prediction_json = p->prediction.dump();
   j.predicted_host_bytes = p->host_bytes;
+  j.predicted_output_bytes = p->output_bytes;
   j.created_at = now;
   if (!fresh) {
     auto earlier = store_->done_job_with_key(p->key);

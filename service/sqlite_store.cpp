@@ -106,6 +106,11 @@ CREATE TABLE logs (
     // 5: a cancel asked while the job ran, kept so that a restart (or another
     // replica) ends it cancelled instead of running it again.
     "ALTER TABLE jobs ADD COLUMN cancel_requested INTEGER NOT NULL DEFAULT 0;",
+    // 6: the disk a job was admitted by, summed over the queued jobs at every
+    // submission from an index alone (summed from their predictions' JSON, a
+    // queue of 2,000 took 10 ms a submission).
+    "ALTER TABLE jobs ADD COLUMN predicted_output_bytes INTEGER NOT NULL DEFAULT 0;"
+    "CREATE INDEX jobs_state_output ON jobs(state, predicted_output_bytes);",
 };
 
 constexpr int kSchemaVersion = int(sizeof kMigrations / sizeof kMigrations[0]);
@@ -113,7 +118,7 @@ constexpr int kSchemaVersion = int(sizeof kMigrations / sizeof kMigrations[0]);
 const char* const kJobColumns =
     "id, owner_id, state, stage, progress, scene_json, scene_key, run_dir, prediction_json, "
     "cost_json, error, predicted_host_bytes, reused_from, created_at, started_at, finished_at, "
-    "attempts, executor_ref, cancel_requested";
+    "attempts, executor_ref, cancel_requested, predicted_output_bytes";
 const char* const kModelColumns =
     "id, owner_id, name, kind, spec, params_json, stl_sha256, stl_bytes, triangles, created_at";
 const char* const kLogColumns =
@@ -322,13 +327,13 @@ class SqliteStore final : public Store {
   Status insert_job(const Job& j) override {
     std::lock_guard lock(mu_);
     Stmt s = stmt(std::string("INSERT INTO jobs(") + kJobColumns +
-                  ") VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)");
+                  ") VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)");
     s.bind(1, j.id).bind(2, j.owner_id).bind(3, j.state).bind(4, j.stage).bind(5, j.progress);
     s.bind(6, j.scene_json).bind(7, j.scene_key).bind(8, j.run_dir).bind(9, j.prediction_json);
     s.bind(10, j.cost_json).bind(11, j.error).bind(12, j.predicted_host_bytes);
     s.bind(13, j.reused_from).bind(14, j.created_at).bind(15, j.started_at);
     s.bind(16, j.finished_at).bind(17, j.attempts).bind(18, j.executor_ref);
-    s.bind(19, int64_t(j.cancel_requested ? 1 : 0));
+    s.bind(19, int64_t(j.cancel_requested ? 1 : 0)).bind(20, j.predicted_output_bytes);
     return s.step() == SQLITE_DONE ? Status::ok() : error("insert_job");
   }
 
@@ -379,11 +384,9 @@ class SqliteStore final : public Store {
 
   Expected<uint64_t> queued_output_bytes() override {
     std::lock_guard lock(mu_);
-    Stmt s = stmt(
-        "SELECT COALESCE(SUM(json_extract(prediction_json, '$.output_bytes.admitted_by')), 0) "
-        "FROM jobs WHERE state = 'queued' AND json_valid(prediction_json)");
+    Stmt s = stmt("SELECT COALESCE(SUM(predicted_output_bytes), 0) FROM jobs WHERE state = 'queued'");
     if (s.step() != SQLITE_ROW) return error("queued_output_bytes");
-    return uint64_t(std::max(0.0, s.real(0)));
+    return uint64_t(s.i64(0));
   }
 
   Expected<uint64_t> count_jobs(int64_t owner_id, const std::string& state) override {
@@ -728,6 +731,7 @@ class SqliteStore final : public Store {
     j.attempts = int(s.i64(16));
     j.executor_ref = s.text(17);
     j.cancel_requested = s.i64(18) != 0;
+    j.predicted_output_bytes = uint64_t(s.i64(19));
     return j;
   }
 

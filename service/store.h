@@ -37,14 +37,14 @@ struct Model {
   double created_at = 0;
 };
 
-// Job states: queued -> running -> done | failed | cancelled (and running ->
-// queued again when the server restarts under a running job).
 // A place in a user's job list (newest first): a job's creation time and id.
 struct JobCursor {
   double created_at = 0;
   std::string id;
 };
 
+// Job states: queued -> running -> done | failed | cancelled (and running ->
+// queued again when the server restarts under a running job).
 struct Job {
   std::string id;
   int64_t owner_id = 0;
@@ -58,6 +58,7 @@ struct Job {
   std::string cost_json = "{}";  // measured, when it ended
   std::string error;             // why it failed
   uint64_t predicted_host_bytes = 0;
+  uint64_t predicted_output_bytes = 0;  // the disk its files were admitted by
   std::string reused_from;  // the job whose result this one is, when reused
   double created_at = 0, started_at = 0, finished_at = 0;
   int attempts = 0;
@@ -151,8 +152,8 @@ class Store {
   virtual Expected<std::vector<Job>> jobs_of(int64_t owner_id, size_t limit,
                                              const std::optional<JobCursor>& after) = 0;
   virtual Expected<uint64_t> count_jobs(int64_t owner_id, const std::string& state) = 0;
-  // The disk the queued jobs were admitted by, summed (their predictions'
-  // output_bytes.admitted_by; 0 for jobs priced before it was kept).
+  // The disk the queued jobs were admitted by, summed (predicted_output_bytes;
+  // 0 for jobs submitted before it was kept).
   virtual Expected<uint64_t> queued_output_bytes() = 0;
   // The newest finished job with this key, to reuse its result.
   virtual Expected<std::optional<Job>> done_job_with_key(const std::string& key) = 0;

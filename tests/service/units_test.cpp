@@ -196,6 +196,32 @@ TEST(Store, JobListPagesFollowOneAnotherWithoutGapsOrRepeats) {
   std::filesystem::remove_all(dir);
 }
 
+// The disk held by the queued jobs is theirs alone: a running or ended job's
+// files are on the disk already.
+TEST(Store, QueuedJobsHoldTheDiskTheyWereAdmittedBy) {
+  const auto dir = std::filesystem::temp_directory_path() / ("store_disk_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  auto store = open_sqlite_store((dir / "db.sqlite").string());
+  ASSERT_TRUE(store) << store.status().message();
+  Store& st = **store;
+  EXPECT_EQ(*st.queued_output_bytes(), 0u);
+  const std::pair<const char*, uint64_t> jobs[] = {{"queued", 3000}, {"queued", 40000}, {"running", 500000}, {"done", 6000000}};
+  int k = 0;
+  for (const auto& [state, bytes] : jobs) {
+    Job j;
+    j.id = "j" + std::to_string(k++);
+    j.owner_id = 1;
+    j.state = state;
+    j.predicted_output_bytes = bytes;
+    j.scene_json = j.prediction_json = j.cost_json = "{}";
+    ASSERT_TRUE(st.insert_job(j));
+  }
+  EXPECT_EQ(*st.queued_output_bytes(), 43000u);
+  EXPECT_EQ(st.job_by_id("j1")->predicted_output_bytes, 40000u);
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Store, RestartsRequeueLocalJobsOnlyAndJobsEndOnce) {
   const auto dir = std::filesystem::temp_directory_path() / ("store_units_" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
