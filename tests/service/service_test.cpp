@@ -62,8 +62,19 @@ class ServiceTest : public ::testing::Test {
  protected:
   void SetUp() override { start(); }
   void TearDown() override {
+    web_server_.reset();
     server_.reset();
     svc_.reset();
+  }
+  // A second server of this service, with a UI folder (the first has none).
+  void start_web_server(const std::string& web_dir) {
+    ServerOptions o;
+    o.port = 0;
+    o.web_dir = web_dir;
+    auto server = Server::start(svc_.get(), o);
+    ASSERT_TRUE(server) << server.status().message();
+    web_server_ = std::move(*server);
+    web_base_ = "http://127.0.0.1:" + std::to_string(web_server_->port());
   }
   void start(uint64_t host_bytes = 0, int max_queued = 8, std::vector<std::string> cost_models = {}) {
     if (dir_.empty()) dir_ = temp_dir(::testing::UnitTest::GetInstance()->current_test_info()->name());
@@ -122,6 +133,8 @@ class ServiceTest : public ::testing::Test {
   int workers_ = 1;
   std::unique_ptr<JobService> svc_;
   std::unique_ptr<Server> server_;
+  std::unique_ptr<Server> web_server_;
+  std::string web_base_;
 };
 
 // Times are priced at the machine's pace: after jobs that ran 1.3 times what the
@@ -675,12 +688,8 @@ TEST_F(ServiceTest, FilesGoOutInSlicesRevalidateAndStoppedDownloadsCloseThem) {
   for (char& ch : big) ch = char((x = x * 1664525u + 1013904223u) >> 24);
   ASSERT_TRUE(collido::write_file_atomic(web + "/big.bin", big));
   ASSERT_TRUE(collido::write_file_atomic(web + "/index.html", "<!doctype html><title>t</title>"));
-  ServerOptions o;
-  o.port = 0;
-  o.web_dir = web;
-  auto server = Server::start(svc_.get(), o);
-  ASSERT_TRUE(server) << server.status().message();
-  const std::string base = "http://127.0.0.1:" + std::to_string((*server)->port());
+  ASSERT_NO_FATAL_FAILURE(start_web_server(web));
+  const std::string& base = web_base_;
 
   auto whole = http("GET", base + "/ui/big.bin");
   ASSERT_EQ(whole.status, 200);
@@ -727,7 +736,7 @@ TEST_F(ServiceTest, FilesGoOutInSlicesRevalidateAndStoppedDownloadsCloseThem) {
   EXPECT_TRUE(stale_range.body == changed);
   ASSERT_TRUE(collido::write_file_atomic(web + "/big.bin", big));
   // Two answers on one connection: the file, then the page.
-  const int fd = connect_loopback((*server)->port());
+  const int fd = connect_loopback(web_server_->port());
   ASSERT_GE(fd, 0);
   timeval tv{10, 0};
   ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
@@ -743,7 +752,7 @@ TEST_F(ServiceTest, FilesGoOutInSlicesRevalidateAndStoppedDownloadsCloseThem) {
   // Twenty downloads stopped after their first bytes.
   const size_t before = open_descriptors();
   for (int i = 0; i < 20; ++i) {
-    const int d = connect_loopback((*server)->port());
+    const int d = connect_loopback(web_server_->port());
     ASSERT_GE(d, 0);
     const std::string req = "GET /ui/big.bin HTTP/1.1\r\nHost: x\r\n\r\n";
     ASSERT_EQ(::send(d, req.data(), req.size(), MSG_NOSIGNAL), ssize_t(req.size()));
@@ -770,12 +779,8 @@ TEST_F(ServiceTest, UiLibrariesGoOutGzippedWhereTheBrowserTakesIt) {
   ASSERT_TRUE(collido::write_file_atomic(web + "/lib.js.gz", gz));
   fs::last_write_time(web + "/lib.js",
                       fs::last_write_time(web + "/lib.js.gz") - std::chrono::seconds(5));
-  ServerOptions o;
-  o.port = 0;
-  o.web_dir = web;
-  auto server = Server::start(svc_.get(), o);
-  ASSERT_TRUE(server) << server.status().message();
-  const std::string url = "http://127.0.0.1:" + std::to_string((*server)->port()) + "/ui/lib.js";
+  ASSERT_NO_FATAL_FAILURE(start_web_server(web));
+  const std::string url = web_base_ + "/ui/lib.js";
 
   auto zipped = http("GET", url, "", {"Accept-Encoding: gzip, deflate, br"});
   EXPECT_EQ(zipped.status, 200);
@@ -805,12 +810,8 @@ TEST_F(ServiceTest, HeadAnswersLikeGetWithoutTheBodyAnd405SaysWhatIsAllowed) {
   fs::create_directories(web);
   const std::string big(1'000'000, 'x');
   ASSERT_TRUE(collido::write_file_atomic(web + "/big.bin", big));
-  ServerOptions o;
-  o.port = 0;
-  o.web_dir = web;
-  auto server = Server::start(svc_.get(), o);
-  ASSERT_TRUE(server) << server.status().message();
-  const std::string base = "http://127.0.0.1:" + std::to_string((*server)->port());
+  ASSERT_NO_FATAL_FAILURE(start_web_server(web));
+  const std::string& base = web_base_;
   auto head = http("HEAD", base + "/ui/big.bin");
   EXPECT_EQ(head.status, 200);
   EXPECT_EQ(head.headers["content-length"], std::to_string(big.size()));
@@ -831,7 +832,7 @@ TEST_F(ServiceTest, HeadAnswersLikeGetWithoutTheBodyAnd405SaysWhatIsAllowed) {
   EXPECT_EQ(http("PUT", base + "/api/v1/jobs").headers["allow"], "POST, GET, HEAD");
 
   // On one connection, the answer after a HEAD's starts where the head ends.
-  const int fd = connect_loopback((*server)->port());
+  const int fd = connect_loopback(web_server_->port());
   ASSERT_GE(fd, 0);
   timeval tv{10, 0};
   ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
