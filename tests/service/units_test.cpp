@@ -147,16 +147,35 @@ TEST(Workers, VisibleGpusFollowCudaVisibleDevices) {
 
 // A restart requeues only local jobs (cluster jobs run on under their
 // scheduler), and a job ends once however many executors end it.
+// A SQLite store in a fresh folder of its own (named for the test), removed
+// when the test ends.
+class ScratchStore {
+ public:
+  explicit ScratchStore(const std::string& name)
+      : dir_(std::filesystem::temp_directory_path() / (name + "_" + std::to_string(::getpid()))) {
+    std::filesystem::remove_all(dir_);
+    std::filesystem::create_directories(dir_);
+    auto store = open_sqlite_store((dir_ / "db.sqlite").string());
+    EXPECT_TRUE(store) << store.status().message();
+    if (store) store_ = std::move(*store);
+  }
+  ~ScratchStore() {
+    store_.reset();  // closed before its folder goes
+    std::filesystem::remove_all(dir_);
+  }
+  Store* get() { return store_.get(); }
+
+ private:
+  std::filesystem::path dir_;
+  std::unique_ptr<Store> store_;
+};
+
 // A user's job list in pages: newest first, ties in creation time by id, each
 // page starting after the last one's place, none twice, another user's never.
 TEST(Store, JobListPagesFollowOneAnotherWithoutGapsOrRepeats) {
-  const auto dir =
-      std::filesystem::temp_directory_path() / ("store_pages_" + std::to_string(::getpid()));
-  std::filesystem::remove_all(dir);
-  std::filesystem::create_directories(dir);
-  auto store = open_sqlite_store((dir / "db.sqlite").string());
-  ASSERT_TRUE(store) << store.status().message();
-  Store& st = **store;
+  ScratchStore scratch("store_pages");
+  ASSERT_NE(scratch.get(), nullptr);
+  Store& st = *scratch.get();
   std::vector<std::string> expected;  // newest first
   const double times[] = {100.25, 100.5, 100.5, 100.5, 101, 99, 100.5};
   for (int k = 0; k < 7; ++k) {
@@ -193,18 +212,14 @@ TEST(Store, JobListPagesFollowOneAnotherWithoutGapsOrRepeats) {
        {"", "zz", "0000000000000000", "00000000000000000x", "0000000000000000.a b",
         "7ff0000000000000.job1", "000000000000000g.job1", "0000000000000000.a/b"})
     EXPECT_FALSE(parse_job_cursor(bad)) << bad;
-  std::filesystem::remove_all(dir);
 }
 
 // The disk held by the queued jobs is theirs alone: a running or ended job's
 // files are on the disk already.
 TEST(Store, QueuedJobsHoldTheDiskTheyWereAdmittedBy) {
-  const auto dir = std::filesystem::temp_directory_path() / ("store_disk_" + std::to_string(::getpid()));
-  std::filesystem::remove_all(dir);
-  std::filesystem::create_directories(dir);
-  auto store = open_sqlite_store((dir / "db.sqlite").string());
-  ASSERT_TRUE(store) << store.status().message();
-  Store& st = **store;
+  ScratchStore scratch("store_disk");
+  ASSERT_NE(scratch.get(), nullptr);
+  Store& st = *scratch.get();
   EXPECT_EQ(*st.queued_output_bytes(), 0u);
   const std::pair<const char*, uint64_t> jobs[] = {{"queued", 3000}, {"queued", 40000}, {"running", 500000}, {"done", 6000000}};
   int k = 0;
@@ -219,16 +234,12 @@ TEST(Store, QueuedJobsHoldTheDiskTheyWereAdmittedBy) {
   }
   EXPECT_EQ(*st.queued_output_bytes(), 43000u);
   EXPECT_EQ(st.job_by_id("j1")->predicted_output_bytes, 40000u);
-  std::filesystem::remove_all(dir);
 }
 
 TEST(Store, RestartsRequeueLocalJobsOnlyAndJobsEndOnce) {
-  const auto dir = std::filesystem::temp_directory_path() / ("store_units_" + std::to_string(::getpid()));
-  std::filesystem::remove_all(dir);
-  std::filesystem::create_directories(dir);
-  auto store = open_sqlite_store((dir / "db.sqlite").string());
-  ASSERT_TRUE(store) << store.status().message();
-  Store& st = **store;
+  ScratchStore scratch("store_units");
+  ASSERT_NE(scratch.get(), nullptr);
+  Store& st = *scratch.get();
   for (const char* id : {"local", "cluster"}) {
     Job j;
     j.id = id;
@@ -287,8 +298,6 @@ TEST(Store, RestartsRequeueLocalJobsOnlyAndJobsEndOnce) {
   EXPECT_TRUE(st.job_by_id("orphan"));
   EXPECT_TRUE(*st.delete_job("local"));
   EXPECT_FALSE(st.job_by_id("local"));
-  store->reset();
-  std::filesystem::remove_all(dir);
 }
 
 }  // namespace
