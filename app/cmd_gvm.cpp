@@ -223,11 +223,10 @@ int gvm_train(const Args& args) {
     // predicted for them, to look at the misses row by row (or chart them).
     const std::string path = parsed->get("predictions");
     const auto& va = cmp->split.validation;
-    std::istringstream log(g::format_run_log(va));
+    const std::vector<std::string> records = csv_records(va, g::format_run_log);
     std::ostringstream out;
-    std::string line;
-    for (size_t i = 0; std::getline(log, line); ++i) {
-      out << line;
+    for (size_t i = 0; i < records.size(); ++i) {
+      out << records[i];
       for (const auto& s : cmp->scores) {
         double p[g::kOutputCount];
         if (i > 0) g::measure_to_array(s.validation_predictions[i - 1], p);

@@ -37,6 +37,9 @@ const std::vector<FlagSpec>& serve_flags() {
       {"port", true, "port (default 8080; 0 = a free one, printed)"},
       {"data", true, "folder of the database, models and results (default var/)"},
       {"threads", true, "HTTP reactor threads (default 2)"},
+      {"work-threads", true,
+       "threads for the requests that compute: sign-ins, uploads, model builds, predictions, "
+       "submissions (default 2)"},
       {"workers", true,
        "job workers (default: one per visible GPU, each job on its own; one without a GPU, a job "
        "taking every CPU)"},
@@ -102,6 +105,7 @@ int cmd_serve(const Args& args) {
     return usage_error(cmd, "unexpected argument '" + parsed->positional()[0] + "'");
   const int64_t port = parsed->get_int("port", 8080, &error);
   const int64_t threads = parsed->get_int("threads", 2, &error);
+  const int64_t work_threads = parsed->get_int("work-threads", 2, &error);
   const int64_t workers = parsed->get_int("workers", -1, &error);
   const int64_t job_threads = parsed->get_int("job-threads", 0, &error);
   const int64_t upload_mb = parsed->get_int("max-upload-mb", 64, &error);
@@ -125,6 +129,8 @@ int cmd_serve(const Args& args) {
     return usage_error(cmd, "--retrain-every must be in 0..1000000");
   if (port < 0 || port > 65535) return usage_error(cmd, "--port must be in 0..65535");
   if (threads < 1 || threads > 64) return usage_error(cmd, "--threads must be in 1..64");
+  if (work_threads < 1 || work_threads > 256)
+    return usage_error(cmd, "--work-threads must be in 1..256");
   if (workers < -1 || workers > 64) return usage_error(cmd, "--workers must be in 0..64");
   if (job_threads < 0 || job_threads > 4096) return usage_error(cmd, "--job-threads must be in 0..4096");
   if (upload_mb < 1 || upload_mb > 4096) return usage_error(cmd, "--max-upload-mb must be in 1..4096");
@@ -183,6 +189,7 @@ int cmd_serve(const Args& args) {
   options.host = parsed->get("host", "127.0.0.1");
   options.port = uint16_t(port);
   options.threads = int(threads);
+  options.work_threads = int(work_threads);
   options.web_dir = parsed->get("web", std::filesystem::exists("web/static/index.html") ? "web/static" : "");
 
   auto svc = service::JobService::open(config);

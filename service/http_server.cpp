@@ -17,12 +17,14 @@
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <mutex>
 #include <optional>
 #include <sstream>
 #include <utility>
 
 #include "job/run_dir.h"
 #include "service/http_parse.h"
+#include "service/request_pool.h"
 
 namespace collido::service {
 
@@ -89,6 +91,29 @@ Response json_response(const Reply& r) {
 }
 Response error_response(int status, const std::string& message) {
   return json_response(error_reply(status, message));
+}
+
+// ---- connections -------------------------------------------------------------
+
+// Per connection: where the guard is in the byte stream of its requests, and
+// whether the connection is still there for a pool thread's answer.
+struct PeerGuard {
+  std::string head;         // header bytes of the request being read
+  uint64_t body_left = 0;   // body bytes of the current request still to come
+  bool discarding = false;  // refused: everything after is dropped
+  // Pistache 0.0.5 keys a queued write by the socket's descriptor, and closes
+  // the descriptor when the client leaves; a write a pool thread queued as
+  // the client left could meet that number given to the next connection
+  // (seen: a file's bytes sent to the next client). A thread other than the
+  // reactor's queues a write only holding send_mu with closed false, and the
+  // reactor sets closed under send_mu before Pistache closes the socket, so
+  // every such write is queued before the close and dropped or sent with it.
+  std::recursive_mutex send_mu;
+  bool closed = false;
+};
+
+std::shared_ptr<PeerGuard> guard_of(const std::shared_ptr<Tcp::Peer>& peer) {
+  return peer ? std::static_pointer_cast<PeerGuard>(peer->tryGetData("collido-guard")) : nullptr;
 }
 
 // ---- files, with Range ------------------------------------------------------
@@ -160,12 +185,20 @@ class FileSender : public std::enable_shared_from_this<FileSender> {
  public:
   static constexpr uint64_t kSlice = 256 << 10;
 
-  FileSender(std::string head, FileBody body, std::weak_ptr<Tcp::Peer> peer)
-      : head_(std::move(head)), body_(std::move(body)), peer_(std::move(peer)) {}
+  FileSender(std::string head, FileBody body, const std::shared_ptr<Tcp::Peer>& peer)
+      : head_(std::move(head)), body_(std::move(body)), peer_(peer), guard_(guard_of(peer)) {}
 
+  // On the reactor thread, or on a pool thread (the first slice of a pool
+  // route's answer, and a slice whose write ended before its continuation
+  // was attached).
   void send_next() {
     auto peer = peer_.lock();
     if (!peer) return;
+    std::unique_lock<std::recursive_mutex> lock;
+    if (guard_) {
+      lock = std::unique_lock<std::recursive_mutex>(guard_->send_mu);
+      if (guard_->closed) return;
+    }
     const uint64_t n = std::min(kSlice, body_.count - sent_);
     std::string slice = std::exchange(head_, {});  // the first slice carries the header
     const size_t offset = slice.size();
@@ -200,6 +233,7 @@ class FileSender : public std::enable_shared_from_this<FileSender> {
   std::string head_;
   FileBody body_;
   std::weak_ptr<Tcp::Peer> peer_;
+  std::shared_ptr<PeerGuard> guard_;
   uint64_t sent_ = 0;
 };
 
@@ -213,12 +247,19 @@ int64_t query_count(const std::string& s, int64_t dflt) {
 
 enum class Auth { kNone, kUser, kAdmin };
 
+// Where a route's handler runs: on the reactor thread of its connection (a
+// look-up, a page, a file), or on the request pool (work that computes: a
+// password's hash, a mesh, a prediction; its connection's reactor serves the
+// others meanwhile).
+enum class Runs { kInline, kOnPool };
+
 struct Route {
   std::string method;
   std::string pattern;
   Auth auth;
   std::function<Response(Request&)> handle;
   std::vector<std::string> parts;  // the pattern, split
+  Runs runs = Runs::kInline;
 };
 
 // The pattern's parts match the path: literals equal, {name} takes one
@@ -357,7 +398,12 @@ std::string cookie_attributes(const JobService& svc) {
 std::vector<Route> make_routes(JobService* svc, const ServerOptions& opt) {
   std::vector<Route> r;
   auto add = [&](const char* m, const char* p, Auth a, std::function<Response(Request&)> h) {
-    r.push_back({m, p, a, std::move(h), split_path(p)});
+    r.push_back({m, p, a, std::move(h), split_path(p), Runs::kInline});
+  };
+  // A route whose work computes: it runs on the request pool.
+  auto add_on_pool = [&](const char* m, const char* p, Auth a,
+                         std::function<Response(Request&)> h) {
+    r.push_back({m, p, a, std::move(h), split_path(p), Runs::kOnPool});
   };
   auto reply = [](Reply rep) { return json_response(rep); };
 
@@ -373,12 +419,12 @@ std::vector<Route> make_routes(JobService* svc, const ServerOptions& opt) {
     out.mime = "text/plain; version=0.0.4";
     return out;
   });
-  add("POST", "/api/v1/accounts", Auth::kNone, [=](Request& q) {
+  add_on_pool("POST", "/api/v1/accounts", Auth::kNone, [=](Request& q) {
     Response e;
     auto b = json_body(q, &e);
     return b ? reply(svc->create_account(*b)) : e;
   });
-  add("POST", "/api/v1/sessions", Auth::kNone, [=](Request& q) {
+  add_on_pool("POST", "/api/v1/sessions", Auth::kNone, [=](Request& q) {
     Response e;
     auto b = json_body(q, &e);
     if (!b) return e;
@@ -402,7 +448,7 @@ std::vector<Route> make_routes(JobService* svc, const ServerOptions& opt) {
     return json_response(rep);
   });
   add("GET", "/api/v1/models", Auth::kUser, [=](Request& q) { return reply(svc->list_models(*q.user)); });
-  add("POST", "/api/v1/models", Auth::kUser, [=](Request& q) {
+  add_on_pool("POST", "/api/v1/models", Auth::kUser, [=](Request& q) {
     Response e;
     auto b = json_body(q, &e);
     return b ? reply(svc->create_model(*q.user, *b)) : e;
@@ -415,30 +461,31 @@ std::vector<Route> make_routes(JobService* svc, const ServerOptions& opt) {
     auto id = id_param(q, "id");
     return id ? reply(svc->delete_model(*q.user, *id)) : error_response(404, "no such model");
   });
-  add("PUT", "/api/v1/models/{id}/stl", Auth::kUser, [=](Request& q) {
+  add_on_pool("PUT", "/api/v1/models/{id}/stl", Auth::kUser, [=](Request& q) {
     auto id = id_param(q, "id");
     return id ? reply(svc->upload_stl(*q.user, *id, q.http->body()))
               : error_response(404, "no such model");
   });
-  add("GET", "/api/v1/models/{id}/stl", Auth::kUser, [=](Request& q) {
+  add_on_pool("GET", "/api/v1/models/{id}/stl", Auth::kUser, [=](Request& q) {
     auto id = id_param(q, "id");
     if (!id) return error_response(404, "no such model");
     auto path = svc->model_stl_path(*q.user, *id);
-    if (!path) return json_response(error_reply(http_status_of(path.status()), path.status().message()));
+    if (!path)
+      return json_response(error_reply(http_status_of(path.status()), path.status().message()));
     return file_response(*path, *q.http);
   });
   add("GET", "/api/v1/algorithms", Auth::kNone, [=](Request&) { return reply(svc->algorithms()); });
-  add("POST", "/api/v1/predict", Auth::kUser, [=](Request& q) {
+  add_on_pool("POST", "/api/v1/predict", Auth::kUser, [=](Request& q) {
     Response e;
     auto b = json_body(q, &e);
     return b ? reply(svc->predict(*q.user, *b)) : e;
   });
-  add("POST", "/api/v1/start-preview", Auth::kUser, [=](Request& q) {
+  add_on_pool("POST", "/api/v1/start-preview", Auth::kUser, [=](Request& q) {
     Response e;
     auto b = json_body(q, &e);
     return b ? reply(svc->start_preview(*q.user, *b)) : e;
   });
-  add("POST", "/api/v1/jobs", Auth::kUser, [=](Request& q) {
+  add_on_pool("POST", "/api/v1/jobs", Auth::kUser, [=](Request& q) {
     Response e;
     auto b = json_body(q, &e);
     return b ? reply(svc->submit(*q.user, *b)) : e;
@@ -562,17 +609,11 @@ std::vector<Route> make_routes(JobService* svc, const ServerOptions& opt) {
 
 // ---- the request guard and the handler --------------------------------------
 
-// Per connection: where the guard is in the byte stream of its requests.
-struct PeerGuard {
-  std::string head;        // header bytes of the request being read
-  uint64_t body_left = 0;  // body bytes of the current request still to come
-  bool discarding = false; // refused: everything after is dropped
-};
-
 struct Shared {
   JobService* service = nullptr;
   ServerOptions options;
   std::vector<Route> routes;
+  std::unique_ptr<RequestPool> pool;  // runs the routes that compute (Runs::kOnPool)
   uint64_t max_upload = 0;
   size_t max_request = 0;  // Pistache's limit: the largest body and the headers
 };
@@ -613,7 +654,48 @@ class Router : public Http::Handler {
   explicit Router(std::shared_ptr<const Shared> shared) : shared_(std::move(shared)) {}
 
   void onRequest(const Http::Request& http, Http::ResponseWriter writer) override {
-    Response out = dispatch(http);
+    Dispatch d = dispatch(http);
+    if (!d.route) {
+      respond(http, writer, d.answer);
+      return;
+    }
+    if (d.route->runs == Runs::kInline) {
+      respond(http, writer, run(*d.route, d.req));
+      return;
+    }
+    // The task owns copies of what it reads: this request is the parser's,
+    // reset once onRequest returns. It answers from the pool's thread under
+    // the connection's send lock (PeerGuard). (A client that pipelined a
+    // second request behind this one could get the second answer first;
+    // browsers wait for each answer.)
+    auto request = std::make_shared<const Http::Request>(http);
+    auto out = std::make_shared<Http::ResponseWriter>(std::move(writer));
+    auto guard = guard_of(out->peer());
+    auto task = [request, out, guard, route = d.route, req = std::move(d.req)]() mutable {
+      req.http = request.get();
+      const Response answer = run(*route, req);
+      std::unique_lock<std::recursive_mutex> lock;
+      if (guard) {
+        lock = std::unique_lock<std::recursive_mutex>(guard->send_mu);
+        if (guard->closed) return;  // the client left: nobody to answer
+      }
+      try {
+        respond(*request, *out, answer);
+      } catch (const std::exception&) {  // the peer went while the answer was written
+      }
+    };
+    if (!shared_->pool->submit(std::move(task))) {
+      Response busy = error_response(503, "the server is busy; try again in a moment");
+      busy.headers.emplace_back("Retry-After", "1");
+      respond(http, *out, busy);
+    }
+  }
+
+ private:
+  // Sends the answer: on the reactor thread of its connection, or on a pool
+  // thread holding the connection's send lock.
+  static void respond(const Http::Request& http, Http::ResponseWriter& writer,
+                      const Response& out) {
     // HTTP/1.1 keeps a connection open unless a side says "close"; 0.0.5
     // closes one that sent no Connection header, which costs every client
     // (wrk, curl, browsers' fetch) a new connection per request.
@@ -639,7 +721,14 @@ class Router : public Http::Handler {
     writer.send(static_cast<Http::Code>(out.status), out.body.data(), out.body.size(), mime);
   }
 
- private:
+  static Response run(const Route& route, Request& req) {
+    try {
+      return route.handle(req);
+    } catch (const std::exception& e) {  // a bug of ours: answer, do not kill the thread
+      return error_response(500, std::string("internal error: ") + e.what());
+    }
+  }
+
   // The status line and headers as ResponseWriter::send writes them, then
   // the file's part through a FileSender; to a HEAD request, or as a 304, the
   // head alone.
@@ -668,14 +757,26 @@ class Router : public Http::Handler {
     std::make_shared<FileSender>(head.str(), *out.file, writer.peer())->send_next();
   }
 
-  Response dispatch(const Http::Request& http) {
+  // The route that answers the request, its user authenticated; or, where
+  // none does, the answer (404, 405, 401, 403).
+  struct Dispatch {
+    const Route* route = nullptr;
     Request req;
+    Response answer;
+  };
+  Dispatch dispatch(const Http::Request& http) {
+    Dispatch d;
+    auto answer = [&d](Response r) {
+      d.answer = std::move(r);
+      return std::move(d);
+    };
+    Request& req = d.req;
     req.http = &http;
     req.method = Http::methodString(http.method());
     bool ok = true;
     for (const std::string& part : split_path(http.resource())) {
       req.segments.push_back(percent_decode(part, &ok));
-      if (!ok) return error_response(404, "no such resource");
+      if (!ok) return answer(error_response(404, "no such resource"));
     }
     // HEAD is GET without the body (RFC 9110 9.3.2): the GET route answers it
     // and onRequest sends the head alone.
@@ -690,23 +791,20 @@ class Router : public Http::Handler {
       if (route.auth != Auth::kNone) {
         req.token = session_token(http);
         auto user = shared_->service->authenticate(req.token);
-        if (!user) return error_response(401, "sign in first (POST /api/v1/sessions)");
+        if (!user) return answer(error_response(401, "sign in first (POST /api/v1/sessions)"));
         if (route.auth == Auth::kAdmin && user->role != "admin")
-          return error_response(403, "administrators only");
+          return answer(error_response(403, "administrators only"));
         req.user = *user;
       }
-      try {
-        return route.handle(req);
-      } catch (const std::exception& e) {  // a bug of ours: answer, do not kill the reactor
-        return error_response(500, std::string("internal error: ") + e.what());
-      }
+      d.route = &route;
+      return d;
     }
     if (!allowed.empty()) {
       Response out = error_response(405, "method " + req.method + " is not allowed here");
       out.set_header("Allow", allowed);
-      return out;
+      return answer(std::move(out));
     }
-    return error_response(404, "no such resource");
+    return answer(error_response(404, "no such resource"));
   }
 
   static std::string session_token(const Http::Request& http) {
@@ -762,6 +860,10 @@ class Handler : public Http::Handler {
   }
 
   void onDisconnection(const std::shared_ptr<Tcp::Peer>& peer) override {
+    if (auto guard = guard_of(peer)) {
+      std::lock_guard<std::recursive_mutex> lock(guard->send_mu);
+      guard->closed = true;
+    }
     static_cast<Tcp::Handler&>(*router_).onDisconnection(peer);
   }
 
@@ -885,6 +987,8 @@ uint16_t Server::port() const { return uint16_t(impl_->endpoint->getPort()); }
 
 void Server::stop() {
   if (impl_ && !impl_->stopped) {
+    // The pool first: its tasks answer through the endpoint's transports.
+    impl_->shared->pool->stop();
     impl_->endpoint->shutdown();
     impl_->stopped = true;
   }
@@ -896,11 +1000,14 @@ Expected<std::unique_ptr<Server>> Server::start(JobService* service, const Serve
   // socket server needs; nothing else of ours handles SIGPIPE).
   ::signal(SIGPIPE, SIG_IGN);
   if (options.threads < 1 || options.threads > 64) return invalid_argument("threads: in [1, 64]");
+  if (options.work_threads < 1 || options.work_threads > 256)
+    return invalid_argument("work threads: in [1, 256]");
   auto shared = std::make_shared<Shared>();
   shared->service = service;
   shared->options = options;
   shared->routes = make_routes(service, options);
   shared->max_upload = service->config().max_upload_bytes;
+  shared->pool = std::make_unique<RequestPool>(options.work_threads, options.max_waiting_work);
   auto impl = std::make_unique<Impl>();
   impl->shared = shared;
   try {

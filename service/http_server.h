@@ -13,7 +13,10 @@
 // - its Rest::Router may insert into a shared map from several threads: we
 //   route ourselves, from a table that is never written after start-up;
 // - it answers a request without a Connection header "Connection: Close":
-//   an HTTP/1.1 request without one is kept alive, as HTTP/1.1 says.
+//   an HTTP/1.1 request without one is kept alive, as HTTP/1.1 says;
+// - it runs a handler on the reactor thread of its connection, which serves
+//   no other connection meanwhile: the routes that compute run on a pool of
+//   their own (request_pool.h) and answer from there.
 #pragma once
 
 #include <cstdint>
@@ -30,6 +33,11 @@ struct ServerOptions {
   std::string host = "127.0.0.1";
   uint16_t port = 8080;  // 0 = a free port (Server::port() tells which)
   int threads = 2;       // reactor threads
+  // Threads for the requests that compute (sign-ins, uploads, model builds,
+  // predictions, submissions), and how many may wait for one before the
+  // server answers 503.
+  int work_threads = 2;
+  size_t max_waiting_work = 256;
   size_t max_json_bytes = 1 << 20;  // a JSON request body
   std::string web_dir;   // the browser UI's files ("" = none)
 };

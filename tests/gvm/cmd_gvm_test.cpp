@@ -9,7 +9,9 @@
 
 #include "app/cli.h"
 #include "app/commands.h"
+#include "gvm/csv.h"
 #include "gvm/evaluate.h"
+#include "gvm/run_log.h"
 
 namespace collido::app {
 namespace {
@@ -61,6 +63,29 @@ TEST(CmdGvm, MissingFilesExitTwo) {
   EXPECT_EQ(cmd_gvm({"train", "--logs", tmp("absent.csv"), "--out", tmp("m.json")}), kExitUsage);
   EXPECT_EQ(cmd_predict({tmp("absent.json"), "--model", tmp("absent-model.json")}), kExitUsage);
   EXPECT_EQ(cmd_predict({tmp("absent.json")}), kExitUsage);  // what it is cannot be read
+}
+
+// A device name with a line break is one quoted field over two lines: the
+// predictions written beside each validation row stay on that row's record.
+TEST(CmdGvm, PredictionsStayOnTheirRowWhereAFieldBreaksTheLine) {
+  const std::string log = tmp("broken_names.csv"), model = tmp("broken_model.json"),
+                    predictions = tmp("broken_predictions.csv");
+  ASSERT_EQ(run([&] { return cmd_gvm({"synth", "--out", log, "--rows", "60"}); }).first, kExitOk);
+  auto rows = gvm::read_run_log(log);
+  ASSERT_TRUE(rows) << rows.status().message();
+  for (size_t i = 0; i < rows->size(); i += 2) (*rows)[i].config.device = "card\nrevision \"b\"";
+  ASSERT_TRUE(gvm::write_run_log(log, *rows));
+  auto train = run([&] {
+    return cmd_gvm({"train", "--logs", log, "--out", model, "--epochs", "10", "--mlp-epochs", "20",
+                    "--predictions", predictions});
+  });
+  ASSERT_EQ(train.first, kExitOk) << train.second;
+  auto records = gvm::split_csv(slurp(predictions));
+  ASSERT_TRUE(records) << records.status().message();
+  ASSERT_EQ(records->size(), 19u);  // the header and 30 % of 60 rows
+  const size_t columns = (*records)[0].fields.size();
+  for (const auto& r : *records) EXPECT_EQ(r.fields.size(), columns) << "line " << r.line;
+  EXPECT_NE(slurp(predictions).find("card\nrevision"), std::string::npos);
 }
 
 TEST(CmdGvm, SynthTrainPredict) {

@@ -10,6 +10,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -71,6 +72,10 @@ class ServiceTest : public ::testing::Test {
     ServerOptions o;
     o.port = 0;
     o.web_dir = web_dir;
+    start_second_server(o);
+  }
+  // A second server of this service with these options, at web_base_.
+  void start_second_server(const ServerOptions& o) {
     auto server = Server::start(svc_.get(), o);
     ASSERT_TRUE(server) << server.status().message();
     web_server_ = std::move(*server);
@@ -610,18 +615,31 @@ TEST_F(ServiceTest, ClientClosingMidVideoLeavesTheServerRunning) {
     bin.append(2, '\0');
   }
   ASSERT_EQ(c.call("PUT", stl, bin).status, 200);
-  for (int round = 0; round < 5; ++round) {
+  // Each round leaves a download behind, and the next connection (which
+  // likely gets the same descriptor number) must get its own answer first.
+  auto answer_head = [&](const std::string& path) {
     const int fd = connect_loopback(server_->port());
-    ASSERT_GE(fd, 0);
-    const std::string req = "GET " + stl + " HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " + c.token + "\r\n\r\n";
-    ASSERT_EQ(::send(fd, req.data(), req.size(), 0), ssize_t(req.size()));
-    char buf[512];
-    ASSERT_GT(::recv(fd, buf, sizeof buf, 0), 0);
+    if (fd < 0) return std::string("no connection");
+    const std::string req =
+        "GET " + path + " HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " + c.token + "\r\n\r\n";
+    std::string got(64, '\0');
+    ssize_t n = -1;
+    if (::send(fd, req.data(), req.size(), 0) == ssize_t(req.size()))
+      n = ::recv(fd, got.data(), got.size(), 0);
     linger l{1, 0};  // close with a reset, as a browser tab that goes away
     ::setsockopt(fd, SOL_SOCKET, SO_LINGER, &l, sizeof l);
     ::close(fd);
+    got.resize(size_t(std::max<ssize_t>(n, 0)));
+    return got;
+  };
+  for (int round = 0; round < 60; ++round) {
+    const std::string download = answer_head(stl);
+    ASSERT_EQ(download.rfind("HTTP/1.1 200", 0), 0u) << "round " << round << ": " << download;
+    const std::string next = answer_head("/api/v1/health");
+    ASSERT_EQ(next.rfind("HTTP/1.1 200", 0), 0u) << "round " << round << ": " << next;
   }
-  EXPECT_EQ(c.call("GET", "/api/v1/health").status, 200);
+  const HttpResponse health = c.call("GET", "/api/v1/health");
+  EXPECT_EQ(health.status, 200) << health.error;
   EXPECT_EQ(c.call("GET", stl).body.size(), bin.size());
 }
 
@@ -801,6 +819,65 @@ TEST_F(ServiceTest, UiLibrariesGoOutGzippedWhereTheBrowserTakesIt) {
   auto edited = http("GET", url, "", {"Accept-Encoding: gzip"});
   EXPECT_EQ(edited.body, js + "// edited\n");
   EXPECT_EQ(edited.headers.count("content-encoding"), 0u);
+}
+
+// A request that computes runs off its connection's reactor thread: here a
+// parametric sphere of 1.3 million triangles, built to count them (about a
+// second). On a server of one reactor thread another connection is answered
+// meanwhile (before, it waited for the build), and with one work thread and
+// no queue a second such request is answered 503 with Retry-After until the
+// first is done.
+TEST_F(ServiceTest, RequestsThatComputeLeaveTheReactorFreeAndABusyPoolSays503) {
+  ServerOptions o;
+  o.port = 0;
+  o.threads = 1;
+  o.work_threads = 1;
+  o.max_waiting_work = 0;
+  ASSERT_NO_FATAL_FAILURE(start_second_server(o));
+  // Signed up on the first server: with no queue, a request sent as the one
+  // before is answered can find the pool's thread not yet free.
+  Client first = client();
+  first.sign_up("builder");
+  Client c(web_base_);
+  c.token = first.token;
+  const json big = {
+      {"name", "big ball"}, {"kind", "parametric"}, {"spec", "sphere:r=10,subdivisions=8"}};
+  std::atomic<int> order{0};
+  std::atomic<int> build_ended{-1};
+  HttpResponse built;
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  std::thread build([&] {
+    do  // refused only while the prediction below holds the pool
+      built = c.call("POST", "/api/v1/models", big.dump());
+    while (built.status == 503 && std::chrono::steady_clock::now() < until);
+    build_ended = order++;
+  });
+  // Until the build holds the pool's one thread, a prediction is answered.
+  HttpResponse refused;
+  while (std::chrono::steady_clock::now() < until) {
+    refused = c.call("POST", "/api/v1/predict", tiny_job("wall1").dump());
+    if (refused.status == 503 || build_ended >= 0) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  const auto health = http("GET", web_base_ + "/api/v1/health");
+  const int health_ended = order++;
+  build.join();
+  EXPECT_EQ(refused.status, 503) << refused.body;
+  EXPECT_EQ(refused.headers["retry-after"], "1");
+  EXPECT_NE(refused.body.find("busy"), std::string::npos) << refused.body;
+  EXPECT_EQ(health.status, 200);
+  EXPECT_LT(health_ended, build_ended.load()) << "the health check waited for the build";
+  ASSERT_EQ(built.status, 201) << built.body;
+  EXPECT_EQ(json::parse(built.body)["triangles"], 1310720);
+  // The pool free again (its thread may still be leaving the build's task
+  // as its answer arrives), the same request is answered.
+  HttpResponse again;
+  for (int i = 0; i < 500; ++i) {
+    again = c.call("POST", "/api/v1/predict", tiny_job("wall1").dump());
+    if (again.status != 503) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  EXPECT_EQ(again.status, 200) << again.body;
 }
 
 // HEAD is GET without the body, files and JSON alike; a method the path does

@@ -4,10 +4,16 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
 #include <filesystem>
+#include <mutex>
+#include <thread>
 
 #include "service/http_parse.h"
 #include "service/job_service.h"
+#include "service/request_pool.h"
 #include "service/store.h"
 #include "service/workers.h"
 
@@ -145,8 +151,66 @@ TEST(Workers, VisibleGpusFollowCudaVisibleDevices) {
   ::unsetenv("CUDA_VISIBLE_DEVICES");
 }
 
-// A restart requeues only local jobs (cluster jobs run on under their
-// scheduler), and a job ends once however many executors end it.
+// A gate the tests' tasks wait at until it opens; every wait bounded.
+class Gate {
+ public:
+  void open() {
+    std::lock_guard<std::mutex> lock(mu_);
+    open_ = true;
+    cv_.notify_all();
+  }
+  bool wait() {
+    std::unique_lock<std::mutex> lock(mu_);
+    return cv_.wait_for(lock, std::chrono::seconds(30), [&] { return open_; });
+  }
+
+ private:
+  std::mutex mu_;
+  std::condition_variable cv_;
+  bool open_ = false;
+};
+
+// The request pool runs every task it takes, takes one more than its free
+// threads only while fewer than its limit wait, and answers what it took
+// before it stops.
+TEST(RequestPool, TakesWhatItsThreadsAndQueueHoldAndFinishesItBeforeStopping) {
+  RequestPool pool(2, 1);
+  Gate gate;
+  std::atomic<int> ran{0};
+  auto blocked = [&] {
+    gate.wait();
+    ++ran;
+  };
+  EXPECT_TRUE(pool.submit(blocked));
+  EXPECT_TRUE(pool.submit(blocked));
+  // Both threads busy (or about to be): one task may wait, the next is refused.
+  EXPECT_TRUE(pool.submit(blocked));
+  EXPECT_FALSE(pool.submit(blocked));
+  EXPECT_EQ(pool.pending(), 3u);
+  gate.open();
+  for (int i = 0; i < 3000 && pool.pending() > 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  EXPECT_EQ(ran.load(), 3);
+  EXPECT_EQ(pool.pending(), 0u);
+  // With its threads free it takes as many at once as it has threads and queue.
+  Gate second;
+  for (int i = 0; i < 3; ++i)
+    EXPECT_TRUE(pool.submit([&] {
+      second.wait();
+      ++ran;
+    }));
+  std::thread opener([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    second.open();
+  });
+  pool.stop();  // waits for the three
+  opener.join();
+  EXPECT_EQ(ran.load(), 6);
+  EXPECT_FALSE(pool.submit([&] { ++ran; }));
+  pool.stop();  // a second stop is harmless
+  EXPECT_EQ(ran.load(), 6);
+}
+
 // A SQLite store in a fresh folder of its own (named for the test), removed
 // when the test ends.
 class ScratchStore {
@@ -236,6 +300,8 @@ TEST(Store, QueuedJobsHoldTheDiskTheyWereAdmittedBy) {
   EXPECT_EQ(st.job_by_id("j1")->predicted_output_bytes, 40000u);
 }
 
+// A restart requeues only local jobs (cluster jobs run on under their
+// scheduler), and a job ends once however many executors end it.
 TEST(Store, RestartsRequeueLocalJobsOnlyAndJobsEndOnce) {
   ScratchStore scratch("store_units");
   ASSERT_NE(scratch.get(), nullptr);

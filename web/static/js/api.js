@@ -2,9 +2,11 @@
 // HttpOnly cookie POST /api/v1/sessions sets, so no token is kept in script.
 
 export class ApiError extends Error {
-  constructor(status, message) {
+  // retryAfter: seconds, from a 503's Retry-After (0 when it has none).
+  constructor(status, message, retryAfter = 0) {
     super(message);
     this.status = status;
+    this.retryAfter = retryAfter;
   }
 }
 
@@ -39,7 +41,8 @@ export async function api(method, path, body, { signal, quiet401 = false, conten
   if (!res.ok) {
     const message = (data && typeof data.error === 'string') ? data.error
       : `${res.status} ${res.statusText || 'error'}`;
-    const err = new ApiError(res.status, message);
+    const wait = Number(res.headers.get('Retry-After'));
+    const err = new ApiError(res.status, message, Number.isFinite(wait) && wait > 0 ? Math.min(wait, 60) : 0);
     if (res.status === 401 && !quiet401) onUnauthorized(err);
     throw err;
   }
