@@ -4,14 +4,6 @@
 
 namespace collido::service {
 
-namespace {
-thread_local bool t_on_pool = false;
-}  // namespace
-
-bool RequestPool::on_pool_thread() {
-  return t_on_pool;
-}
-
 RequestPool::RequestPool(int threads, size_t max_waiting) : max_waiting_(max_waiting) {
   for (int i = 0; i < std::max(1, threads); ++i) threads_.emplace_back([this] { run(); });
 }
@@ -51,7 +43,6 @@ size_t RequestPool::pending() const {
 }
 
 void RequestPool::run() {
-  t_on_pool = true;
   for (;;) {
     std::function<void()> task;
     {

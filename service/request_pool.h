@@ -32,8 +32,6 @@ class RequestPool {
   void stop();
   // Tasks queued or running.
   size_t pending() const;
-  // Whether the calling thread is one of a pool's.
-  static bool on_pool_thread();
 
  private:
   void run();
