@@ -106,8 +106,9 @@ struct PeerGuard {
   // the client left could meet that number given to the next connection
   // (seen: a file's bytes sent to the next client). A thread other than the
   // reactor's queues a write only holding send_mu with closed false, and the
-  // reactor sets closed under send_mu before Pistache closes the socket, so
-  // every such write is queued before the close and dropped or sent with it.
+  // reactor sets closed under send_mu before Pistache closes the socket: such
+  // a write is queued before the close, as the reactor's own are, and goes
+  // with the connection.
   std::recursive_mutex send_mu;
   bool closed = false;
 };
