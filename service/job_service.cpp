@@ -11,6 +11,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <thread>
 
@@ -573,7 +574,8 @@ Reply JobService::algorithms() {
 
 // ---- jobs -------------------------------------------------------------------
 
-Expected<JobService::PreparedJob> JobService::prepare(const User& u, const json& body) {
+Expected<JobService::PreparedJob> JobService::prepare(const User& u, const json& body,
+                                                      bool refuse_over_memory) {
   if (!body.is_object()) return invalid_argument("the body must be a JSON object");
   for (auto it = body.begin(); it != body.end(); ++it)
     if (it.key() != "scene" && it.key() != "render" && it.key() != "fresh")
@@ -657,7 +659,8 @@ Expected<JobService::PreparedJob> JobService::prepare(const User& u, const json&
     }
   }
   job::Budget& budget = spec.budget;
-  budget.host_bytes = config_.host_bytes;
+  budget.host_bytes =
+      refuse_over_memory ? config_.host_bytes : std::numeric_limits<uint64_t>::max();
   auto assessed = job::assess_job(spec);
   if (!assessed) {
     const Status& st = assessed.status();
@@ -840,7 +843,9 @@ Reply JobService::predict(const User& u, const json& body) {
 }
 
 Reply JobService::start_preview(const User& u, const json& body) {
-  auto p = prepare(u, body);
+  // A job too large for this server's memory still shows where its particles
+  // would start: the form's view follows the form while the user cuts it down.
+  auto p = prepare(u, body, /*refuse_over_memory=*/false);
   if (!p) return status_reply(p.status());
   const uint64_t count = p->assessment.value("particles", uint64_t(0));
   if (count > kStartPlacedMost) {

@@ -234,7 +234,9 @@ class JobService {
   // may upload again or delete the model while the job waits) and points the
   // spec at it; false when the file no longer holds the STL the job was priced on.
   Expected<bool> pin_model_wall(PreparedJob* p, const std::string& job_dir);
-  Expected<PreparedJob> prepare(const User& u, const json& body);
+  // refuse_over_memory false: a job the engine's memory bound refuses is
+  // assessed all the same (a start preview places a bounded share of it).
+  Expected<PreparedJob> prepare(const User& u, const json& body, bool refuse_over_memory = true);
   // The predicted cost of an assessed job; *admit_bytes: the memory it is
   // admitted by, *admit_output: the disk its files are.
   json price(const job::JobAssessment& a, const json& assessment, uint64_t* admit_bytes,

@@ -1108,6 +1108,11 @@ TEST_F(ServiceTest, AJobThatCanNeverFitIsRefusedWithTheFigures) {
   auto predicted = c.call("POST", "/api/v1/predict", tiny_job("wall1", 200000, 0.2).dump());
   EXPECT_EQ(predicted.status, r.status) << predicted.body;
   EXPECT_EQ(predicted.body, r.body);
+  // Where its particles would start is shown all the same (the form's start view).
+  EXPECT_EQ(c.call("POST", "/api/v1/predict", tiny_job("wall1", 300, 1.0).dump()).status, 409);
+  const json start = c.call_json("POST", "/api/v1/start-preview", tiny_job("wall1", 300, 1.0));
+  EXPECT_EQ(start.value("particles", 0), 300) << start.dump();
+  EXPECT_FALSE(start.value("shown", json::array()).empty()) << start.dump();
 }
 
 // A job the service was stopped on before its run began (while it prepared:

@@ -354,9 +354,7 @@ export async function render(main, ctx, modelParam) {
       showWarnings([{ level: 'error', text }]);
       predStatus.textContent = refused ? 'Would be refused.' : 'Not predicted.';
       mini(`${refused ? 'This job would be refused' : 'No prediction'}. Show why ↑`);
-      // The start view follows the form too: a job refused for its files
-      // still shows where its particles start; one refused for its memory
-      // says so there rather than keep the last job's particles.
+      // A refused job's particles still start somewhere: the view follows the form.
       if (refused) showStart(b, me.signal);
       // 503: the server's threads for such requests are busy; ask again when it says.
       if (e.status === 503) {
