@@ -74,24 +74,4 @@ std::string human_bytes(double bytes);
 // True when stdout/stderr is a terminal (progress bars) rather than a pipe or file.
 bool stderr_is_terminal();
 
-// A log's CSV text as its header line, then each row's record, formatted one
-// row at a time by format (a log's writer: header line, then a line per row)
-// and without its final line break: columns added to a record's end stay on
-// its row even where a quoted field breaks the record over lines.
-template <class Row, class Format>
-std::vector<std::string> csv_records(const std::vector<Row>& rows, Format format) {
-  std::string header = format(std::vector<Row>{});
-  std::vector<std::string> out;
-  out.reserve(rows.size() + 1);
-  for (const Row& row : rows) {
-    std::string text = format(std::vector<Row>{row});
-    text.erase(0, header.size());
-    if (!text.empty() && text.back() == '\n') text.pop_back();
-    out.push_back(std::move(text));
-  }
-  header.pop_back();
-  out.insert(out.begin(), std::move(header));
-  return out;
-}
-
 }  // namespace collido::app

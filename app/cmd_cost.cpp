@@ -82,10 +82,9 @@ void print_errors(const job::JobModelScore& s, bool validation) {
 // The first split's validation jobs as job-log rows, then the GVM's p10, p50 and p90
 // of each cost: to look at the misses job by job (or chart them).
 Status write_job_predictions(const std::string& path, const job::JobComparison& cmp) {
-  const std::vector<std::string> records = csv_records(cmp.validation, job::format_job_log);
   std::string text;
-  for (size_t i = 0; i < records.size(); ++i) {
-    text += records[i];
+  for (size_t i = 0; i <= cmp.validation.size(); ++i) {
+    text += i == 0 ? job::job_log_header() : job::format_job_log_row(cmp.validation[i - 1]);
     if (i == 0) {
       for (const char* k : kShort)
         text += std::string(",gvm_") + k + "_p10,gvm_" + k + "_p50,gvm_" + k + "_p90";

@@ -223,10 +223,9 @@ int gvm_train(const Args& args) {
     // predicted for them, to look at the misses row by row (or chart them).
     const std::string path = parsed->get("predictions");
     const auto& va = cmp->split.validation;
-    const std::vector<std::string> records = csv_records(va, g::format_run_log);
     std::ostringstream out;
-    for (size_t i = 0; i < records.size(); ++i) {
-      out << records[i];
+    for (size_t i = 0; i <= va.size(); ++i) {
+      out << (i == 0 ? g::run_log_header() : g::format_run_log_row(va[i - 1]));
       for (const auto& s : cmp->scores) {
         double p[g::kOutputCount];
         if (i > 0) g::measure_to_array(s.validation_predictions[i - 1], p);

@@ -190,24 +190,29 @@ Expected<std::vector<RunRecord>> parse_run_log(const std::string& text) {
   return rows;
 }
 
-std::string format_run_log(const std::vector<RunRecord>& rows) {
-  std::string out;
+std::string run_log_header() {
   const auto& cols = run_log_columns();
+  std::string out;
   for (size_t k = 0; k < cols.size(); ++k) out += (k ? "," : "") + cols[k];
-  out += "\n";
-  for (const auto& r : rows) {
-    const RunConfig& c = r.config;
-    const RunMeasure& m = r.measure;
-    out += std::to_string(c.particles) + "," + std::to_string(c.triangles) + "," +
-           std::to_string(c.triangles_original) + "," + format_double(c.radius) + "," +
-           format_double(c.wall_area) + "," + format_double(c.wall_box_volume) + "," +
-           method_name(c.method) + "," +
-           traversal_name(c.traversal) + "," + std::to_string(c.frames) + "," +
-           backend_name(c.backend) + "," + quote_csv(c.device) + "," + std::to_string(c.threads) +
-           "," + format_double(m.time_per_frame_s) + "," + format_double(m.total_time_s) + "," +
-           format_double(m.peak_host_bytes) + "," + format_double(m.peak_device_bytes) + "," +
-           format_double(m.gpu_load) + "\n";
-  }
+  return out;
+}
+
+std::string format_run_log_row(const RunRecord& r) {
+  const RunConfig& c = r.config;
+  const RunMeasure& m = r.measure;
+  return std::to_string(c.particles) + "," + std::to_string(c.triangles) + "," +
+         std::to_string(c.triangles_original) + "," + format_double(c.radius) + "," +
+         format_double(c.wall_area) + "," + format_double(c.wall_box_volume) + "," +
+         method_name(c.method) + "," + traversal_name(c.traversal) + "," +
+         std::to_string(c.frames) + "," + backend_name(c.backend) + "," + quote_csv(c.device) +
+         "," + std::to_string(c.threads) + "," + format_double(m.time_per_frame_s) + "," +
+         format_double(m.total_time_s) + "," + format_double(m.peak_host_bytes) + "," +
+         format_double(m.peak_device_bytes) + "," + format_double(m.gpu_load);
+}
+
+std::string format_run_log(const std::vector<RunRecord>& rows) {
+  std::string out = run_log_header() + "\n";
+  for (const auto& r : rows) out += format_run_log_row(r) + "\n";
   return out;
 }
 

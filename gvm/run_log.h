@@ -76,6 +76,11 @@ Status validate(const RunMeasure& m);
 Expected<std::vector<RunRecord>> parse_run_log(const std::string& text);
 // Writes CSV text with a header line; doubles with 17 significant digits (round trip).
 std::string format_run_log(const std::vector<RunRecord>& rows);
+// Its header line and one row's record, each without the line break: a record
+// may span lines (a quoted device name with a line break), so a writer that
+// adds columns adds them to the record, not to a line of the text.
+std::string run_log_header();
+std::string format_run_log_row(const RunRecord& r);
 
 // Combines repeated measurements of one configuration (rows whose RunConfig is equal in
 // every field, e.g. two sweeps with the same seed) into one row, as `calibrate` combines

@@ -422,15 +422,23 @@ Expected<std::vector<JobRecord>> parse_job_log(const std::string& text) {
   return rows;
 }
 
-std::string format_job_log(const std::vector<JobRecord>& rows) {
+std::string job_log_header() {
   const auto& cols = job_log_columns();
   std::string out;
   for (size_t k = 0; k < cols.size(); ++k) out += (k ? "," : "") + cols[k];
-  out += "\n";
-  for (const JobRecord& r : rows) {
-    for (size_t k = 0; k < cols.size(); ++k) out += (k ? "," : "") + cell(r, cols[k]);
-    out += "\n";
-  }
+  return out;
+}
+
+std::string format_job_log_row(const JobRecord& r) {
+  const auto& cols = job_log_columns();
+  std::string out;
+  for (size_t k = 0; k < cols.size(); ++k) out += (k ? "," : "") + cell(r, cols[k]);
+  return out;
+}
+
+std::string format_job_log(const std::vector<JobRecord>& rows) {
+  std::string out = job_log_header() + "\n";
+  for (const JobRecord& r : rows) out += format_job_log_row(r) + "\n";
   return out;
 }
 

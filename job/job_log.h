@@ -104,6 +104,11 @@ Status validate(const JobMeasure& m);
 Expected<std::vector<JobRecord>> parse_job_log(const std::string& text);
 // CSV text with a header line; doubles with 17 significant digits (round trip).
 std::string format_job_log(const std::vector<JobRecord>& rows);
+// Its header line and one row's record, each without the line break: a record
+// may span lines (a quoted field with a line break), so a writer that adds
+// columns adds them to the record, not to a line of the text.
+std::string job_log_header();
+std::string format_job_log_row(const JobRecord& r);
 Expected<std::vector<JobRecord>> read_job_log(const std::string& path);
 Status write_job_log(const std::string& path, const std::vector<JobRecord>& rows);
 
