@@ -398,14 +398,13 @@ std::string cookie_attributes(const JobService& svc) {
 
 std::vector<Route> make_routes(JobService* svc, const ServerOptions& opt) {
   std::vector<Route> r;
-  auto add = [&](const char* m, const char* p, Auth a, std::function<Response(Request&)> h) {
-    r.push_back({m, p, a, std::move(h), split_path(p), Runs::kInline});
+  auto adder = [&r](Runs runs) {
+    return [&r, runs](const char* m, const char* p, Auth a, std::function<Response(Request&)> h) {
+      r.push_back({m, p, a, std::move(h), split_path(p), runs});
+    };
   };
-  // A route whose work computes: it runs on the request pool.
-  auto add_on_pool = [&](const char* m, const char* p, Auth a,
-                         std::function<Response(Request&)> h) {
-    r.push_back({m, p, a, std::move(h), split_path(p), Runs::kOnPool});
-  };
+  const auto add = adder(Runs::kInline);
+  const auto add_on_pool = adder(Runs::kOnPool);  // a route whose work computes
   auto reply = [](Reply rep) { return json_response(rep); };
 
   add("GET", "/api/v1/health", Auth::kNone, [=](Request&) { return reply(svc->health()); });
