@@ -34,6 +34,8 @@ inline constexpr int kWallSlots = kMaxWallContacts;
 inline constexpr int kPairSlots = 8;
 // Waiting particles the neighbour lists hold at least, past the live ones (see list_cover).
 inline constexpr size_t kCoverAhead = 64;
+// The listed pairs of a batch of the CPU's vector pair pass (see batch_end).
+inline constexpr uint32_t kBatchPairs = 48;
 // An automatic skin grows when a list lived fewer steps than this, up to this
 // share of the smallest radius (the bound of the automatic choice; grow_skin_after).
 inline constexpr uint64_t kShortListSteps = 3;
@@ -533,7 +535,7 @@ class DynamicsPipeline final : public Simulation {
       return true;
     });
     if (!fits || k != in.size()) return;  // some buffers overwritten: the build replaces them
-    if (once_ && counts[0] > rec_f_.size()) {  // the records of every listed pair
+    if (keeps_records() && counts[0] > rec_f_.size()) {  // the records of every listed pair
       backend_.resize(rec_f_, size_t(counts[0]));
       backend_.resize(rec_touched_, size_t(counts[0]));
       if (rotation_) backend_.resize(rec_torque_, size_t(counts[0]));
@@ -1126,7 +1128,7 @@ class DynamicsPipeline final : public Simulation {
     if (up_total > nl_list_.size()) {
       const size_t cap = size_t(up_total + up_total / 4 + 16);
       backend_.resize(nl_list_, cap);
-      if (once_) {
+      if (keeps_records()) {
         backend_.resize(rec_f_, cap);
         backend_.resize(rec_touched_, cap);
         if (rotation_) backend_.resize(rec_torque_, cap);
@@ -1322,8 +1324,12 @@ class DynamicsPipeline final : public Simulation {
     if (cfg_.particle_contacts) {
       if (once_ && !measure) {
         if (decide) decide_releases(t);
-        pair_records(dt);
-        pair_gather();
+        if (sums_in_order()) {
+          pair_forces_in_order(dt);
+        } else {
+          pair_records(dt);
+          pair_gather();
+        }
       } else {
         pair_forces(dt, measure, decide ? t : -std::numeric_limits<double>::infinity());
       }
@@ -1418,34 +1424,40 @@ class DynamicsPipeline final : public Simulation {
   // Particle i's upper list (the pairs it owns): marks each listed pair
   // touched or not and calls f(owner, contact) for each touching one, in list
   // order. Terminates the new slots. An inactive i touches nothing.
-  template <class F>
+  // kMarks false: touched is left alone (pair_forces_in_order keeps no
+  // records; and with no byte stores the compiler keeps the arrays' pointers).
+  template <bool kMarks = true, class F>
   COLLIDO_HD static COLLIDO_FORCEINLINE void for_each_owned_contact(const RecordPass& R, uint32_t i,
-                                                                   F&& f) {
+                                                                    F&& f) {
     const ParticleArrays& P = R.P;
     const uint32_t* nl = R.nl;
     uint8_t* touched = R.touched;
+    const Vec3d* x = P.x;
+    const double* rad = P.r;
+    const uint8_t* state = P.state;
     const bool rot = R.rot;
     const FrictionSlot* hin = R.hin;
     FrictionSlot* hout = R.hout;
     const uint32_t k0 = R.nl_start[i], k1 = R.nl_start[i + 1];
-    if (P.state[i] != kActive) {
-      for (uint32_t k = k0; k < k1; ++k) touched[k] = 0;
+    if (state[i] != kActive) {
+      if (kMarks)
+        for (uint32_t k = k0; k < k1; ++k) touched[k] = 0;
       return;
     }
-    const Owner owner{P.v[i], rot ? P.w[i] : Vec3d{0, 0, 0}, P.r[i], P.mass[i]};
+    const Owner owner{P.v[i], rot ? P.w[i] : Vec3d{0, 0, 0}, rad[i], P.mass[i]};
     const FrictionSlot* old_slots = hin ? hin + size_t(i) * kPairSlots : nullptr;
     FrictionSlot* new_slots = hout ? hout + size_t(i) * kPairSlots : nullptr;
-    const Vec3d xi = P.x[i];
+    const Vec3d xi = x[i];
     uint32_t slots = 0;
     for (uint32_t k = k0; k < k1; ++k) {
       const uint32_t j = nl[k];
-      touched[k] = 0;
-      if (P.state[j] != kActive) continue;
-      const Vec3d d = xi - P.x[j];
-      const double rs = owner.r + P.r[j];
+      if (kMarks) touched[k] = 0;
+      if (state[j] != kActive) continue;
+      const Vec3d d = xi - x[j];
+      const double rs = owner.r + rad[j];
       const double dist2 = dot(d, d);
       if (!(dist2 < rs * rs)) continue;
-      touched[k] = 1;
+      if (kMarks) touched[k] = 1;
       FrictionSlot* slot = nullptr;
       if (new_slots && slots < uint32_t(kPairSlots)) {
         slot = new_slots + slots++;
@@ -1488,11 +1500,8 @@ class DynamicsPipeline final : public Simulation {
     const RecordPass R = record_pass();
     backend_.parallel_chunks(live_, kHeavyGrain, [=](size_t begin, size_t end) {
       thread_local PairBatch b;
-      // kHeavyGrain particles a batch: about as many pairs, whose columns
-      // stay in the first-level cache (a whole chunk's did not, and its
-      // stores took longer than the scalar path's arithmetic).
-      for (size_t first = begin; first < end; first += kHeavyGrain) {
-        const uint32_t last = uint32_t(std::min(end, first + kHeavyGrain));
+      for (uint32_t first = uint32_t(begin), last; first < end; first = last) {
+        last = batch_end(R, first, uint32_t(end));
         b.reset(R.nl_start[last] - R.nl_start[first]);
         batch_touching_pairs(R, uint32_t(first), last, b);
         pair_batch_forces(R.law, R.rot, dt, b);
@@ -1512,9 +1521,106 @@ class DynamicsPipeline final : public Simulation {
     });
   }
 
+  // Whether one thread runs the step's pair pass with the vectors: it then
+  // adds each pair's force to its two particles as it goes
+  // (pair_forces_in_order), with no records and no gathering pass.
+  bool sums_in_order() const {
+    if constexpr (B::kPairRecordsInBatches && B::kHostThreads) {
+      return cfg_.simd_pairs != 0 && pair_batch_supported() && backend_.threads() == 1;
+    } else {
+      return false;
+    }
+  }
+
+  // Whether the pairs evaluated once go through records (pair_records and
+  // pair_gather): their buffers are allocated only then.
+  bool keeps_records() const { return once_ && !sums_in_order(); }
+
+  // pair_records_in_batches and pair_gather in one pass, for one thread. The
+  // owners come in ascending index and each one's pairs in list order, so a
+  // particle j receives its lower partners' forces (negated) in ascending
+  // partner index, and then its own pairs' in list order: pair_gather's sums,
+  // operation for operation, the same bits (test
+  // PairsOnceOrFromBothSidesAgreeBitForBit runs this path, the records and
+  // the pairs from both sides). The sums live in acc and alpha until a batch's
+  // particles have all their pairs (a particle's lower partners come before
+  // it), then become accelerations. Gathering read every listed pair's record
+  // twice and branched on whether it touched; this reads the touching ones once.
+  void pair_forces_in_order(double dt) {
+    const RecordPass R = record_pass();
+    const ParticleArrays P = R.P;
+    const Vec3d grav = cfg_.gravity;
+    const bool rot = R.rot, rolling = R.rolling;
+    const uint32_t live = uint32_t(live_);
+    PairBatch& b = ordered_batch_;
+    uint32_t started = 0;  // the sums of particles [0, started) are begun
+    const auto start_sums = [&](uint32_t end) {
+      for (; started < end; ++started) {
+        const uint32_t i = started;
+        if (P.state[i] != kActive) continue;
+        P.acc[i] = grav * P.mass[i];
+        if (rot) P.alpha[i] = Vec3d{0, 0, 0};
+        P.flags[i] = uint8_t(kActive);
+      }
+    };
+    using C = PairBatch;
+    for (uint32_t first = 0, last; first < live; first = last) {
+      last = batch_end(R, first, live);
+      b.reset(R.nl_start[last] - R.nl_start[first]);
+      batch_touching_pairs<false>(R, first, last, b);
+      pair_batch_forces(R.law, rot, dt, b);
+      start_sums(last);
+      const double *fx = b.col(C::kFx), *tx = b.col(C::kTx), *sx = b.col(C::kSxOut);
+      const double* rx = b.col(C::kRollX);
+      const size_t st = b.stride;
+      for (size_t c = 0; c < b.size; ++c) {
+        const uint32_t i = b.owner[c], j = b.partner[c];
+        if (j >= started) start_sums(j + 1);
+        const Vec3d f{fx[c], fx[c + st], fx[c + 2 * st]};
+        P.acc[i] = P.acc[i] + f;
+        P.acc[j] = P.acc[j] - f;
+        P.flags[i] = P.flags[j] = uint8_t(kActive | kFlagParticleContact);
+        if (rot) {
+          const Vec3d t{tx[c], tx[c + st], tx[c + 2 * st]};
+          P.alpha[i] = P.alpha[i] + t * P.r[i];
+          P.alpha[j] = P.alpha[j] + t * P.r[j];
+        }
+        if (rolling) {
+          const Vec3d roll{rx[c], rx[c + st], rx[c + 2 * st]};
+          P.alpha[i] = P.alpha[i] + roll;
+          P.alpha[j] = P.alpha[j] - roll;
+        }
+        if (FrictionSlot* s = b.slot[c])
+          s->sx = float(sx[c]), s->sy = float(sx[c + st]), s->sz = float(sx[c + 2 * st]);
+      }
+      // Particles [first, last) have every pair: their sums become accelerations.
+      for (uint32_t i = first; i < last; ++i) {
+        if (P.state[i] != kActive) continue;
+        const double r = P.r[i], m = P.mass[i];
+        P.acc[i] = P.acc[i] * (1.0 / m);
+        if (rot) P.alpha[i] = P.alpha[i] * (1.0 / (0.4 * m * r * r));
+      }
+    }
+  }
+
+  // The end of the batch of particles from `first` (before `limit`): whole
+  // particles, at least one, whose listed pairs number at most kBatchPairs.
+  // A batch's columns (36 doubles a pair) stay in the first-level cache: a
+  // whole chunk's did not, and its stores took longer than the scalar path's
+  // arithmetic. Batches of 64 particles, as before, held 190 pairs in the
+  // settled block; 48 pairs made a step 7 % faster on one thread and 4 % on
+  // two (32 and 96 slower than 48; docs/benchmarks.md).
+  static uint32_t batch_end(const RecordPass& R, uint32_t first, uint32_t limit) {
+    const uint32_t most = R.nl_start[first] + kBatchPairs;
+    uint32_t last = first + 1;
+    while (last < limit && R.nl_start[last + 1] <= most) ++last;
+    return last;
+  }
+
   // pair_records_in_batches' first step: particles [first, last) file their
   // touching pairs into b's input columns (and mark them touched), and their
   // springs' keys into this step's slots, in pair_records' order.
+  template <bool kMarks = true>
   static void batch_touching_pairs(const RecordPass& R, uint32_t first, uint32_t last,
                                    PairBatch& b) {
     using C = PairBatch;
@@ -1522,8 +1628,10 @@ class DynamicsPipeline final : public Simulation {
     const size_t st = b.stride;
     size_t c = 0;
     for (uint32_t i = first; i < last; ++i)
-      for_each_owned_contact(R, i, [&](const Owner& o, const OwnedContact& p) {
-        b.record[c] = p.k;
+      for_each_owned_contact<kMarks>(R, i, [&](const Owner& o, const OwnedContact& p) {
+        if (kMarks) b.record[c] = p.k;  // the records' place (the records path only)
+        b.owner[c] = i;
+        b.partner[c] = p.j;
         b.slot[c] = p.slot;
         // As pair_contact reads them (spins only where they are followed).
         const Vec3d vj = R.P.v[p.j], wj = R.rot ? R.P.w[p.j] : Vec3d{0, 0, 0};
@@ -1996,6 +2104,7 @@ class DynamicsPipeline final : public Simulation {
   bool once_ = false;
   Buf<Vec3d> rec_f_, rec_torque_, rec_roll_;
   Buf<uint8_t> rec_touched_;
+  PairBatch ordered_batch_;  // pair_forces_in_order's
   // The wall's candidates per particle (wall_list_, on a still wall):
   // wl_count_[i] triangles or pieces from wl_list_[wl_start_[i]].
   bool wall_list_ = false;

@@ -40,6 +40,7 @@ struct PairBatch {
   size_t stride = 0;          // column c holds data[c * stride, c * stride + size)
   std::vector<double> data;
   std::vector<uint32_t> record;     // the listed pair's record index
+  std::vector<uint32_t> owner, partner;  // the pair's i and j
   std::vector<FrictionSlot*> slot;  // where its spring goes (nullptr: past the slots)
 
   // Empties the batch, with room for `pairs` (and the padding of a group of four).
@@ -51,6 +52,8 @@ struct PairBatch {
       stride = ((pairs + 3 + 7) & ~size_t(7)) | 8;
       data.resize(stride * kColumns);
       record.resize(stride);
+      owner.resize(stride);
+      partner.resize(stride);
       slot.resize(stride);
     }
   }

@@ -701,16 +701,20 @@ void pairs_once_or_from_both_sides_agree() {
     cfg.pool = &pool;
     cfg.one_thread_below = 0;  // 512 particles, on both threads
     if (scene == 2) release_in_groups(wall, cfg, &p);
-    // 0: from both sides; 1: once, four at a time where the CPU can; 2: once, one at a time.
-    const int ways = backend_under_test() == Backend::kCpu ? 3 : 2;
-    ParticleSet end[3];
-    std::vector<uint8_t> flags[3];
-    uint64_t contacts[3] = {0, 0, 0}, overflow[3] = {0, 0, 0};
+    // 0: from both sides; 1: once, four at a time where the CPU can; 2: once,
+    // one at a time; 3: once, four at a time on one thread, which adds each
+    // pair to its particles as it goes instead of gathering records.
+    ThreadPool one(1);
+    const int ways = backend_under_test() == Backend::kCpu ? 4 : 2;
+    ParticleSet end[4];
+    std::vector<uint8_t> flags[4];
+    uint64_t contacts[4] = {0, 0, 0, 0}, overflow[4] = {0, 0, 0, 0};
     for (int way = 0; way < ways; ++way) {
       const int once = way > 0;
       DynamicsConfig c = cfg;
       c.pairs_once = once;
       c.simd_pairs = way == 2 ? 0 : -1;
+      if (way == 3) c.pool = &one;
       auto s = make_sim(wall, c, p);
       ASSERT_TRUE(s);
       ASSERT_GT(s->time_step_info().neighbour_skin, 0);
