@@ -1639,12 +1639,10 @@ class DynamicsPipeline final : public Simulation {
           col[at * st + c] = v.x, col[(at + 1) * st + c] = v.y, col[(at + 2) * st + c] = v.z;
         };
         put3(C::kDx, p.d);
-        col[C::kDist2 * st + c] = p.dist2;
         col[C::kRi * st + c] = o.r, col[C::kRj * st + c] = R.P.r[p.j];
         col[C::kMi * st + c] = o.m, col[C::kMj * st + c] = R.P.mass[p.j];
         put3(C::kVix, o.v), put3(C::kVjx, vj), put3(C::kWix, o.w), put3(C::kWjx, wj);
         put3(C::kSx, p.spring);
-        col[C::kCoincidentSign * st + c] = i < p.j ? 1.0 : -1.0;
         ++c;
       });
     b.size = c;

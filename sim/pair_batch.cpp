@@ -74,13 +74,13 @@ __attribute__((target("avx2"))) void pair_batch_forces(const ContactLaw& law, bo
     // pair_contact: the normal, the surfaces' relative velocity, the reduced
     // mass and, for the laws that read it, the contact's radius.
     const V3 d = load3(b, C::kDx, k);
-    const V dist2 = load(b.col(C::kDist2), k);
+    const V dist2 = dot(d, d);
     const V r = load(b.col(C::kRi), k), rj = load(b.col(C::kRj), k);
     const V m = load(b.col(C::kMi), k), mj = load(b.col(C::kMj), k);
     const V rs = r + rj;
     const V dist = vsqrt(dist2);
     const V3 along = mul(d, one / dist);
-    const V3 apart{zero, zero, load(b.col(C::kCoincidentSign), k)};
+    const V3 apart{zero, zero, one};  // i < j: pair_contact's +z
     const V3 n = pick(dist > tiny * rs, along, apart);
     const V3 wi = load3(b, C::kWix, k), wj = load3(b, C::kWjx, k);
     V3 vrel = sub(load3(b, C::kVix, k), load3(b, C::kVjx, k));

@@ -23,17 +23,48 @@ namespace collido::sim {
 // The touching pairs of a chunk, one column per input and output, in the
 // order they were found. The pair's particles are i (the owner) and j.
 struct PairBatch {
-  // In: the centres' difference x_i - x_j and its squared length, the radii
-  // and masses, the velocities and spins, the spring as last step left it,
-  // and the normal's sign should the centres coincide (+1 when i < j).
+  // In: the centres' difference x_i - x_j, the radii and masses, the
+  // velocities and spins, the spring as last step left it. (i < j always: a
+  // pair is its owner's, the particle of lower index, so should the centres
+  // coincide the normal is +z; the squared distance is recomputed from the
+  // difference with the same operations.)
   enum Column {
-    kDx, kDy, kDz, kDist2, kRi, kRj, kMi, kMj,
-    kVix, kViy, kViz, kVjx, kVjy, kVjz,
-    kWix, kWiy, kWiz, kWjx, kWjy, kWjz,
-    kSx, kSy, kSz, kCoincidentSign,
+    kDx,
+    kDy,
+    kDz,
+    kRi,
+    kRj,
+    kMi,
+    kMj,
+    kVix,
+    kViy,
+    kViz,
+    kVjx,
+    kVjy,
+    kVjz,
+    kWix,
+    kWiy,
+    kWiz,
+    kWjx,
+    kWjy,
+    kWjz,
+    kSx,
+    kSy,
+    kSz,
     // Out: the force on i, the torque per metre of lever on i, the spring,
     // the rolling torque on i.
-    kFx, kFy, kFz, kTx, kTy, kTz, kSxOut, kSyOut, kSzOut, kRollX, kRollY, kRollZ,
+    kFx,
+    kFy,
+    kFz,
+    kTx,
+    kTy,
+    kTz,
+    kSxOut,
+    kSyOut,
+    kSzOut,
+    kRollX,
+    kRollY,
+    kRollZ,
     kColumns
   };
   size_t size = 0;
