@@ -678,6 +678,7 @@ class Router : public Http::Handler {
     auto task = [request, out, guard, route = d.route, req = std::move(d.req)]() mutable {
       req.http = request.get();
       const Response answer = run(*route, req);
+      RequestPool::answering();  // only the answer left: the next request finds the thread free
       std::unique_lock<std::recursive_mutex> lock;
       if (guard) {
         lock = std::unique_lock<std::recursive_mutex>(guard->send_mu);

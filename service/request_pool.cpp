@@ -4,6 +4,12 @@
 
 namespace collido::service {
 
+namespace {
+// The pool whose task this thread runs, and whether that task said answering().
+thread_local RequestPool* tl_pool = nullptr;
+thread_local bool tl_answering = false;
+}  // namespace
+
 RequestPool::RequestPool(int threads, size_t max_waiting) : max_waiting_(max_waiting) {
   for (int i = 0; i < std::max(1, threads); ++i) threads_.emplace_back([this] { run(); });
 }
@@ -42,7 +48,15 @@ size_t RequestPool::pending() const {
   return queue_.size() + running_;
 }
 
+void RequestPool::answering() {
+  if (!tl_pool || tl_answering) return;
+  tl_answering = true;
+  std::lock_guard<std::mutex> lock(tl_pool->mu_);
+  --tl_pool->running_;
+}
+
 void RequestPool::run() {
+  tl_pool = this;
   for (;;) {
     std::function<void()> task;
     {
@@ -53,7 +67,9 @@ void RequestPool::run() {
       queue_.pop_front();
       ++running_;
     }
+    tl_answering = false;
     task();
+    if (tl_answering) continue;
     std::lock_guard<std::mutex> lock(mu_);
     --running_;
   }

@@ -28,9 +28,15 @@ class RequestPool {
   // Queues the task; false (the task dropped) when max_waiting tasks would
   // wait or the pool has stopped: the caller answers 503 itself.
   bool submit(std::function<void()> task);
+  // Called by a task on its pool thread once only its answer is left to
+  // send: its thread counts as free from here on. A client that sends its
+  // next request as the answer arrives then finds room (with no queue it was
+  // refused while the thread was still leaving the task). Does nothing off a
+  // pool thread or when called twice.
+  static void answering();
   // Runs what is queued, then joins the threads; later submits are refused.
   void stop();
-  // Tasks queued or running.
+  // Tasks queued or running (those answering() not counted).
   size_t pending() const;
 
  private:

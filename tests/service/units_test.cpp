@@ -211,6 +211,31 @@ TEST(RequestPool, TakesWhatItsThreadsAndQueueHoldAndFinishesItBeforeStopping) {
   EXPECT_EQ(ran.load(), 6);
 }
 
+// A task that says it is answering frees its thread's place at once: with
+// one thread and no queue, a request sent as the answer leaves is taken (it
+// was refused while the thread was still leaving the task), and it runs once
+// that thread is done.
+TEST(RequestPool, ATaskThatIsAnsweringLeavesRoomForTheNext) {
+  RequestPool pool(1, 0);
+  Gate answered, sent;
+  std::atomic<int> ran{0};
+  ASSERT_TRUE(pool.submit([&] {
+    RequestPool::answering();
+    RequestPool::answering();  // a second call changes nothing
+    answered.open();
+    sent.wait();  // still writing its answer
+    ++ran;
+  }));
+  answered.wait();
+  EXPECT_EQ(pool.pending(), 0u);
+  EXPECT_TRUE(pool.submit([&] { ++ran; }));
+  EXPECT_FALSE(pool.submit([&] { ++ran; }));  // one waits for the thread, no more
+  sent.open();
+  pool.stop();
+  EXPECT_EQ(ran.load(), 2);
+  RequestPool::answering();  // off a pool thread: nothing
+}
+
 // A SQLite store in a fresh folder of its own (named for the test), removed
 // when the test ends.
 class ScratchStore {
