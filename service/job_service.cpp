@@ -849,12 +849,15 @@ Reply JobService::start_preview(const User& u, const json& body) {
   if (!p) return status_reply(p.status());
   const uint64_t count = p->assessment.value("particles", uint64_t(0));
   if (count > kStartPlacedMost) {
+    // A job this server's memory refuses has no run to place them.
+    const bool runs = !over_memory(p->host_bytes);
     Reply r;
     r.body = {{"particles", count},
               {"shown", json::array()},
               {"release_s", json::array()},
               {"note", "more than " + std::to_string(kStartPlacedMost) +
-                           " particles are not placed for a preview; the run places them"}};
+                           " particles are not placed for a preview" +
+                           (runs ? "; the run places them" : "")}};
     return r;
   }
   auto start = job::preview_start(p->assessed, kStartShown);

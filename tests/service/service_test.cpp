@@ -1090,7 +1090,9 @@ TEST_F(ServiceTest, ShowsWhereTheParticlesStart) {
   const json huge = c.call_json("POST", "/api/v1/start-preview", tiny_job("wall1", 200001, 1.0));
   EXPECT_EQ(huge["particles"], 200001);
   EXPECT_TRUE(huge["shown"].empty());
-  EXPECT_NE(huge.value("note", "").find("not placed for a preview"), std::string::npos) << huge;
+  EXPECT_EQ(huge.value("note", ""),
+            "more than 200000 particles are not placed for a preview; the run places them")
+      << huge;
   // Signed out: refused.
   Client anonymous = client();
   EXPECT_EQ(anonymous.call("POST", "/api/v1/start-preview", fill.dump()).status, 401);
@@ -1115,6 +1117,11 @@ TEST_F(ServiceTest, AJobThatCanNeverFitIsRefusedWithTheFigures) {
   const json start = c.call_json("POST", "/api/v1/start-preview", tiny_job("wall1", 300, 1.0));
   EXPECT_EQ(start.value("particles", 0), 300) << start.dump();
   EXPECT_FALSE(start.value("shown", json::array()).empty()) << start.dump();
+  // Past what a preview places, the note does not promise a run that memory refuses.
+  const json huge = c.call_json("POST", "/api/v1/start-preview", tiny_job("wall1", 200001, 1.0));
+  EXPECT_TRUE(huge["shown"].empty()) << huge.dump();
+  EXPECT_EQ(huge.value("note", ""), "more than 200000 particles are not placed for a preview")
+      << huge.dump();
 }
 
 // A job the service was stopped on before its run began (while it prepared:
