@@ -14,6 +14,7 @@
 #include <cctype>
 #include <cstdio>
 #include <cstring>
+#include <deque>
 #include <filesystem>
 #include <functional>
 #include <map>
@@ -111,10 +112,44 @@ struct PeerGuard {
   // with the connection.
   std::recursive_mutex send_mu;
   bool closed = false;
+  // Answers go out in the order their requests came (HTTP/1.1 pipelining):
+  // while one is being answered off the reactor's turn (a pool task, a
+  // file's later slices), the requests behind it wait here, each a closure
+  // that answers it and says whether its answer is all queued (false: what
+  // finishes it calls answered()).
+  std::mutex order_mu;
+  bool answering = false;
+  std::deque<std::function<bool()>> waiting;
 };
 
 std::shared_ptr<PeerGuard> guard_of(const std::shared_ptr<Tcp::Peer>& peer) {
   return peer ? std::static_pointer_cast<PeerGuard>(peer->tryGetData("collido-guard")) : nullptr;
+}
+
+// Whether `answer` may run now; if not, it waits for the answers before it.
+bool begin_answer(PeerGuard& g, std::function<bool()>& answer) {
+  std::lock_guard<std::mutex> lock(g.order_mu);
+  if (!g.answering) return g.answering = true;
+  g.waiting.push_back(std::move(answer));
+  return false;
+}
+
+// The answer being sent is all queued: the waiting requests are answered in
+// order, here, until one goes on past this call (it calls answered() again).
+void answered(PeerGuard& g) {
+  for (;;) {
+    std::function<bool()> next;
+    {
+      std::lock_guard<std::mutex> lock(g.order_mu);
+      if (g.waiting.empty()) {
+        g.answering = false;
+        return;
+      }
+      next = std::move(g.waiting.front());
+      g.waiting.pop_front();
+    }
+    if (!next()) return;
+  }
 }
 
 // ---- files, with Range ------------------------------------------------------
@@ -189,16 +224,22 @@ class FileSender : public std::enable_shared_from_this<FileSender> {
   FileSender(std::string head, FileBody body, const std::shared_ptr<Tcp::Peer>& peer)
       : head_(std::move(head)), body_(std::move(body)), peer_(peer), guard_(guard_of(peer)) {}
 
+  // Queues the first slice: true when that was the whole answer (or the
+  // connection is gone), false when later slices follow, the last of which
+  // (or what stops them) calls answered() for the requests behind it.
+  bool start() { return send_next(true); }
+
+ private:
   // On the reactor thread, or on a pool thread (the first slice of a pool
   // route's answer, and a slice whose write ended before its continuation
   // was attached).
-  void send_next() {
+  bool send_next(bool first) {
     auto peer = peer_.lock();
-    if (!peer) return;
+    if (!peer) return over(first);
     std::unique_lock<std::recursive_mutex> lock;
     if (guard_) {
       lock = std::unique_lock<std::recursive_mutex>(guard_->send_mu);
-      if (guard_->closed) return;
+      if (guard_->closed) return over(first);
     }
     const uint64_t n = std::min(kSlice, body_.count - sent_);
     std::string slice = std::exchange(head_, {});  // the first slice carries the header
@@ -214,7 +255,7 @@ class FileSender : public std::enable_shared_from_this<FileSender> {
         // never do): the promised length cannot be kept, so end the
         // connection rather than let the client read the next answer as body.
         ::shutdown(peer->fd(), SHUT_RDWR);
-        return;
+        return over(first);
       }
       got += uint64_t(r);
     }
@@ -225,12 +266,21 @@ class FileSender : public std::enable_shared_from_this<FileSender> {
     peer->send(RawBuffer(std::move(slice), length))
         .then(
             [self, more](ssize_t) {
-              if (more) self->send_next();
+              if (more) self->send_next(false);
             },
-            [](std::exception_ptr&) {});
+            [self, more](std::exception_ptr&) {
+              if (more) self->over(false);  // no more slices: the answer ends here
+            });
+    return more ? false : over(first);
   }
 
- private:
+  // The answer is over (all queued, or stopped). Its first slice tells the
+  // caller; a later one lets the requests behind it go.
+  bool over(bool first) {
+    if (!first && guard_) answered(*guard_);
+    return true;
+  }
+
   std::string head_;
   FileBody body_;
   std::weak_ptr<Tcp::Peer> peer_;
@@ -654,52 +704,74 @@ class Router : public Http::Handler {
   explicit Router(std::shared_ptr<const Shared> shared) : shared_(std::move(shared)) {}
 
   void onRequest(const Http::Request& http, Http::ResponseWriter writer) override {
-    Dispatch d = dispatch(http);
-    if (!d.route) {
-      respond(http, writer, d.answer);
-      return;
-    }
-    if (d.route->runs == Runs::kInline) {
-      respond(http, writer, run(*d.route, d.req));
-      return;
-    }
-    // The task owns what it reads: this request is the parser's, reset once
-    // onRequest returns, so it is moved out (the parser's reset reassigns
-    // it). Copying it copied the body on the reactor thread: an upload of
-    // 64 MiB held every connection of that thread for 0.2-0.3 s in fresh
-    // pages. The task answers from the pool's thread under the connection's
-    // send lock (PeerGuard). (A client that pipelined a second request behind
-    // this one could get the second answer first; browsers wait for each
-    // answer.)
+    // The answer may be sent after onRequest returns (below), and this request
+    // is the parser's, reassigned once it does: it is moved out, not copied
+    // (a copy of a 64 MiB upload's body held every connection of this
+    // reactor thread for 0.2-0.3 s in fresh pages).
     auto request =
         std::make_shared<const Http::Request>(std::move(const_cast<Http::Request&>(http)));
     auto out = std::make_shared<Http::ResponseWriter>(std::move(writer));
     auto guard = guard_of(out->peer());
+    auto d = std::make_shared<Dispatch>(dispatch(*request));
+    std::function<bool()> answer = [shared = shared_, request, out, guard, d] {
+      return answer_request(*shared->pool, request, out, guard, *d);
+    };
+    // A request pipelined behind one still being answered waits for it.
+    if (guard && !begin_answer(*guard, answer)) return;
+    if (answer() && guard) answered(*guard);
+  }
+
+ private:
+  // The route that answers the request, its user authenticated; or, where
+  // none does, the answer (404, 405, 401, 403).
+  struct Dispatch {
+    const Route* route = nullptr;
+    Request req;
+    Response answer;
+  };
+
+  // Answers a dispatched request: true when its answer is all queued; false
+  // when a pool task or a file's later slices finish it (and call answered()).
+  // Routes that compute run on the pool: the task answers from the pool's
+  // thread under the connection's send lock (PeerGuard).
+  static bool answer_request(RequestPool& pool, const std::shared_ptr<const Http::Request>& request,
+                             const std::shared_ptr<Http::ResponseWriter>& out,
+                             const std::shared_ptr<PeerGuard>& guard, Dispatch& d) {
+    if (!d.route) return respond_locked(*request, *out, guard.get(), d.answer);
+    if (d.route->runs == Runs::kInline)
+      return respond_locked(*request, *out, guard.get(), run(*d.route, d.req));
     auto task = [request, out, guard, route = d.route, req = std::move(d.req)]() mutable {
       req.http = request.get();
       const Response answer = run(*route, req);
       RequestPool::answering();  // only the answer left: the next request finds the thread free
-      std::unique_lock<std::recursive_mutex> lock;
-      if (guard) {
-        lock = std::unique_lock<std::recursive_mutex>(guard->send_mu);
-        if (guard->closed) return;  // the client left: nobody to answer
-      }
-      try {
-        respond(*request, *out, answer);
-      } catch (const std::exception&) {  // the peer went while the answer was written
-      }
+      if (respond_locked(*request, *out, guard.get(), answer) && guard) answered(*guard);
     };
-    if (!shared_->pool->submit(std::move(task))) {
-      Response busy = error_response(503, "the server is busy; try again in a moment");
-      busy.headers.emplace_back("Retry-After", "1");
-      respond(*request, *out, busy);  // http was moved into *request
+    if (pool.submit(std::move(task))) return false;
+    Response busy = error_response(503, "the server is busy; try again in a moment");
+    busy.headers.emplace_back("Retry-After", "1");
+    return respond_locked(*request, *out, guard.get(), busy);
+  }
+
+  // respond() holding the connection's send lock, unless the client has left
+  // (then there is nobody to answer: true). Any thread.
+  static bool respond_locked(const Http::Request& http, Http::ResponseWriter& writer,
+                             PeerGuard* guard, const Response& out) {
+    std::unique_lock<std::recursive_mutex> lock;
+    if (guard) {
+      lock = std::unique_lock<std::recursive_mutex>(guard->send_mu);
+      if (guard->closed) return true;
+    }
+    try {
+      return respond(http, writer, out);
+    } catch (const std::exception&) {  // the peer went while the answer was written
+      return true;
     }
   }
 
- private:
   // Sends the answer: on the reactor thread of its connection, or on a pool
   // thread holding the connection's send lock.
-  static void respond(const Http::Request& http, Http::ResponseWriter& writer,
+  // True when the answer is all queued (see FileSender::start).
+  static bool respond(const Http::Request& http, Http::ResponseWriter& writer,
                       const Response& out) {
     // HTTP/1.1 keeps a connection open unless a side says "close"; 0.0.5
     // closes one that sent no Connection header, which costs every client
@@ -719,11 +791,10 @@ class Router : public Http::Handler {
     } catch (...) {
       writer.headers().add(std::make_shared<NamedHeader>("Content-Type", out.mime));
     }
-    if (out.file || out.status == 304 || http.method() == Http::Method::Head) {
-      send_head_and_file(http, writer, mime, out);
-      return;
-    }
+    if (out.file || out.status == 304 || http.method() == Http::Method::Head)
+      return send_head_and_file(http, writer, mime, out);
     writer.send(static_cast<Http::Code>(out.status), out.body.data(), out.body.size(), mime);
+    return true;
   }
 
   static Response run(const Route& route, Request& req) {
@@ -737,7 +808,7 @@ class Router : public Http::Handler {
   // The status line and headers as ResponseWriter::send writes them, then
   // the file's part through a FileSender; to a HEAD request, or as a 304, the
   // head alone.
-  static void send_head_and_file(const Http::Request& http, Http::ResponseWriter& writer,
+  static bool send_head_and_file(const Http::Request& http, Http::ResponseWriter& writer,
                                  const Http::Mime::MediaType& mime, const Response& out) {
     if (mime.isValid()) writer.headers().add<Http::Header::ContentType>(mime);
     std::ostringstream head;
@@ -757,18 +828,11 @@ class Router : public Http::Handler {
       std::string text = head.str();
       const size_t length = text.size();
       writer.peer()->send(RawBuffer(std::move(text), length));
-      return;
+      return true;
     }
-    std::make_shared<FileSender>(head.str(), *out.file, writer.peer())->send_next();
+    return std::make_shared<FileSender>(head.str(), *out.file, writer.peer())->start();
   }
 
-  // The route that answers the request, its user authenticated; or, where
-  // none does, the answer (404, 405, 401, 403).
-  struct Dispatch {
-    const Route* route = nullptr;
-    Request req;
-    Response answer;
-  };
   Dispatch dispatch(const Http::Request& http) {
     Dispatch d;
     auto answer = [&d](Response r) {
@@ -859,33 +923,47 @@ class Handler : public Http::Handler {
       return;
     }
     if (guard->discarding) return;
-    std::string forward;
+    std::vector<std::string> forward;
     if (!inspect(*guard, buffer, len, peer, &forward)) return;
-    if (!forward.empty()) static_cast<Tcp::Handler&>(*router_).onInput(forward.data(), forward.size(), peer);
+    for (const std::string& piece : forward)
+      if (!piece.empty())
+        static_cast<Tcp::Handler&>(*router_).onInput(piece.data(), piece.size(), peer);
   }
 
   void onDisconnection(const std::shared_ptr<Tcp::Peer>& peer) override {
     if (auto guard = guard_of(peer)) {
-      std::lock_guard<std::recursive_mutex> lock(guard->send_mu);
-      guard->closed = true;
+      {
+        std::lock_guard<std::recursive_mutex> lock(guard->send_mu);
+        guard->closed = true;
+      }
+      // The requests still waiting have nobody to answer (and their closures
+      // hold the guard: dropped here, not kept alive by it).
+      std::deque<std::function<bool()>> dropped;
+      std::lock_guard<std::mutex> lock(guard->order_mu);
+      dropped.swap(guard->waiting);
     }
     static_cast<Tcp::Handler&>(*router_).onDisconnection(peer);
   }
 
- private:
   // Reads request heads as they arrive; false when the request is refused
   // (answered here, the connection closed for writing and the rest dropped).
   // What the Router should see goes to *forward: body bytes as they come, a
   // head once it is whole and cleaned of headers Pistache cannot parse.
   bool inspect(PeerGuard& g, const char* buf, size_t len, const std::shared_ptr<Tcp::Peer>& peer,
-               std::string* forward) {
+               std::vector<std::string>* forward) {
+    // Each piece ends where a request ends (or the bytes do): Pistache 0.0.5
+    // parses one request a call and then drops what is left of its buffer,
+    // so pipelined requests that arrived together went unanswered.
+    const auto request_ends = [forward] { forward->emplace_back(); };
+    forward->emplace_back();
     size_t i = 0;
     while (i < len) {
       if (g.body_left > 0) {
         const size_t take = size_t(std::min<uint64_t>(g.body_left, len - i));
-        forward->append(buf + i, take);
+        forward->back().append(buf + i, take);
         g.body_left -= take;
         i += take;
+        if (g.body_left == 0) request_ends();
         continue;
       }
       const size_t before = g.head.size();
@@ -909,9 +987,10 @@ class Handler : public Http::Handler {
         return refuse(g, peer, 413, "Payload Too Large",
                       "the body is " + std::to_string(h.content_length) +
                           " bytes; this route takes at most " + std::to_string(limit));
-      forward->append(without_unparsable_headers(head));
-      forward->append("\r\n\r\n");
+      forward->back().append(without_unparsable_headers(head));
+      forward->back().append("\r\n\r\n");
       g.body_left = h.content_length;
+      if (g.body_left == 0) request_ends();
     }
     return true;
   }

@@ -697,6 +697,32 @@ std::pair<std::string, std::string> read_answer(int fd) {
   return {got.substr(0, head_end), got.substr(head_end, length)};
 }
 
+// Reads n answers from a raw connection that may bring several in one read
+// (read_answer keeps none of the bytes past its answer). Stops early on a
+// closed or silent connection.
+std::vector<std::pair<std::string, std::string>> read_answers(int fd, int n) {
+  std::vector<std::pair<std::string, std::string>> answers;
+  std::string got;
+  char buf[65536];
+  while (int(answers.size()) < n) {
+    const size_t head_end = got.find("\r\n\r\n");
+    if (head_end != std::string::npos) {
+      const size_t at = got.find("Content-Length: ");
+      if (at == std::string::npos || at > head_end) return answers;
+      const size_t length = std::stoull(got.substr(at + 16));
+      if (got.size() >= head_end + 4 + length) {
+        answers.emplace_back(got.substr(0, head_end + 4), got.substr(head_end + 4, length));
+        got.erase(0, head_end + 4 + length);
+        continue;
+      }
+    }
+    const ssize_t r = ::recv(fd, buf, sizeof buf, 0);
+    if (r <= 0) return answers;
+    got.append(buf, size_t(r));
+  }
+  return answers;
+}
+
 // A large file is sent in slices from the open file, never read whole: it
 // arrives byte for byte, with its headers, whole or by any range, and the
 // connection serves the next request after it. Downloads stopped part way
@@ -880,6 +906,67 @@ TEST_F(ServiceTest, RequestsThatComputeLeaveTheReactorFreeAndABusyPoolSays503) {
     const HttpResponse again = c.call("POST", "/api/v1/predict", tiny_job("wall1").dump());
     ASSERT_EQ(again.status, 200) << "request " << i << ": " << again.body;
   }
+}
+
+// Answers go out in the order their requests came, to a client that
+// pipelines them (HTTP/1.1): a prediction (computed on the pool) before a
+// health check (answered on the reactor thread), and a file sent in slices
+// before the request behind it. Before, the health check was answered first,
+// and the request behind a large file between two of its slices.
+TEST_F(ServiceTest, PipelinedRequestsAreAnsweredInOrder) {
+  Client c = client();
+  c.sign_up("piper");
+  const std::string job = tiny_job("wall1", 400, 1.0).dump();
+  const std::string predict =
+      "POST /api/v1/predict HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " + c.token +
+      "\r\nContent-Type: application/json\r\nContent-Length: " + std::to_string(job.size()) +
+      "\r\n\r\n" + job;
+  const std::string health = "GET /api/v1/health HTTP/1.1\r\nHost: x\r\n\r\n";
+  const auto send_all = [](int fd, const std::string& bytes) {
+    timeval tv{20, 0};
+    ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    return ::send(fd, bytes.data(), bytes.size(), MSG_NOSIGNAL) == ssize_t(bytes.size());
+  };
+  int fd = connect_loopback(server_->port());
+  ASSERT_GE(fd, 0);
+  ASSERT_TRUE(send_all(fd, predict + health + predict + health + health));
+  auto answers = read_answers(fd, 5);
+  ASSERT_EQ(answers.size(), 5u);
+  for (int k = 0; k < 5; ++k) {
+    const auto& [head, body] = answers[size_t(k)];
+    ASSERT_EQ(head.compare(0, 15, "HTTP/1.1 200 OK"), 0) << "answer " << k << ": " << head;
+    const json j = json::parse(body, nullptr, false);
+    if (k == 0 || k == 2)
+      EXPECT_TRUE(j.contains("total_time_s")) << "answer " << k << ": " << body;
+    else
+      EXPECT_EQ(j.value("status", ""), "ok") << "answer " << k << ": " << body;
+  }
+  ::close(fd);
+
+  const std::string web = dir_ + "/web";
+  fs::create_directories(web);
+  std::string big(3'000'000, '\0');
+  uint32_t x = 777;
+  for (char& ch : big) ch = char((x = x * 1664525u + 1013904223u) >> 24);
+  ASSERT_TRUE(collido::write_file_atomic(web + "/big.bin", big));
+  ASSERT_NO_FATAL_FAILURE(start_web_server(web));
+  fd = connect_loopback(web_server_->port());
+  ASSERT_GE(fd, 0);
+  const std::string file = "GET /ui/big.bin HTTP/1.1\r\nHost: x\r\n\r\n";
+  ASSERT_TRUE(send_all(fd, file + health + file + predict + health));
+  answers = read_answers(fd, 5);
+  ASSERT_EQ(answers.size(), 5u);
+  for (int k = 0; k < 5; ++k) {
+    const auto& [head, body] = answers[size_t(k)];
+    ASSERT_EQ(head.compare(0, 15, "HTTP/1.1 200 OK"), 0) << "answer " << k << ": " << head;
+    if (k == 0 || k == 2) {
+      EXPECT_TRUE(body == big) << "answer " << k << ": " << body.size() << " bytes";
+    } else {
+      const json j = json::parse(body, nullptr, false);
+      EXPECT_TRUE(j.contains(k == 3 ? "total_time_s" : "status")) << "answer " << k << ": " << body;
+    }
+  }
+  ::close(fd);
 }
 
 // HEAD is GET without the body, files and JSON alike; a method the path does
