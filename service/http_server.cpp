@@ -945,6 +945,7 @@ class Handler : public Http::Handler {
     static_cast<Tcp::Handler&>(*router_).onDisconnection(peer);
   }
 
+ private:
   // Reads request heads as they arrive; false when the request is refused
   // (answered here, the connection closed for writing and the rest dropped).
   // What the Router should see goes to *forward: body bytes as they come, a
