@@ -126,11 +126,13 @@ std::shared_ptr<PeerGuard> guard_of(const std::shared_ptr<Tcp::Peer>& peer) {
   return peer ? std::static_pointer_cast<PeerGuard>(peer->tryGetData("collido-guard")) : nullptr;
 }
 
-// Whether `answer` may run now; if not, it waits for the answers before it.
-bool begin_answer(PeerGuard& g, std::function<bool()>& answer) {
+// Whether a request may be answered now; if not, make_answer() makes the
+// closure that answers it once the answers before it are out.
+template <class MakeAnswer>
+bool begin_answer(PeerGuard& g, MakeAnswer&& make_answer) {
   std::lock_guard<std::mutex> lock(g.order_mu);
   if (!g.answering) return g.answering = true;
-  g.waiting.push_back(std::move(answer));
+  g.waiting.push_back(make_answer());
   return false;
 }
 
@@ -704,21 +706,19 @@ class Router : public Http::Handler {
   explicit Router(std::shared_ptr<const Shared> shared) : shared_(std::move(shared)) {}
 
   void onRequest(const Http::Request& http, Http::ResponseWriter writer) override {
-    // The answer may be sent after onRequest returns (below), and this request
-    // is the parser's, reassigned once it does: it is moved out, not copied
-    // (a copy of a 64 MiB upload's body held every connection of this
-    // reactor thread for 0.2-0.3 s in fresh pages).
-    auto request =
-        std::make_shared<const Http::Request>(std::move(const_cast<Http::Request&>(http)));
-    auto out = std::make_shared<Http::ResponseWriter>(std::move(writer));
-    auto guard = guard_of(out->peer());
-    auto d = std::make_shared<Dispatch>(dispatch(*request));
-    std::function<bool()> answer = [shared = shared_, request, out, guard, d] {
-      return answer_request(*shared->pool, request, out, guard, *d);
-    };
+    auto guard = guard_of(writer.peer());
     // A request pipelined behind one still being answered waits for it.
-    if (guard && !begin_answer(*guard, answer)) return;
-    if (answer() && guard) answered(*guard);
+    if (guard && !begin_answer(*guard, [&] { return later(http, std::move(writer), guard); }))
+      return;
+    Dispatch d = dispatch(http);
+    if (!d.route || d.route->runs == Runs::kInline) {
+      // Answered here, from the parser's request (most requests: no copies).
+      const Response answer = d.route ? run(*d.route, d.req) : std::move(d.answer);
+      if (respond_locked(http, writer, guard.get(), answer) && guard) answered(*guard);
+      return;
+    }
+    const Held h = shared_for(http, std::move(writer), guard);  // d.req.http is reset by the task
+    if (answer_on_pool(h, std::move(d), shared_->pool.get()) && guard) answered(*guard);
   }
 
  private:
@@ -730,26 +730,51 @@ class Router : public Http::Handler {
     Response answer;
   };
 
-  // Answers a dispatched request: true when its answer is all queued; false
-  // when a pool task or a file's later slices finish it (and call answered()).
-  // Routes that compute run on the pool: the task answers from the pool's
-  // thread under the connection's send lock (PeerGuard).
-  static bool answer_request(RequestPool& pool, const std::shared_ptr<const Http::Request>& request,
-                             const std::shared_ptr<Http::ResponseWriter>& out,
-                             const std::shared_ptr<PeerGuard>& guard, Dispatch& d) {
-    if (!d.route) return respond_locked(*request, *out, guard.get(), d.answer);
-    if (d.route->runs == Runs::kInline)
-      return respond_locked(*request, *out, guard.get(), run(*d.route, d.req));
-    auto task = [request, out, guard, route = d.route, req = std::move(d.req)]() mutable {
-      req.http = request.get();
+  // What an answer made after onRequest returns holds: the request (the
+  // parser's, reassigned once onRequest returns, so moved out rather than
+  // copied: a copy of a 64 MiB upload's body held every connection of this
+  // reactor thread for 0.2-0.3 s in fresh pages), the writer, the guard.
+  struct Held {
+    std::shared_ptr<const Http::Request> request;
+    std::shared_ptr<Http::ResponseWriter> out;
+    std::shared_ptr<PeerGuard> guard;
+  };
+  static Held shared_for(const Http::Request& http, Http::ResponseWriter&& writer,
+                         const std::shared_ptr<PeerGuard>& guard) {
+    return {std::make_shared<const Http::Request>(std::move(const_cast<Http::Request&>(http))),
+            std::make_shared<Http::ResponseWriter>(std::move(writer)), guard};
+  }
+
+  // A request that waits behind another: answered by the closure, which says
+  // whether its answer is all queued.
+  std::function<bool()> later(const Http::Request& http, Http::ResponseWriter&& writer,
+                              const std::shared_ptr<PeerGuard>& guard) {
+    Held h = shared_for(http, std::move(writer), guard);
+    auto d = std::make_shared<Dispatch>(dispatch(*h.request));
+    return [shared = shared_, h, d]() -> bool {
+      if (!d->route || d->route->runs == Runs::kInline) {
+        const Response answer = d->route ? run(*d->route, d->req) : d->answer;
+        return respond_locked(*h.request, *h.out, h.guard.get(), answer);
+      }
+      return answer_on_pool(h, std::move(*d), shared->pool.get());
+    };
+  }
+
+  // Runs a route that computes on the pool: the task answers from the pool's
+  // thread under the connection's send lock (PeerGuard). False when the task
+  // finishes the answer (and calls answered()); true when it is answered
+  // here (503: the pool is full).
+  static bool answer_on_pool(const Held& h, Dispatch d, RequestPool* pool) {
+    auto task = [h, route = d.route, req = std::move(d.req)]() mutable {
+      req.http = h.request.get();
       const Response answer = run(*route, req);
       RequestPool::answering();  // only the answer left: the next request finds the thread free
-      if (respond_locked(*request, *out, guard.get(), answer) && guard) answered(*guard);
+      if (respond_locked(*h.request, *h.out, h.guard.get(), answer) && h.guard) answered(*h.guard);
     };
-    if (pool.submit(std::move(task))) return false;
+    if (pool->submit(std::move(task))) return false;
     Response busy = error_response(503, "the server is busy; try again in a moment");
     busy.headers.emplace_back("Retry-After", "1");
-    return respond_locked(*request, *out, guard.get(), busy);
+    return respond_locked(*h.request, *h.out, h.guard.get(), busy);
   }
 
   // respond() holding the connection's send lock, unless the client has left
