@@ -1605,7 +1605,7 @@ class DynamicsPipeline final : public Simulation {
 
   // The end of the batch of particles from `first` (before `limit`): whole
   // particles, at least one, whose listed pairs number at most kBatchPairs.
-  // A batch's columns (36 doubles a pair) stay in the first-level cache: a
+  // A batch's columns (34 doubles a pair) stay in the first-level cache: a
   // whole chunk's did not, and its stores took longer than the scalar path's
   // arithmetic. Batches of 64 particles, as before, held 190 pairs in the
   // settled block; 48 pairs made a step 7 % faster on one thread and 4 % on

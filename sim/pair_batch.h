@@ -28,45 +28,18 @@ struct PairBatch {
   // pair is its owner's, the particle of lower index, so should the centres
   // coincide the normal is +z; the squared distance is recomputed from the
   // difference with the same operations.)
+  // clang-format off
   enum Column {
-    kDx,
-    kDy,
-    kDz,
-    kRi,
-    kRj,
-    kMi,
-    kMj,
-    kVix,
-    kViy,
-    kViz,
-    kVjx,
-    kVjy,
-    kVjz,
-    kWix,
-    kWiy,
-    kWiz,
-    kWjx,
-    kWjy,
-    kWjz,
-    kSx,
-    kSy,
-    kSz,
+    kDx, kDy, kDz, kRi, kRj, kMi, kMj,
+    kVix, kViy, kViz, kVjx, kVjy, kVjz,
+    kWix, kWiy, kWiz, kWjx, kWjy, kWjz,
+    kSx, kSy, kSz,
     // Out: the force on i, the torque per metre of lever on i, the spring,
     // the rolling torque on i.
-    kFx,
-    kFy,
-    kFz,
-    kTx,
-    kTy,
-    kTz,
-    kSxOut,
-    kSyOut,
-    kSzOut,
-    kRollX,
-    kRollY,
-    kRollZ,
+    kFx, kFy, kFz, kTx, kTy, kTz, kSxOut, kSyOut, kSzOut, kRollX, kRollY, kRollZ,
     kColumns
   };
+  // clang-format on
   size_t size = 0;
   size_t stride = 0;          // column c holds data[c * stride, c * stride + size)
   std::vector<double> data;
