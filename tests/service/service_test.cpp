@@ -697,6 +697,13 @@ std::pair<std::string, std::string> read_answer(int fd) {
   return {got.substr(0, head_end), got.substr(head_end, length)};
 }
 
+// n bytes of a fixed pseudo-random sequence (a file no compression shrinks).
+std::string random_bytes(size_t n, uint32_t seed) {
+  std::string bytes(n, '\0');
+  for (char& ch : bytes) ch = char((seed = seed * 1664525u + 1013904223u) >> 24);
+  return bytes;
+}
+
 // Reads n answers from a raw connection that may bring several in one read
 // (read_answer keeps none of the bytes past its answer). Stops early on a
 // closed or silent connection.
@@ -730,9 +737,7 @@ std::vector<std::pair<std::string, std::string>> read_answers(int fd, int n) {
 TEST_F(ServiceTest, FilesGoOutInSlicesRevalidateAndStoppedDownloadsCloseThem) {
   const std::string web = dir_ + "/web";
   fs::create_directories(web);
-  std::string big(5'000'000, '\0');
-  uint32_t x = 12345;
-  for (char& ch : big) ch = char((x = x * 1664525u + 1013904223u) >> 24);
+  const std::string big = random_bytes(5'000'000, 12345);
   ASSERT_TRUE(collido::write_file_atomic(web + "/big.bin", big));
   ASSERT_TRUE(collido::write_file_atomic(web + "/index.html", "<!doctype html><title>t</title>"));
   ASSERT_NO_FATAL_FAILURE(start_web_server(web));
@@ -945,9 +950,7 @@ TEST_F(ServiceTest, PipelinedRequestsAreAnsweredInOrder) {
 
   const std::string web = dir_ + "/web";
   fs::create_directories(web);
-  std::string big(3'000'000, '\0');
-  uint32_t x = 777;
-  for (char& ch : big) ch = char((x = x * 1664525u + 1013904223u) >> 24);
+  const std::string big = random_bytes(3'000'000, 777);
   ASSERT_TRUE(collido::write_file_atomic(web + "/big.bin", big));
   ASSERT_NO_FATAL_FAILURE(start_web_server(web));
   fd = connect_loopback(web_server_->port());
