@@ -710,15 +710,12 @@ class Router : public Http::Handler {
     // A request pipelined behind one still being answered waits for it.
     if (guard && !begin_answer(*guard, [&] { return later(http, std::move(writer), guard); }))
       return;
+    // Most requests are answered here from the parser's request, with no
+    // copies; one that goes to the pool is moved into holders.
     Dispatch d = dispatch(http);
-    if (!d.route || d.route->runs == Runs::kInline) {
-      // Answered here, from the parser's request (most requests: no copies).
-      const Response answer = d.route ? run(*d.route, d.req) : std::move(d.answer);
-      if (respond_locked(http, writer, guard.get(), answer) && guard) answered(*guard);
-      return;
-    }
-    const Held h = shared_for(http, std::move(writer), guard);  // d.req.http is reset by the task
-    if (answer_on_pool(h, std::move(d), shared_->pool.get()) && guard) answered(*guard);
+    const bool done = answer(d, http, writer, guard.get(), shared_->pool.get(),
+                             [&] { return shared_for(http, std::move(writer), guard); });
+    if (done && guard) answered(*guard);
   }
 
  private:
@@ -752,18 +749,28 @@ class Router : public Http::Handler {
     Held h = shared_for(http, std::move(writer), guard);
     auto d = std::make_shared<Dispatch>(dispatch(*h.request));
     return [shared = shared_, h, d]() -> bool {
-      if (!d->route || d->route->runs == Runs::kInline) {
-        const Response answer = d->route ? run(*d->route, d->req) : d->answer;
-        return respond_locked(*h.request, *h.out, h.guard.get(), answer);
-      }
-      return answer_on_pool(h, std::move(*d), shared->pool.get());
+      return answer(*d, *h.request, *h.out, h.guard.get(), shared->pool.get(), [&] { return h; });
     };
   }
 
+  // Answers a dispatched request: dispatch's own answer or an inline route's
+  // here, a route that computes on the pool, which needs the request and
+  // writer held (hold() gives them). True when the answer is all queued;
+  // false when a pool task or a file's later slices finish it (and call
+  // answered()).
+  template <class Hold>
+  static bool answer(Dispatch& d, const Http::Request& http, Http::ResponseWriter& writer,
+                     PeerGuard* guard, RequestPool* pool, Hold&& hold) {
+    if (d.route && d.route->runs != Runs::kInline)
+      return answer_on_pool(hold(), std::move(d), pool);
+    const Response out = d.route ? run(*d.route, d.req) : std::move(d.answer);
+    return respond_locked(http, writer, guard, out);
+  }
+
   // Runs a route that computes on the pool: the task answers from the pool's
-  // thread under the connection's send lock (PeerGuard). False when the task
-  // finishes the answer (and calls answered()); true when it is answered
-  // here (503: the pool is full).
+  // thread under the connection's send lock (PeerGuard); it points the
+  // request's http at the held one. False when the task finishes the answer
+  // (and calls answered()); true when it is answered here (503: the pool is full).
   static bool answer_on_pool(const Held& h, Dispatch d, RequestPool* pool) {
     auto task = [h, route = d.route, req = std::move(d.req)]() mutable {
       req.http = h.request.get();

@@ -1503,7 +1503,7 @@ class DynamicsPipeline final : public Simulation {
       for (uint32_t first = uint32_t(begin), last; first < end; first = last) {
         last = batch_end(R, first, uint32_t(end));
         b.reset(R.nl_start[last] - R.nl_start[first]);
-        batch_touching_pairs(R, uint32_t(first), last, b);
+        batch_touching_pairs(R, first, last, b);
         pair_batch_forces(R.law, R.rot, dt, b);
         using C = PairBatch;
         const double *fx = b.col(C::kFx), *tx = b.col(C::kTx), *sx = b.col(C::kSxOut);
@@ -1594,12 +1594,9 @@ class DynamicsPipeline final : public Simulation {
           s->sx = float(sx[c]), s->sy = float(sx[c + st]), s->sz = float(sx[c + 2 * st]);
       }
       // Particles [first, last) have every pair: their sums become accelerations.
-      for (uint32_t i = first; i < last; ++i) {
-        if (P.state[i] != kActive) continue;
-        const double r = P.r[i], m = P.mass[i];
-        P.acc[i] = P.acc[i] * (1.0 / m);
-        if (rot) P.alpha[i] = P.alpha[i] * (1.0 / (0.4 * m * r * r));
-      }
+      for (uint32_t i = first; i < last; ++i)
+        if (P.state[i] == kActive)
+          sums_to_accelerations(P, i, P.acc[i], rot ? P.alpha[i] : Vec3d{0, 0, 0}, rot);
     }
   }
 
@@ -1684,9 +1681,18 @@ class DynamicsPipeline final : public Simulation {
         any = true;
       }
       P.flags[i] = any ? uint8_t(kActive | kFlagParticleContact) : uint8_t(kActive);
-      P.acc[i] = f * (1.0 / m);
-      if (rot) P.alpha[i] = torque * (1.0 / (0.4 * m * r * r));
+      sums_to_accelerations(P, i, f, torque, rot);
     });
+  }
+
+  // A particle's summed force and torque become its accelerations: one
+  // expression for pair_gather and pair_forces_in_order, which give the same bits.
+  COLLIDO_HD static COLLIDO_FORCEINLINE void sums_to_accelerations(const ParticleArrays& P,
+                                                                   uint32_t i, Vec3d f,
+                                                                   Vec3d torque, bool rot) {
+    const double r = P.r[i], m = P.mass[i];
+    P.acc[i] = f * (1.0 / m);
+    if (rot) P.alpha[i] = torque * (1.0 / (0.4 * m * r * r));
   }
 
   // decide_t: the releases due by then are decided on the way (-inf: none).
