@@ -6,6 +6,7 @@
 
 #include "app/cli.h"
 #include "app/commands.h"
+#include "tests/scratch.h"
 
 namespace collido::app {
 namespace {
@@ -42,7 +43,7 @@ TEST(CliDetect, BadInputsExitTwo) {
 }
 
 TEST(CliDetect, WritesSortedContactsThatMatchTheReference) {
-  const std::string dir = ::testing::TempDir();
+  const std::string dir = test::scratch_dir("cli_detect");
   const std::string csv = dir + "/p.csv";
   // Particles on wall1's side, cap and rim, and one far away.
   std::ofstream(csv) << "x,y,z,r\n50,0,50,1\n0,0,100.5,1\n50,0,100,0.8\n0,0,-50,1\n";

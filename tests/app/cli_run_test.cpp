@@ -10,6 +10,7 @@
 #include "job/child.h"
 #include "job/job.h"
 #include "sim/snapshot.h"
+#include "tests/scratch.h"
 
 namespace collido::app {
 namespace {
@@ -17,7 +18,7 @@ namespace {
 namespace fs = std::filesystem;
 
 std::string write_scene(const std::string& name, const std::string& json) {
-  const std::string path = ::testing::TempDir() + "/" + name;
+  const std::string path = test::scratch_path(name);
   std::ofstream(path) << json;
   return path;
 }
@@ -37,8 +38,7 @@ TEST(CliRun, WritesSnapshotsStatisticsAndParaViewFrames) {
     "material": {"restitution": 0.5, "friction": 0.3, "stiffness": 1e6},
     "particle_contacts": true, "duration": 0.5, "fps": 10, "backend": "cpu"
   })");
-  const std::string dir = ::testing::TempDir() + "/run_drop";
-  fs::remove_all(dir);
+  const std::string dir = test::scratch_path("run_drop");
   ASSERT_EQ(cmd_run({scene, "--out", dir, "--vtp", "--quiet"}), kExitOk);
   for (const char* f :
        {"wall.stl", "scene.json", "result.json", "stats.csv", "frames.pvd", "vtp/frame_000005.vtp"})
@@ -71,8 +71,7 @@ TEST(CliRun, ExampleScenesRun) {
   for (const auto& e : fs::directory_iterator(COLLIDO_SCENES)) {
     if (e.path().extension() != ".json") continue;
     ++seen;
-    const std::string dir = ::testing::TempDir() + "/example_" + e.path().stem().string();
-    fs::remove_all(dir);
+    const std::string dir = test::scratch_path("example_" + e.path().stem().string());
     EXPECT_EQ(cmd_run({e.path().string(), "--out", dir, "--duration", "0.04", "--backend", "cpu",
                        "--quiet"}),
               kExitOk)
@@ -93,8 +92,7 @@ TEST(CliRun, BadInputExitsTwo) {
   const std::string ok =
       write_scene("ok.json", R"({"wall": "wall1", "particles": {"count": 5}, "duration": 0.01})");
   // Into a folder that does not exist: a refusal is the flag's, not the folder's.
-  const std::string unused = ::testing::TempDir() + "/run_unused";
-  fs::remove_all(unused);
+  const std::string unused = test::scratch_path("run_unused");
   EXPECT_EQ(cmd_run({ok, "--out", unused, "--backend", "quantum"}), kExitUsage);
   // --duration is held to the scene's own timing limits (scene::check_timing).
   for (const char* d : {"0", "-1", "1e6", "nan"})
@@ -113,8 +111,7 @@ TEST(CliRun, BadInputExitsTwo) {
   }
   EXPECT_FALSE(fs::exists(unused));
   // A wall that does not exist, and more particles than the vessel holds.
-  const std::string dir = ::testing::TempDir() + "/run_fail";
-  fs::remove_all(dir);
+  const std::string dir = test::scratch_path("run_fail");
   EXPECT_EQ(cmd_run({write_scene("nowall.json", R"({"wall": {"file": "missing.stl"}})"), "--out",
                      dir, "--quiet"}),
             kExitUsage);
@@ -131,8 +128,7 @@ TEST(CliRun, AFixedStepBeyondTheStableBoundIsWarnedAboutAndStillReported) {
     "wall": "box:x=6,y=6,z=6", "particles": {"count": 8, "radius": 0.4},
     "material": {"stiffness": 1e6}, "time_step": 0.05, "duration": 0.5, "fps": 10, "backend": "cpu"
   })");
-  const std::string dir = ::testing::TempDir() + "/run_coarse";
-  fs::remove_all(dir);
+  const std::string dir = test::scratch_path("run_coarse");
   ASSERT_EQ(cmd_run({scene, "--out", dir, "--quiet"}), kExitOk);
   std::stringstream run;
   run << std::ifstream(dir + "/result.json").rdbuf();
@@ -142,8 +138,7 @@ TEST(CliRun, AFixedStepBeyondTheStableBoundIsWarnedAboutAndStillReported) {
 // `job-exec` as a cluster node runs it: progress appended to a file (with the
 // job's peak memory), and --resume continuing the run a requeued job left.
 TEST(CliJobExec, ProgressFileAndResumeAsOnAClusterNode) {
-  const std::string dir = ::testing::TempDir() + "/job_exec_node";
-  fs::remove_all(dir);
+  const std::string dir = test::scratch_path("job_exec_node");
   job::JobSpec spec;
   spec.scene_json = R"({"wall": "box:x=6,y=6,z=6", "particles": {"count": 8, "radius": 0.4},
     "placement": {"kind": "fill"}, "duration": 0.3, "fps": 10, "backend": "cpu"})";

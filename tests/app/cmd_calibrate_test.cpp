@@ -17,6 +17,7 @@
 #include "gvm/csv.h"
 #include "gvm/run_log.h"
 #include "job/job_log.h"
+#include "tests/scratch.h"
 
 namespace collido::app {
 namespace {
@@ -26,7 +27,7 @@ namespace {
 [[maybe_unused]] const bool kExeSet = setenv("COLLIDOSCOPE_EXE", COLLIDO_BINARY, 1) == 0;
 
 std::string tmp(const std::string& name) {
-  return testing::TempDir() + "/cmd_calibrate_test_" + name;
+  return test::scratch_path("cmd_calibrate_test_" + name);
 }
 
 TEST(CmdCalibrate, BadArgumentsExitTwo) {
@@ -151,9 +152,9 @@ TEST(CmdCalibrate, SameSeedSameConfigurations) {
 // scene file with it, as text and JSON, and says when the scene lies outside.
 TEST(CmdCalibrate, JobSweepTrainAndPredictAScene) {
   const std::string log = tmp("jobs.csv"), model = tmp("job_model.json"), scene = tmp("scene.json"),
-                    held_out = tmp("held_out.csv");
+                    held_out = tmp("held_out.csv"), work = tmp("jobs_work");
   ASSERT_EQ(cmd_calibrate({"--jobs", "--quick", "--configs", "2", "--repeats", "1", "--no-render",
-                           "--out", log}),
+                           "--out", log, "--work", work}),
             kExitOk);
   auto rows = job::read_job_log(log);
   ASSERT_TRUE(rows) << rows.status().message();

@@ -12,6 +12,7 @@
 
 #include "app/cli.h"
 #include "app/commands.h"
+#include "tests/scratch.h"
 
 namespace collido::app {
 namespace {
@@ -40,7 +41,7 @@ std::vector<std::map<std::string, std::string>> read_csv(const std::string& path
 }
 
 TEST(CmdStudy, QuickDetectionOnWall1) {
-  const std::string out = testing::TempDir() + "/cmd_study_test_wall1";
+  const std::string out = test::scratch_path("cmd_study_test_wall1");
   // The half not run (--only detect) keeps what an earlier study wrote of it.
   std::filesystem::create_directories(out);
   std::ofstream(out + "/study_dynamics.csv") << "scene\nkept\n";
@@ -94,7 +95,7 @@ TEST(CmdStudy, AnUnknownSceneIsBadInputThatNamesTheScenes) {
   testing::internal::CaptureStderr();
   EXPECT_EQ(cmd_study({"--quick", "--only", "detect", "--scenes", "teapot", "--meshes",
                        COLLIDO_TEST_DATA "/meshes", "--out",
-                       testing::TempDir() + "/cmd_study_test_unknown"}),
+                       test::scratch_path("cmd_study_test_unknown")}),
             kExitUsage);
   const std::string said = testing::internal::GetCapturedStderr();
   EXPECT_NE(said.find("no detection scene 'teapot' (wall1, wall2, teapot_trimesh)"),
@@ -113,7 +114,7 @@ TEST(CmdStudy, BadArgumentsExitTwo) {
 TEST(CmdStudy, AMissingMeshFolderIsBadInputThatSaysSo) {
   testing::internal::CaptureStderr();
   EXPECT_EQ(cmd_study({"--quick", "--only", "detect", "--meshes", "/nonexistent/meshes", "--out",
-                       testing::TempDir() + "/cmd_study_test_missing"}),
+                       test::scratch_path("cmd_study_test_missing")}),
             kExitUsage);
   const std::string said = testing::internal::GetCapturedStderr();
   EXPECT_NE(said.find("cannot read the mesh folder /nonexistent/meshes"), std::string::npos) << said;

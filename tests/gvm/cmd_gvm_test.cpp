@@ -12,12 +12,13 @@
 #include "gvm/csv.h"
 #include "gvm/evaluate.h"
 #include "gvm/run_log.h"
+#include "tests/scratch.h"
 
 namespace collido::app {
 namespace {
 
 std::string tmp(const std::string& name) {
-  return testing::TempDir() + "/cmd_gvm_test_" + name;
+  return test::scratch_path("cmd_gvm_test_" + name);
 }
 
 std::string slurp(const std::string& path) {

@@ -8,6 +8,7 @@
 #include <cstring>
 
 #include "gvm/evaluate.h"
+#include "tests/scratch.h"
 
 namespace collido::gvm {
 namespace {
@@ -145,7 +146,7 @@ TEST(Predictor, RejectsInvalidConfiguration) {
 }
 
 TEST(Predictor, SaveAndLoadGiveBitIdenticalPredictions) {
-  const std::string path = testing::TempDir() + "/gvm_predictor_test.json";
+  const std::string path = test::scratch_path("gvm_predictor_test.json");
   ASSERT_TRUE(trained().save(path));
   auto back = ResourcePredictor::load(path);
   ASSERT_TRUE(back) << back.status().message();

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "gvm/evaluate.h"
+#include "tests/scratch.h"
 
 namespace collido::gvm {
 namespace {
@@ -66,7 +67,7 @@ TEST(RunLog, RoundTripKeepsEveryFieldExactly) {
 }
 
 TEST(RunLog, FileRoundTrip) {
-  const std::string path = testing::TempDir() + "/gvm_run_log_test.csv";
+  const std::string path = test::scratch_path("gvm_run_log_test.csv");
   auto rows = synthetic_run_log(10, 5);
   ASSERT_TRUE(write_run_log(path, rows));
   auto back = read_run_log(path);

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "gvm/run_log.h"
+#include "tests/scratch.h"
 
 namespace collido::job {
 namespace {
@@ -20,8 +21,7 @@ namespace {
 using json = nlohmann::json;
 
 std::string tmp(const std::string& name) {
-  return ::testing::TempDir() + "/calibrate_test_" + name + "_" + std::to_string(getpid()) +
-         ".csv";
+  return test::scratch_path("calibrate_test_" + name + ".csv");
 }
 
 CalibrateSpec quick_spec(const std::string& out, int64_t configs) {

@@ -13,15 +13,16 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "gvm/csv.h"
+#include "gvm/run_log.h"
 #include "job/assess.h"
 #include "job/calibrate_jobs.h"
 #include "job/cost_model.h"
 #include "job/job.h"
 #include "job/job_log.h"
-#include "gvm/csv.h"
-#include "gvm/run_log.h"
 #include "sim/detect.h"
 #include "sim/shapes.h"
+#include "tests/scratch.h"
 
 namespace collido::job {
 namespace {
@@ -29,7 +30,7 @@ namespace {
 namespace fs = std::filesystem;
 
 std::string tmp(const std::string& name) {
-  return ::testing::TempDir() + "/cost_model_test_" + std::to_string(getpid()) + "_" + name;
+  return test::scratch_path("cost_model_test_" + name);
 }
 
 JobRecord sample_record(uint64_t particles) {

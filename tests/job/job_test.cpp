@@ -28,6 +28,7 @@
 #include "job/render_run.h"
 #include "render/snapshot.h"
 #include "render/video.h"
+#include "tests/scratch.h"
 #endif
 
 namespace collido::job {
@@ -43,10 +44,11 @@ std::string read_file(const std::string& path) {
   return s.str();
 }
 
-// A fresh directory per test under the test temp folder.
+// A fresh directory per test under the temp folder (not made), and the
+// spec file beside it (dir + ".spec.json"), both gone when the test passes.
 std::string fresh_dir(const std::string& name) {
-  const std::string dir = ::testing::TempDir() + "/job_" + name + "_" + std::to_string(getpid());
-  fs::remove_all(dir);
+  const std::string dir = test::scratch_path("job_" + name);
+  test::scratch_path("job_" + name + ".spec.json");
   return dir;
 }
 
@@ -484,7 +486,7 @@ TEST(Job, JobExecReportsProgressAndRefusesBadSpecs) {
 
   for (const std::string& bad : {std::string("{\"scene\": "), std::string("{\"out_dir\": \"x\"}"),
                                  std::string("[1, 2]")}) {
-    const std::string path = dir + ".bad.json";
+    const std::string path = test::scratch_path("job_exec.bad.json");
     std::ofstream(path) << bad;
     auto c = ChildJob::start(COLLIDO_BINARY, path);
     ASSERT_TRUE(c);

@@ -1,4 +1,5 @@
 #include "mesh_import/mesh_import.h"
+#include "tests/scratch.h"
 
 #include <gtest/gtest.h>
 
@@ -8,7 +9,7 @@ namespace collido::mesh_import {
 namespace {
 
 std::string write(const std::string& name, const std::string& text) {
-  const std::string path = ::testing::TempDir() + "/" + name;
+  const std::string path = test::scratch_path(name);
   std::ofstream(path) << text;
   return path;
 }

@@ -7,6 +7,7 @@
 
 #include "scene/scene.h"
 #include "sim/particles.h"
+#include "tests/scratch.h"
 
 namespace collido::scene {
 namespace {
@@ -265,7 +266,7 @@ TEST(Scene, ContactModelWallMaterialAndWallMotion) {
 }
 
 TEST(Scene, WallFileIsRelativeToTheSceneFile) {
-  const std::string dir = ::testing::TempDir();
+  const std::string dir = test::scratch_dir("scene_relative");
   const std::string path = dir + "/s.json";
   std::ofstream(path) << R"({"wall": {"file": "vessel.stl"}})";
   auto s = load_scene(path);
@@ -277,8 +278,7 @@ TEST(Scene, WallFileIsRelativeToTheSceneFile) {
 
 // "wall": "vessel.stl" (a string that names no shape) is a file too, found the same way.
 TEST(Scene, WallFileWrittenAsAStringIsRelativeToTheSceneFileToo) {
-  const std::string dir = ::testing::TempDir() + "/scene_dir";
-  std::filesystem::create_directories(dir);
+  const std::string dir = test::scratch_dir("scene_dir");
   std::ofstream(dir + "/s.json") << R"({"wall": "vessel.stl"})";
   auto s = load_scene(dir + "/s.json");
   ASSERT_TRUE(s) << s.status().message();

@@ -11,6 +11,7 @@
 
 #include "job/job_log.h"
 #include "service/cost_trainer.h"
+#include "tests/scratch.h"
 
 namespace collido::service {
 namespace {
@@ -18,10 +19,7 @@ namespace {
 namespace fs = std::filesystem;
 
 std::string temp_dir(const std::string& name) {
-  const fs::path p = fs::temp_directory_path() / ("cost_trainer_" + name + "_" + std::to_string(getpid()));
-  fs::remove_all(p);
-  fs::create_directories(p);
-  return p.string();
+  return test::scratch_dir("cost_trainer_" + name);
 }
 
 std::vector<job::JobRecord> committed_rows() {

@@ -14,18 +14,16 @@
 #include <thread>
 #include <vector>
 
+#include "tests/scratch.h"
 #include "tests/service/http_client.h"
 
 namespace collido::test {
 
 using json = nlohmann::json;
 
+// A fresh folder for the test, gone when it passes (tests/scratch.h).
 inline std::string temp_dir(const std::string& name) {
-  const std::filesystem::path p =
-      std::filesystem::temp_directory_path() / (name + "_" + std::to_string(::getpid()));
-  std::filesystem::remove_all(p);
-  std::filesystem::create_directories(p);
-  return p.string();
+  return scratch_dir(name);
 }
 
 inline std::string read_file(const std::string& path) {

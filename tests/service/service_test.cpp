@@ -272,7 +272,7 @@ TEST_F(ServiceTest, PricesJobsWithTheJobCostModel) {
 
 TEST_F(ServiceTest, AModelFileThatIsNotAJobCostModelStopsTheStart) {
   ServiceConfig c;
-  c.data_dir = dir_ + "-bad-model";
+  c.data_dir = dir_ + "/bad-model";
   c.job_executable = COLLIDO_BINARY;
   c.cost_models = {dir_ + "/absent-model.json"};
   auto svc = JobService::open(c);

@@ -1,4 +1,5 @@
 #include "sim/particles.h"
+#include "tests/scratch.h"
 
 #include <gtest/gtest.h>
 
@@ -8,7 +9,7 @@ namespace collido::sim {
 namespace {
 
 std::string write(const std::string& name, const std::string& text) {
-  const std::string path = ::testing::TempDir() + "/" + name;
+  const std::string path = test::scratch_path(name);
   std::ofstream(path) << text;
   return path;
 }

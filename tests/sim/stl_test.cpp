@@ -8,6 +8,7 @@
 
 #include "sim/mesh.h"
 #include "sim/shapes.h"
+#include "tests/scratch.h"
 
 namespace collido::sim {
 namespace {
@@ -189,7 +190,7 @@ TEST(Stl, MultiSolidAsciiAndRealFiles) {
 
 TEST(Stl, SaveRoundTrip) {
   TriangleMesh wall = make_cylinder(50, 100, 40);
-  const std::string path = ::testing::TempDir() + "/wall1_roundtrip.stl";
+  const std::string path = test::scratch_path("wall1_roundtrip.stl");
   ASSERT_TRUE(save_stl(wall, path));
   auto back = load_stl(path);
   ASSERT_TRUE(back);
