@@ -956,10 +956,12 @@ class Handler : public Http::Handler {
     }
     if (guard->discarding) return;
     std::vector<std::string> forward;
-    if (!inspect(*guard, buffer, len, peer, &forward)) return;
+    std::string refusal;
+    inspect(*guard, buffer, len, &forward, &refusal);
     for (const std::string& piece : forward)
       if (!piece.empty())
         static_cast<Tcp::Handler&>(*router_).onInput(piece.data(), piece.size(), peer);
+    if (!refusal.empty()) refuse_in_turn(guard, peer, std::move(refusal));
   }
 
   void onDisconnection(const std::shared_ptr<Tcp::Peer>& peer) override {
@@ -978,12 +980,13 @@ class Handler : public Http::Handler {
   }
 
  private:
-  // Reads request heads as they arrive; false when the request is refused
-  // (answered here, the connection closed for writing and the rest dropped).
-  // What the Router should see goes to *forward: body bytes as they come, a
-  // head once it is whole and cleaned of headers Pistache cannot parse.
-  bool inspect(PeerGuard& g, const char* buf, size_t len, const std::shared_ptr<Tcp::Peer>& peer,
-               std::vector<std::string>* forward) {
+  // Reads request heads as they arrive. What the Router should see goes to
+  // *forward: body bytes as they come, a head once it is whole and cleaned of
+  // headers Pistache cannot parse. A request refused from its head leaves its
+  // answer in *refusal (the requests before it are forwarded; everything
+  // after it is dropped).
+  void inspect(PeerGuard& g, const char* buf, size_t len, std::vector<std::string>* forward,
+               std::string* refusal) {
     // Each piece ends where a request ends (or the bytes do): Pistache 0.0.5
     // parses one request a call and then drops what is left of its buffer,
     // so pipelined requests that arrived together went unanswered.
@@ -1005,27 +1008,33 @@ class Handler : public Http::Handler {
       const size_t end = g.head.find("\r\n\r\n", from);
       if (end == std::string::npos) {
         if (g.head.size() > kMaxHeaderBytes)
-          return refuse(g, peer, 431, "Request Header Fields Too Large", "the headers are too large");
-        return true;
+          *refusal = refuse(g, 431, "Request Header Fields Too Large", "the headers are too large");
+        return;
       }
       const std::string head = g.head.substr(0, end);
       i += end + 4 - before;
       g.head.clear();
       const RequestHead h = parse_request_head(head);
-      if (h.bad_length) return refuse(g, peer, 400, "Bad Request", "a malformed Content-Length");
-      if (h.chunked)
-        return refuse(g, peer, 411, "Length Required", "send the body with a Content-Length");
+      if (h.bad_length) {
+        *refusal = refuse(g, 400, "Bad Request", "a malformed Content-Length");
+        return;
+      }
+      if (h.chunked) {
+        *refusal = refuse(g, 411, "Length Required", "send the body with a Content-Length");
+        return;
+      }
       const uint64_t limit = limit_for(h);
-      if (h.content_length > limit)
-        return refuse(g, peer, 413, "Payload Too Large",
-                      "the body is " + std::to_string(h.content_length) +
-                          " bytes; this route takes at most " + std::to_string(limit));
+      if (h.content_length > limit) {
+        *refusal = refuse(g, 413, "Payload Too Large",
+                          "the body is " + std::to_string(h.content_length) +
+                              " bytes; this route takes at most " + std::to_string(limit));
+        return;
+      }
       forward->back().append(without_unparsable_headers(head));
       forward->back().append("\r\n\r\n");
       g.body_left = h.content_length;
       if (g.body_left == 0) request_ends();
     }
-    return true;
   }
 
   // The largest body a request may carry: an STL upload's from a signed-in
@@ -1055,18 +1064,47 @@ class Handler : public Http::Handler {
     return {};
   }
 
-  bool refuse(PeerGuard& g, const std::shared_ptr<Tcp::Peer>& peer, int code, const char* reason,
-              const std::string& message) {
-    const std::string body = error_reply(code, message).body.dump() + "\n";
-    const std::string msg = "HTTP/1.1 " + std::to_string(code) + " " + reason +
-                            "\r\nContent-Type: application/json\r\nContent-Length: " +
-                            std::to_string(body.size()) + "\r\nConnection: close\r\n\r\n" + body;
-    // A short answer fits the socket buffer; MSG_NOSIGNAL: the client may be gone.
-    (void)::send(peer->fd(), msg.data(), msg.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
-    ::shutdown(peer->fd(), SHUT_WR);
+  // The refusal's answer; from here on the connection's bytes are dropped.
+  static std::string refuse(PeerGuard& g, int code, const char* reason,
+                            const std::string& message) {
     g.discarding = true;
     g.head.clear();
-    return false;
+    const std::string body = error_reply(code, message).body.dump() + "\n";
+    return "HTTP/1.1 " + std::to_string(code) + " " + reason +
+           "\r\nContent-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) +
+           "\r\nConnection: close\r\n\r\n" + body;
+  }
+
+  // Sends a refusal in its request's turn (after the answers to the requests
+  // before it, which may still be computing or going out in slices), then
+  // closes the connection for writing once it is written.
+  static void refuse_in_turn(const std::shared_ptr<PeerGuard>& guard,
+                             const std::shared_ptr<Tcp::Peer>& peer, std::string msg) {
+    std::weak_ptr<Tcp::Peer> weak = peer;
+    auto send = [guard, weak, msg = std::move(msg)]() -> bool {
+      std::lock_guard<std::recursive_mutex> lock(guard->send_mu);
+      auto p = weak.lock();
+      if (guard->closed || !p) return true;
+      try {
+        std::string text = msg;
+        const size_t length = text.size();
+        p->send(RawBuffer(std::move(text), length))
+            .then(
+                // On the reactor thread, the connection still there: its
+                // descriptor is this client's.
+                [guard, weak](ssize_t) {
+                  std::lock_guard<std::recursive_mutex> lock(guard->send_mu);
+                  if (auto p = weak.lock(); p && !guard->closed) ::shutdown(p->fd(), SHUT_WR);
+                },
+                [](std::exception_ptr&) {});
+      } catch (const std::exception&) {  // the peer went as it was written
+      }
+      return true;
+    };
+    if (begin_answer(*guard, [&] { return std::function<bool()>(send); })) {
+      send();
+      answered(*guard);
+    }
   }
 
   void associate() {

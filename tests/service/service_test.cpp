@@ -972,6 +972,53 @@ TEST_F(ServiceTest, PipelinedRequestsAreAnsweredInOrder) {
   ::close(fd);
 }
 
+// A request refused from its head (here 413: a body over the limit) answers
+// in its turn: the requests before it on the connection get their whole
+// answers first (one computing on the pool, a file going out in slices), then
+// the refusal, then the server closes. The refusal went out at once, ahead of
+// them, and the earlier requests that came in the same read were dropped.
+TEST_F(ServiceTest, ARefusalPipelinedBehindOtherRequestsComesAfterTheirAnswers) {
+  Client c = client();
+  c.sign_up("piper");
+  const std::string job = tiny_job("wall1", 400, 1.0).dump();
+  const std::string predict =
+      "POST /api/v1/predict HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " + c.token +
+      "\r\nContent-Type: application/json\r\nContent-Length: " + std::to_string(job.size()) +
+      "\r\n\r\n" + job;
+  const std::string health = "GET /api/v1/health HTTP/1.1\r\nHost: x\r\n\r\n";
+  const std::string too_big =
+      "POST /api/v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Length: 99999999999\r\n\r\n";
+  const std::string web = dir_ + "/web";
+  fs::create_directories(web);
+  const std::string big = random_bytes(3'000'000, 778);
+  ASSERT_TRUE(collido::write_file_atomic(web + "/big.bin", big));
+  ASSERT_NO_FATAL_FAILURE(start_web_server(web));
+  const std::string file = "GET /ui/big.bin HTTP/1.1\r\nHost: x\r\n\r\n";
+
+  for (const std::string& first : {predict, file, health}) {
+    const int fd = connect_loopback(web_server_->port());
+    ASSERT_GE(fd, 0);
+    timeval tv{20, 0};
+    ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    const std::string bytes = first + health + too_big;
+    ASSERT_EQ(::send(fd, bytes.data(), bytes.size(), MSG_NOSIGNAL), ssize_t(bytes.size()));
+    const auto answers = read_answers(fd, 3);
+    ASSERT_EQ(answers.size(), 3u) << first.substr(0, 30);
+    EXPECT_EQ(answers[0].first.compare(0, 15, "HTTP/1.1 200 OK"), 0) << answers[0].first;
+    if (first == file)
+      EXPECT_TRUE(answers[0].second == big) << answers[0].second.size() << " bytes";
+    else
+      EXPECT_TRUE(json::parse(answers[0].second, nullptr, false)
+                      .contains(first == predict ? "total_time_s" : "status"))
+          << answers[0].second;
+    EXPECT_EQ(answers[1].first.compare(0, 15, "HTTP/1.1 200 OK"), 0) << answers[1].first;
+    EXPECT_EQ(answers[2].first.compare(0, 12, "HTTP/1.1 413"), 0) << answers[2].first;
+    char byte;
+    EXPECT_EQ(::recv(fd, &byte, 1, 0), 0) << "the connection ends after the refusal";
+    ::close(fd);
+  }
+}
+
 // HEAD is GET without the body, files and JSON alike; a method the path does
 // not take gets 405 with the ones it does.
 TEST_F(ServiceTest, HeadAnswersLikeGetWithoutTheBodyAnd405SaysWhatIsAllowed) {
