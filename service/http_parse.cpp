@@ -18,7 +18,7 @@ bool all_digits(const std::string& t) {
 
 RequestHead parse_request_head(const std::string& head) {
   RequestHead h;
-  bool first = true, seen_length = false;
+  bool first = true, seen_length = false, http11 = false;
   size_t pos = 0;
   while (pos <= head.size()) {
     size_t eol = head.find("\r\n", pos);
@@ -31,6 +31,7 @@ RequestHead parse_request_head(const std::string& head) {
     }
     if (first) {
       first = false;
+      http11 = line.size() >= 9 && line.compare(line.size() - 9, 9, " HTTP/1.1") == 0;
       const auto a = line.find(' ');
       const auto b = a == std::string::npos ? a : line.find(' ', a + 1);
       h.method = line.substr(0, a);
@@ -40,6 +41,12 @@ RequestHead parse_request_head(const std::string& head) {
     const auto colon = line.find(':');
     if (colon == std::string::npos) continue;
     std::string key = line.substr(0, colon), value = line.substr(colon + 1);
+    // Whitespace before the colon (RFC 9112 5.1: refused): "Content-Length :"
+    // is a length to some parsers and not to others.
+    if (!key.empty() && (key.back() == ' ' || key.back() == '\t')) {
+      h.bad_length = true;
+      return h;
+    }
     for (char& c : key) c = char(std::tolower((unsigned char)c));
     value.erase(0, value.find_first_not_of(" \t"));
     while (!value.empty() && (value.back() == ' ' || value.back() == '\t')) value.pop_back();
@@ -58,12 +65,17 @@ RequestHead parse_request_head(const std::string& head) {
     } else if (key == "transfer-encoding") {
       for (char& c : value) c = char(std::tolower((unsigned char)c));
       if (value.find("chunked") != std::string::npos) h.chunked = true;
+    } else if (key == "expect") {
+      for (char& c : value) c = char(std::tolower((unsigned char)c));
+      h.expects_continue = value == "100-continue";
     }
   }
+  // A 1.0 client does not know interim answers (RFC 9110 10.1.1).
+  h.expects_continue = h.expects_continue && http11;
   return h;
 }
 
-std::string without_unparsable_headers(const std::string& head) {
+std::string head_for_pistache(const std::string& head) {
   std::string out;
   size_t pos = 0;
   bool first = true;
@@ -78,8 +90,12 @@ std::string without_unparsable_headers(const std::string& head) {
       const std::string name = line.substr(0, colon);
       std::string value = line.substr(colon + 1);
       value.erase(0, value.find_first_not_of(" \t"));
+      std::string lower = name;
+      for (char& c : lower) c = char(std::tolower((unsigned char)c));
       auto& registry = Pistache::Http::Header::Registry::instance();
-      if (registry.isRegistered(name)) {
+      if (lower == "content-length") {
+        keep = false;
+      } else if (registry.isRegistered(name)) {
         try {
           registry.makeHeader(name)->parseRaw(value.data(), value.size());
         } catch (...) {

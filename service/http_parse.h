@@ -20,19 +20,23 @@ struct RequestHead {
   std::string cookies;          // the Cookie header's value
   uint64_t content_length = 0;  // 0 when absent
   bool chunked = false;         // Transfer-Encoding names chunked
-  // A Content-Length that is not a plain number, two that disagree, or a bare
-  // CR or LF inside the head (read differently by different parsers: refused).
+  bool expects_continue = false;  // HTTP/1.1 with Expect: 100-continue
+  // A Content-Length that is not a plain number, two that disagree, a bare
+  // CR or LF inside the head, or whitespace before a header's colon (read
+  // differently by different parsers: refused).
   bool bad_length = false;
 };
 RequestHead parse_request_head(const std::string& head);
 
-// The head without the header lines Pistache 0.0.5 would fail to parse.
-// Pistache parses the headers it knows (Content-Type, Accept, Host, ...) and
-// answers 415 or 400 for the whole request when one fails: a
-// `Content-Type: model/stl` upload (the registered type for STL) would be
-// refused. None of those headers steers a route of ours, so a line whose value
-// does not parse is dropped instead.
-std::string without_unparsable_headers(const std::string& head);
+// The head as the guard hands it to Pistache 0.0.5: without the header lines
+// Pistache would fail to parse, and without Content-Length (the guard keeps
+// the body itself; Pistache's parser walked a body a byte at a time on the
+// reactor thread). Pistache parses the headers it knows (Content-Type,
+// Accept, Host, ...) and answers 415 or 400 for the whole request when one
+// fails: a `Content-Type: model/stl` upload (the registered type for STL)
+// would be refused. None of those headers steers a route of ours, so a line
+// whose value does not parse is dropped instead.
+std::string head_for_pistache(const std::string& head);
 
 // A byte range of a file of `size` bytes from a Range header: first and last
 // byte. nullopt = answer the whole file (no header, a syntax we ignore, or

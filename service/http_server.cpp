@@ -46,6 +46,7 @@ struct Request {
   const Http::Request* http = nullptr;
   std::optional<User> user;
   std::string token;  // the session token the request came with
+  std::string body;   // as the guard kept it (Pistache's request has none)
   std::string query(const std::string& key) const {
     auto v = http->query().get(key);
     return v ? *v : std::string();
@@ -102,6 +103,9 @@ struct PeerGuard {
   std::string head;         // header bytes of the request being read
   uint64_t body_left = 0;   // body bytes of the current request still to come
   bool discarding = false;  // refused: everything after is dropped
+  std::string pending_head;  // a request's head (for Pistache) while its body comes
+  std::string body;          // that body so far
+  std::string handed_body;   // the body of the request being handed to the Router
   // Pistache 0.0.5 keys a queued write by the socket's descriptor, and closes
   // the descriptor when the client leaves; a write a pool thread queued as
   // the client left could meet that number given to the next connection
@@ -376,7 +380,7 @@ bool nests_deeper_than(const std::string& text, int limit) {
 
 // The body as JSON, or the 400 that says why not.
 std::optional<json> json_body(const Request& req, Response* error, bool allow_empty = false) {
-  const std::string& body = req.http->body();
+  const std::string& body = req.body;
   if (body.empty() && allow_empty) return json(nullptr);
   // No document of this API nests past a handful of levels.
   constexpr int kMaxDepth = 64;
@@ -515,8 +519,7 @@ std::vector<Route> make_routes(JobService* svc, const ServerOptions& opt) {
   });
   add_on_pool("PUT", "/api/v1/models/{id}/stl", Auth::kUser, [=](Request& q) {
     auto id = id_param(q, "id");
-    return id ? reply(svc->upload_stl(*q.user, *id, q.http->body()))
-              : error_response(404, "no such model");
+    return id ? reply(svc->upload_stl(*q.user, *id, q.body)) : error_response(404, "no such model");
   });
   add_on_pool("GET", "/api/v1/models/{id}/stl", Auth::kUser, [=](Request& q) {
     auto id = id_param(q, "id");
@@ -667,7 +670,7 @@ struct Shared {
   std::vector<Route> routes;
   std::unique_ptr<RequestPool> pool;  // runs the routes that compute (Runs::kOnPool)
   uint64_t max_upload = 0;
-  size_t max_request = 0;  // Pistache's limit: the largest body and the headers
+  size_t max_request = 0;  // Pistache's limit: a head (bodies stay in the guard)
 };
 
 // Tcp::Handler::associateTransport is private (Transport is its friend); the
@@ -707,12 +710,17 @@ class Router : public Http::Handler {
 
   void onRequest(const Http::Request& http, Http::ResponseWriter writer) override {
     auto guard = guard_of(writer.peer());
+    // The body the guard kept (it hands Pistache the head alone).
+    std::string body = guard ? std::move(guard->handed_body) : http.body();
     // A request pipelined behind one still being answered waits for it.
-    if (guard && !begin_answer(*guard, [&] { return later(http, std::move(writer), guard); }))
+    if (guard && !begin_answer(*guard, [&] {
+          return later(http, std::move(writer), guard, std::move(body));
+        }))
       return;
     // Most requests are answered here from the parser's request, with no
     // copies; one that goes to the pool is moved into holders.
     Dispatch d = dispatch(http);
+    d.req.body = std::move(body);
     const bool done = answer(d, http, writer, guard.get(), shared_->pool.get(),
                              [&] { return shared_for(http, std::move(writer), guard); });
     if (done && guard) answered(*guard);
@@ -729,8 +737,8 @@ class Router : public Http::Handler {
 
   // What an answer made after onRequest returns holds: the request (the
   // parser's, reassigned once onRequest returns, so moved out rather than
-  // copied: a copy of a 64 MiB upload's body held every connection of this
-  // reactor thread for 0.2-0.3 s in fresh pages), the writer, the guard.
+  // copied), the writer, the guard. The body is not in it: the guard keeps
+  // bodies, and the Dispatch's Request carries the body.
   struct Held {
     std::shared_ptr<const Http::Request> request;
     std::shared_ptr<Http::ResponseWriter> out;
@@ -745,9 +753,10 @@ class Router : public Http::Handler {
   // A request that waits behind another: answered by the closure, which says
   // whether its answer is all queued.
   std::function<bool()> later(const Http::Request& http, Http::ResponseWriter&& writer,
-                              const std::shared_ptr<PeerGuard>& guard) {
+                              const std::shared_ptr<PeerGuard>& guard, std::string&& body) {
     Held h = shared_for(http, std::move(writer), guard);
     auto d = std::make_shared<Dispatch>(dispatch(*h.request));
+    d->req.body = std::move(body);
     return [shared = shared_, h, d]() -> bool {
       return answer(*d, *h.request, *h.out, h.guard.get(), shared->pool.get(), [&] { return h; });
     };
@@ -920,9 +929,10 @@ class Router : public Http::Handler {
   std::shared_ptr<const Shared> shared_;
 };
 
-// What the endpoint runs: reads each request's head as it arrives and refuses
-// a body over its route's limit before Pistache's parser reserves it, then
-// hands the bytes to the Router. (Http::Handler's onInput is private, so the
+// What the endpoint runs: reads each request's head as it arrives, refuses a
+// body over its route's limit before anything holds it, keeps the body, and
+// hands the Router (through Pistache's parser) the head of each whole request
+// and the body beside it. (Http::Handler's onInput is private, so the
 // guard cannot call it as a base; the Router is a second handler that shares
 // this one's transport.)
 class Handler : public Http::Handler {
@@ -955,12 +965,19 @@ class Handler : public Http::Handler {
       return;
     }
     if (guard->discarding) return;
-    std::vector<std::string> forward;
+    std::vector<Whole> whole;
     std::string refusal;
-    inspect(*guard, buffer, len, &forward, &refusal);
-    for (const std::string& piece : forward)
-      if (!piece.empty())
-        static_cast<Tcp::Handler&>(*router_).onInput(piece.data(), piece.size(), peer);
+    inspect(*guard, buffer, len, peer, &whole, &refusal);
+    // One request a call: Pistache 0.0.5 parses one request a call and then
+    // drops what is left of its buffer (pipelined requests that arrived
+    // together went unanswered). Its body waits in the guard for the Router,
+    // which takes it as Pistache hands over the parsed head; one Pistache
+    // did not parse goes with the call.
+    for (Whole& w : whole) {
+      guard->handed_body = std::move(w.body);
+      static_cast<Tcp::Handler&>(*router_).onInput(w.head.data(), w.head.size(), peer);
+      std::string().swap(guard->handed_body);
+    }
     if (!refusal.empty()) refuse_in_turn(guard, peer, std::move(refusal));
   }
 
@@ -980,26 +997,32 @@ class Handler : public Http::Handler {
   }
 
  private:
-  // Reads request heads as they arrive. What the Router should see goes to
-  // *forward: body bytes as they come, a head once it is whole and cleaned of
-  // headers Pistache cannot parse. A request refused from its head leaves its
-  // answer in *refusal (the requests before it are forwarded; everything
-  // after it is dropped).
-  void inspect(PeerGuard& g, const char* buf, size_t len, std::vector<std::string>* forward,
-               std::string* refusal) {
-    // Each piece ends where a request ends (or the bytes do): Pistache 0.0.5
-    // parses one request a call and then drops what is left of its buffer,
-    // so pipelined requests that arrived together went unanswered.
-    const auto request_ends = [forward] { forward->emplace_back(); };
-    forward->emplace_back();
+  // A whole request as the Router gets it: its head (as Pistache should
+  // parse it) and its body, which the guard keeps (Pistache is never told
+  // of it).
+  struct Whole {
+    std::string head, body;
+  };
+
+  // Reads requests as they arrive: the whole ones go to *whole. A request
+  // refused from its head leaves its answer in *refusal (the requests before
+  // it are handed on; everything after it is dropped). A head that asks to
+  // hear it may send its body is told so (100 Continue) when nothing is
+  // answered before it.
+  void inspect(PeerGuard& g, const char* buf, size_t len, const std::shared_ptr<Tcp::Peer>& peer,
+               std::vector<Whole>* whole, std::string* refusal) {
     size_t i = 0;
     while (i < len) {
       if (g.body_left > 0) {
         const size_t take = size_t(std::min<uint64_t>(g.body_left, len - i));
-        forward->back().append(buf + i, take);
+        g.body.append(buf + i, take);
         g.body_left -= take;
         i += take;
-        if (g.body_left == 0) request_ends();
+        if (g.body_left == 0) {
+          whole->push_back({std::move(g.pending_head), std::move(g.body)});
+          g.pending_head.clear();
+          g.body.clear();
+        }
         continue;
       }
       const size_t before = g.head.size();
@@ -1016,7 +1039,9 @@ class Handler : public Http::Handler {
       g.head.clear();
       const RequestHead h = parse_request_head(head);
       if (h.bad_length) {
-        *refusal = refuse(g, 400, "Bad Request", "a malformed Content-Length");
+        *refusal = refuse(g, 400, "Bad Request",
+                          "a malformed head (its Content-Length, a bare CR or LF, or a space "
+                          "before a colon)");
         return;
       }
       if (h.chunked) {
@@ -1030,10 +1055,33 @@ class Handler : public Http::Handler {
                               " bytes; this route takes at most " + std::to_string(limit));
         return;
       }
-      forward->back().append(without_unparsable_headers(head));
-      forward->back().append("\r\n\r\n");
+      std::string clean = head_for_pistache(head) + "\r\n\r\n";
       g.body_left = h.content_length;
-      if (g.body_left == 0) request_ends();
+      if (g.body_left == 0) {
+        whole->push_back({std::move(clean), {}});
+        continue;
+      }
+      g.pending_head = std::move(clean);
+      if (h.expects_continue && whole->empty()) may_continue(g, peer);
+    }
+  }
+
+  // Tells a client waiting to send its body to go on (curl waits a second
+  // for this before an upload of over 1 MiB), unless an answer to an earlier
+  // request of the connection is still to come: the interim answer would be
+  // read as that request's. Then the client sends when its wait ends.
+  static void may_continue(PeerGuard& g, const std::shared_ptr<Tcp::Peer>& peer) {
+    {
+      std::lock_guard<std::mutex> lock(g.order_mu);
+      if (g.answering) return;
+    }
+    std::lock_guard<std::recursive_mutex> lock(g.send_mu);
+    if (g.closed) return;
+    static const std::string kContinue = "HTTP/1.1 100 Continue\r\n\r\n";
+    try {
+      std::string text = kContinue;
+      peer->send(RawBuffer(std::move(text), kContinue.size()));
+    } catch (const std::exception&) {  // the peer went as it was written
     }
   }
 
@@ -1168,10 +1216,9 @@ Expected<std::unique_ptr<Server>> Server::start(JobService* service, const Serve
   try {
     Address addr(options.host, Port(options.port));
     impl->endpoint = std::make_unique<Http::Endpoint>(addr);
-    // Pistache's own limit covers headers and body together; the guard holds
-    // each route to its own body limit first.
-    shared->max_request = size_t(std::max<uint64_t>(shared->max_upload, options.max_json_bytes)) +
-                          kMaxHeaderBytes;
+    // Pistache's own limit covers headers and body together; it sees heads
+    // alone (the guard holds each route to its body limit and keeps the body).
+    shared->max_request = 2 * kMaxHeaderBytes;
     const size_t max_request = shared->max_request;
     auto opts = Http::Endpoint::options()
                     .threads(options.threads)

@@ -1019,6 +1019,58 @@ TEST_F(ServiceTest, ARefusalPipelinedBehindOtherRequestsComesAfterTheirAnswers) 
   }
 }
 
+// An upload that asks whether to send its body (Expect: 100-continue, as curl
+// does past 1 MiB; it waited a second for an answer that never came) is told
+// to go on at once, then answered; one over the limit is refused before its
+// body is sent.
+TEST_F(ServiceTest, AnUploadThatAsksToGoOnIsToldToOrRefusedBeforeItsBody) {
+  Client c = client();
+  c.sign_up("curly");
+  json model = c.call_json("POST", "/api/v1/models", {{"name", "asks"}, {"kind", "stl"}}, 201);
+  const std::string stl = "/api/v1/models/" + std::to_string(model["id"].get<int>()) + "/stl";
+  const std::string body =
+      "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\n"
+      "endloop\nendfacet\nendsolid t\n";
+  const auto head = [&](size_t length) {
+    return "PUT " + stl + " HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " + c.token +
+           "\r\nContent-Type: model/stl\r\nExpect: 100-continue\r\nContent-Length: " +
+           std::to_string(length) + "\r\n\r\n";
+  };
+  const auto open = [&] {
+    const int fd = connect_loopback(server_->port());
+    timeval tv{20, 0};
+    ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    return fd;
+  };
+  const auto read_some = [](int fd) {
+    char buf[4096];
+    const ssize_t r = ::recv(fd, buf, sizeof buf, 0);
+    return r > 0 ? std::string(buf, size_t(r)) : std::string();
+  };
+  int fd = open();
+  ASSERT_GE(fd, 0);
+  std::string h = head(body.size());
+  ASSERT_EQ(::send(fd, h.data(), h.size(), MSG_NOSIGNAL), ssize_t(h.size()));
+  EXPECT_EQ(read_some(fd), "HTTP/1.1 100 Continue\r\n\r\n");
+  ASSERT_EQ(::send(fd, body.data(), body.size(), MSG_NOSIGNAL), ssize_t(body.size()));
+  auto answers = read_answers(fd, 1);
+  ASSERT_EQ(answers.size(), 1u);
+  EXPECT_EQ(answers[0].first.compare(0, 15, "HTTP/1.1 200 OK"), 0) << answers[0].first;
+  EXPECT_EQ(json::parse(answers[0].second, nullptr, false).value("triangles", 0), 1)
+      << answers[0].second;
+  ::close(fd);
+  EXPECT_EQ(c.call("GET", stl).body, body);
+
+  fd = open();
+  ASSERT_GE(fd, 0);
+  h = head(size_t(1) << 40);
+  ASSERT_EQ(::send(fd, h.data(), h.size(), MSG_NOSIGNAL), ssize_t(h.size()));
+  answers = read_answers(fd, 1);
+  ASSERT_EQ(answers.size(), 1u);
+  EXPECT_EQ(answers[0].first.compare(0, 12, "HTTP/1.1 413"), 0) << answers[0].first;
+  ::close(fd);
+}
+
 // HEAD is GET without the body, files and JSON alike; a method the path does
 // not take gets 405 with the ones it does.
 TEST_F(ServiceTest, HeadAnswersLikeGetWithoutTheBodyAnd405SaysWhatIsAllowed) {
