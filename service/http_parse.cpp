@@ -112,6 +112,66 @@ std::string head_for_pistache(const std::string& head) {
   return out;
 }
 
+RequestFramer::Refusal RequestFramer::feed(const char* buf, size_t len, Limit limit,
+                                           const void* context, std::vector<Whole>* whole,
+                                           bool* ask_continue) {
+  *ask_continue = false;
+  const auto refuse = [this](int code, const char* reason, std::string message) {
+    refused_ = true;
+    head_.clear();
+    return Refusal{code, reason, std::move(message)};
+  };
+  size_t i = 0;
+  while (i < len && !refused_) {
+    if (body_left_ > 0) {
+      const size_t take = size_t(std::min<uint64_t>(body_left_, len - i));
+      body_.append(buf + i, take);
+      body_left_ -= take;
+      i += take;
+      if (body_left_ == 0) {
+        whole->push_back({std::move(pending_head_), std::move(body_)});
+        pending_head_.clear();
+        body_.clear();
+        *ask_continue = false;
+      }
+      continue;
+    }
+    const size_t before = head_.size();
+    // At most a head's worth: the rest of the read is its body and the next
+    // requests (a head that goes on past it is refused below).
+    head_.append(buf + i, std::min(len - i, kMaxHeadBytes + 8));
+    const size_t from = before >= 3 ? before - 3 : 0;
+    const size_t end = head_.find("\r\n\r\n", from);
+    // Too long whether or not its end came in this read.
+    if (std::min(end, head_.size()) > kMaxHeadBytes)
+      return refuse(431, "Request Header Fields Too Large", "the headers are too large");
+    if (end == std::string::npos) break;
+    const std::string head = head_.substr(0, end);
+    i += end + 4 - before;
+    head_.clear();
+    const RequestHead h = parse_request_head(head);
+    if (h.bad_length)
+      return refuse(400, "Bad Request",
+                    "a malformed head (its Content-Length, a bare CR or LF, or a space before "
+                    "a colon)");
+    if (h.chunked) return refuse(411, "Length Required", "send the body with a Content-Length");
+    const uint64_t most = limit(h, context);
+    if (h.content_length > most)
+      return refuse(413, "Payload Too Large",
+                    "the body is " + std::to_string(h.content_length) +
+                        " bytes; this route takes at most " + std::to_string(most));
+    std::string clean = head_for_pistache(head) + "\r\n\r\n";
+    body_left_ = h.content_length;
+    if (body_left_ == 0) {
+      whole->push_back({std::move(clean), {}});
+      continue;
+    }
+    pending_head_ = std::move(clean);
+    *ask_continue = h.expects_continue && whole->empty();
+  }
+  return {};
+}
+
 FileValidators file_validators(uint64_t size, int64_t mtime_s, int64_t mtime_ns) {
   char tag[64];
   std::snprintf(tag, sizeof tag, "\"%llx-%llx\"", static_cast<unsigned long long>(size),

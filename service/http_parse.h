@@ -38,6 +38,42 @@ RequestHead parse_request_head(const std::string& head);
 // whose value does not parse is dropped instead.
 std::string head_for_pistache(const std::string& head);
 
+// A connection's bytes cut into whole requests, whatever the reads'
+// boundaries: each request's head (as head_for_pistache gives it, with its
+// blank line) and its body, counted by Content-Length. The guard keeps the
+// body; Pistache parses the head alone. A head that fails the checks refuses
+// its request and everything after it (the framer then takes nothing more).
+class RequestFramer {
+ public:
+  struct Whole {
+    std::string head, body;
+  };
+  struct Refusal {
+    int code = 0;  // 0: none
+    const char* reason = "";
+    std::string message;
+  };
+  // The largest body the request of a head may carry.
+  using Limit = uint64_t (*)(const RequestHead&, const void* context);
+  static constexpr size_t kMaxHeadBytes = 16 << 10;  // 431 beyond
+
+  // Appends the requests these bytes complete to *whole; returns a refusal
+  // (code != 0) when a head is refused. *ask_continue: the last head read
+  // here asks to hear whether to send its body (Expect: 100-continue), no
+  // request came whole before it in these bytes, and its body is still to
+  // come.
+  Refusal feed(const char* buf, size_t len, Limit limit, const void* context,
+               std::vector<Whole>* whole, bool* ask_continue);
+  bool refused() const { return refused_; }
+
+ private:
+  std::string head_;          // header bytes of the request being read
+  std::string pending_head_;  // a whole head (for Pistache) while its body comes
+  std::string body_;          // that body so far
+  uint64_t body_left_ = 0;    // its bytes still to come
+  bool refused_ = false;
+};
+
 // A byte range of a file of `size` bytes from a Range header: first and last
 // byte. nullopt = answer the whole file (no header, a syntax we ignore, or
 // several ranges, which RFC 9110 lets a server answer whole); *unsatisfiable

@@ -35,7 +35,6 @@ using namespace Pistache;
 namespace {
 
 constexpr const char* kSessionCookie = "collido_session";
-constexpr size_t kMaxHeaderBytes = 16 << 10;
 
 // ---- requests and responses -------------------------------------------------
 
@@ -100,12 +99,8 @@ Response error_response(int status, const std::string& message) {
 // Per connection: where the guard is in the byte stream of its requests, and
 // whether the connection is still there for a pool thread's answer.
 struct PeerGuard {
-  std::string head;         // header bytes of the request being read
-  uint64_t body_left = 0;   // body bytes of the current request still to come
-  bool discarding = false;  // refused: everything after is dropped
-  std::string pending_head;  // a request's head (for Pistache) while its body comes
-  std::string body;          // that body so far
-  std::string handed_body;   // the body of the request being handed to the Router
+  RequestFramer framer;     // the connection's bytes, cut into whole requests
+  std::string handed_body;  // the body of the request being handed to the Router
   // Pistache 0.0.5 keys a queued write by the socket's descriptor, and closes
   // the descriptor when the client leaves; a write a pool thread queued as
   // the client left could meet that number given to the next connection
@@ -964,21 +959,23 @@ class Handler : public Http::Handler {
       static_cast<Tcp::Handler&>(*router_).onInput(buffer, len, peer);
       return;
     }
-    if (guard->discarding) return;
-    std::vector<Whole> whole;
-    std::string refusal;
-    inspect(*guard, buffer, len, peer, &whole, &refusal);
+    if (guard->framer.refused()) return;  // everything after a refusal is dropped
+    std::vector<RequestFramer::Whole> whole;
+    bool ask_continue = false;
+    const RequestFramer::Refusal refusal =
+        guard->framer.feed(buffer, len, &Handler::limit_for, this, &whole, &ask_continue);
     // One request a call: Pistache 0.0.5 parses one request a call and then
     // drops what is left of its buffer (pipelined requests that arrived
     // together went unanswered). Its body waits in the guard for the Router,
     // which takes it as Pistache hands over the parsed head; one Pistache
     // did not parse goes with the call.
-    for (Whole& w : whole) {
+    for (RequestFramer::Whole& w : whole) {
       guard->handed_body = std::move(w.body);
       static_cast<Tcp::Handler&>(*router_).onInput(w.head.data(), w.head.size(), peer);
       std::string().swap(guard->handed_body);
     }
-    if (!refusal.empty()) refuse_in_turn(guard, peer, std::move(refusal));
+    if (ask_continue) may_continue(*guard, peer);
+    if (refusal.code) refuse_in_turn(guard, peer, refusal_text(refusal));
   }
 
   void onDisconnection(const std::shared_ptr<Tcp::Peer>& peer) override {
@@ -997,75 +994,6 @@ class Handler : public Http::Handler {
   }
 
  private:
-  // A whole request as the Router gets it: its head (as Pistache should
-  // parse it) and its body, which the guard keeps (Pistache is never told
-  // of it).
-  struct Whole {
-    std::string head, body;
-  };
-
-  // Reads requests as they arrive: the whole ones go to *whole. A request
-  // refused from its head leaves its answer in *refusal (the requests before
-  // it are handed on; everything after it is dropped). A head that asks to
-  // hear it may send its body is told so (100 Continue) when nothing is
-  // answered before it.
-  void inspect(PeerGuard& g, const char* buf, size_t len, const std::shared_ptr<Tcp::Peer>& peer,
-               std::vector<Whole>* whole, std::string* refusal) {
-    size_t i = 0;
-    while (i < len) {
-      if (g.body_left > 0) {
-        const size_t take = size_t(std::min<uint64_t>(g.body_left, len - i));
-        g.body.append(buf + i, take);
-        g.body_left -= take;
-        i += take;
-        if (g.body_left == 0) {
-          whole->push_back({std::move(g.pending_head), std::move(g.body)});
-          g.pending_head.clear();
-          g.body.clear();
-        }
-        continue;
-      }
-      const size_t before = g.head.size();
-      g.head.append(buf + i, len - i);
-      const size_t from = before >= 3 ? before - 3 : 0;
-      const size_t end = g.head.find("\r\n\r\n", from);
-      if (end == std::string::npos) {
-        if (g.head.size() > kMaxHeaderBytes)
-          *refusal = refuse(g, 431, "Request Header Fields Too Large", "the headers are too large");
-        return;
-      }
-      const std::string head = g.head.substr(0, end);
-      i += end + 4 - before;
-      g.head.clear();
-      const RequestHead h = parse_request_head(head);
-      if (h.bad_length) {
-        *refusal = refuse(g, 400, "Bad Request",
-                          "a malformed head (its Content-Length, a bare CR or LF, or a space "
-                          "before a colon)");
-        return;
-      }
-      if (h.chunked) {
-        *refusal = refuse(g, 411, "Length Required", "send the body with a Content-Length");
-        return;
-      }
-      const uint64_t limit = limit_for(h);
-      if (h.content_length > limit) {
-        *refusal = refuse(g, 413, "Payload Too Large",
-                          "the body is " + std::to_string(h.content_length) +
-                              " bytes; this route takes at most " + std::to_string(limit));
-        return;
-      }
-      std::string clean = head_for_pistache(head) + "\r\n\r\n";
-      g.body_left = h.content_length;
-      if (g.body_left == 0) {
-        whole->push_back({std::move(clean), {}});
-        continue;
-      }
-      g.pending_head = std::move(clean);
-      if (h.expects_continue && whole->empty()) may_continue(g, peer);
-    }
-  }
-
   // Tells a client waiting to send its body to go on (curl waits a second
   // for this before an upload of over 1 MiB), unless an answer to an earlier
   // request of the connection is still to come: the interim answer would be
@@ -1088,13 +1016,15 @@ class Handler : public Http::Handler {
   // The largest body a request may carry: an STL upload's from a signed-in
   // user (checked here, before the body is buffered: anyone else would make
   // the server hold the upload limit a connection), else a JSON document's.
-  uint64_t limit_for(const RequestHead& h) const {
+  // (The framer's Limit: context is the Handler.)
+  static uint64_t limit_for(const RequestHead& h, const void* context) {
+    const Shared& shared = *static_cast<const Handler*>(context)->shared_;
     const auto q = h.target.find('?');
     const auto parts = split_path(h.target.substr(0, q));
     if (h.method == "PUT" && parts.size() == 5 && parts[0] == "api" && parts[1] == "v1" &&
-        parts[2] == "models" && parts[4] == "stl" && shared_->service->authenticate(token_of(h)))
-      return shared_->max_upload;
-    return shared_->options.max_json_bytes;
+        parts[2] == "models" && parts[4] == "stl" && shared.service->authenticate(token_of(h)))
+      return shared.max_upload;
+    return shared.options.max_json_bytes;
   }
   // The session a request head names: its Bearer token, else its session cookie.
   static std::string token_of(const RequestHead& h) {
@@ -1112,13 +1042,10 @@ class Handler : public Http::Handler {
     return {};
   }
 
-  // The refusal's answer; from here on the connection's bytes are dropped.
-  static std::string refuse(PeerGuard& g, int code, const char* reason,
-                            const std::string& message) {
-    g.discarding = true;
-    g.head.clear();
-    const std::string body = error_reply(code, message).body.dump() + "\n";
-    return "HTTP/1.1 " + std::to_string(code) + " " + reason +
+  // A refusal's answer (the connection closes after it).
+  static std::string refusal_text(const RequestFramer::Refusal& r) {
+    const std::string body = error_reply(r.code, r.message).body.dump() + "\n";
+    return "HTTP/1.1 " + std::to_string(r.code) + " " + r.reason +
            "\r\nContent-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) +
            "\r\nConnection: close\r\n\r\n" + body;
   }
@@ -1218,7 +1145,7 @@ Expected<std::unique_ptr<Server>> Server::start(JobService* service, const Serve
     impl->endpoint = std::make_unique<Http::Endpoint>(addr);
     // Pistache's own limit covers headers and body together; it sees heads
     // alone (the guard holds each route to its body limit and keeps the body).
-    shared->max_request = 2 * kMaxHeaderBytes;
+    shared->max_request = 2 * RequestFramer::kMaxHeadBytes;
     const size_t max_request = shared->max_request;
     auto opts = Http::Endpoint::options()
                     .threads(options.threads)

@@ -68,6 +68,98 @@ TEST(HttpParse, HeadersPistacheCannotParseAndTheLengthAreDroppedAndTheRestKept) 
   EXPECT_EQ(head_for_pistache(json_head), json_head);
 }
 
+// The guard's framing: a connection's pipelined requests come out whole and
+// the same whatever the reads' boundaries (two reads split at every byte, and
+// one byte a read), each head without its Content-Length, each body exact.
+TEST(RequestFramer, CutsRequestsTheSameWhereverTheReadsEnd) {
+  const std::string stream =
+      "GET /a HTTP/1.1\r\nHost: x\r\n\r\n"
+      "POST /b HTTP/1.1\r\nContent-Length: 10\r\n\r\n0123456789"
+      "PUT /c HTTP/1.1\r\ncontent-length: 300\r\nExpect: 100-continue\r\n\r\n" +
+      std::string(300, 'z') + "GET /d HTTP/1.1\r\n\r\n";
+  const auto limit = [](const RequestHead&, const void*) -> uint64_t { return 1000; };
+  using Whole = RequestFramer::Whole;
+  const auto feed_in = [&](const std::vector<size_t>& cuts) {
+    RequestFramer f;
+    std::vector<Whole> all;
+    size_t at = 0;
+    for (size_t cut : cuts) {
+      std::vector<Whole> got;
+      bool ask = false;
+      EXPECT_EQ(f.feed(stream.data() + at, cut - at, limit, nullptr, &got, &ask).code, 0);
+      for (Whole& w : got) all.push_back(std::move(w));
+      at = cut;
+    }
+    return all;
+  };
+  const std::vector<Whole> once = feed_in({stream.size()});
+  ASSERT_EQ(once.size(), 4u);
+  EXPECT_EQ(once[0].head, "GET /a HTTP/1.1\r\nHost: x\r\n\r\n");
+  EXPECT_EQ(once[1].head, "POST /b HTTP/1.1\r\n\r\n");
+  EXPECT_EQ(once[1].body, "0123456789");
+  EXPECT_EQ(once[2].head.find("ength"), std::string::npos) << once[2].head;
+  EXPECT_EQ(once[2].body, std::string(300, 'z'));
+  EXPECT_EQ(once[3].head, "GET /d HTTP/1.1\r\n\r\n");
+  EXPECT_TRUE(once[3].body.empty());
+  const auto same = [&](const std::vector<Whole>& got, const std::string& how) {
+    ASSERT_EQ(got.size(), once.size()) << how;
+    for (size_t k = 0; k < got.size(); ++k) {
+      EXPECT_EQ(got[k].head, once[k].head) << how;
+      EXPECT_EQ(got[k].body, once[k].body) << how;
+    }
+  };
+  for (size_t cut = 1; cut < stream.size(); ++cut)
+    same(feed_in({cut, stream.size()}), "split at " + std::to_string(cut));
+  std::vector<size_t> bytes;
+  for (size_t k = 1; k <= stream.size(); ++k) bytes.push_back(k);
+  same(feed_in(bytes), "a byte a read");
+}
+
+// A head over its limit, chunked, malformed or too long refuses its request
+// and everything after it; the requests before it come out whole.
+TEST(RequestFramer, ARefusedHeadEndsTheConnectionsRequests) {
+  const auto limit = [](const RequestHead&, const void*) -> uint64_t { return 5; };
+  const std::string ok = "GET /a HTTP/1.1\r\n\r\n";
+  const struct {
+    std::string head;
+    int code;
+  } cases[] = {{"POST /b HTTP/1.1\r\nContent-Length: 6\r\n\r\n", 413},
+               {"POST /b HTTP/1.1\r\nTransfer-Encoding: chunked\r\n\r\n", 411},
+               {"POST /b HTTP/1.1\r\nContent-Length: 5x\r\n\r\n", 400},
+               {"GET /b HTTP/1.1\r\nX: " + std::string(RequestFramer::kMaxHeadBytes, 'a'), 431}};
+  for (const auto& c : cases) {
+    RequestFramer f;
+    std::vector<RequestFramer::Whole> got;
+    bool ask = false;
+    const std::string bytes = ok + c.head + ok;
+    EXPECT_EQ(f.feed(bytes.data(), bytes.size(), limit, nullptr, &got, &ask).code, c.code);
+    EXPECT_TRUE(f.refused());
+    ASSERT_EQ(got.size(), 1u) << c.code;
+    EXPECT_EQ(got[0].head, ok);
+    got.clear();
+    EXPECT_EQ(f.feed(ok.data(), ok.size(), limit, nullptr, &got, &ask).code, 0);
+    EXPECT_TRUE(got.empty()) << "nothing after a refusal";
+  }
+}
+
+// Expect: 100-continue is passed on for a head whose body is still to come,
+// first of its read; not when the body came with it or a request before it.
+TEST(RequestFramer, AsksToContinueOnlyForTheFirstHeadStillWaitingForItsBody) {
+  const auto limit = [](const RequestHead&, const void*) -> uint64_t { return 100; };
+  const std::string asks = "PUT /m HTTP/1.1\r\nExpect: 100-continue\r\nContent-Length: 4\r\n\r\n";
+  const auto ask_after = [&](const std::string& bytes) {
+    RequestFramer f;
+    std::vector<RequestFramer::Whole> got;
+    bool ask = false;
+    f.feed(bytes.data(), bytes.size(), limit, nullptr, &got, &ask);
+    return ask;
+  };
+  EXPECT_TRUE(ask_after(asks));
+  EXPECT_FALSE(ask_after(asks + "abcd"));
+  EXPECT_FALSE(ask_after("GET / HTTP/1.1\r\n\r\n" + asks));
+  EXPECT_FALSE(ask_after("PUT /m HTTP/1.1\r\nContent-Length: 4\r\n\r\n"));
+}
+
 TEST(HttpParse, RangesWithinTheFileOrWhole) {
   bool unsat = false;
   using R = std::pair<uint64_t, uint64_t>;
