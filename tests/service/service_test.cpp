@@ -913,6 +913,16 @@ TEST_F(ServiceTest, RequestsThatComputeLeaveTheReactorFreeAndABusyPoolSays503) {
   }
 }
 
+// A prediction's request as bytes on the wire (computed on the pool), and a
+// health check's (answered on the reactor thread), for the pipelining tests.
+std::string predict_request(const Client& c) {
+  const std::string job = tiny_job("wall1", 400, 1.0).dump();
+  return "POST /api/v1/predict HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " + c.token +
+         "\r\nContent-Type: application/json\r\nContent-Length: " + std::to_string(job.size()) +
+         "\r\n\r\n" + job;
+}
+const char* const kHealthRequest = "GET /api/v1/health HTTP/1.1\r\nHost: x\r\n\r\n";
+
 // Answers go out in the order their requests came, to a client that
 // pipelines them (HTTP/1.1): a prediction (computed on the pool) before a
 // health check (answered on the reactor thread), and a file sent in slices
@@ -921,12 +931,7 @@ TEST_F(ServiceTest, RequestsThatComputeLeaveTheReactorFreeAndABusyPoolSays503) {
 TEST_F(ServiceTest, PipelinedRequestsAreAnsweredInOrder) {
   Client c = client();
   c.sign_up("piper");
-  const std::string job = tiny_job("wall1", 400, 1.0).dump();
-  const std::string predict =
-      "POST /api/v1/predict HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " + c.token +
-      "\r\nContent-Type: application/json\r\nContent-Length: " + std::to_string(job.size()) +
-      "\r\n\r\n" + job;
-  const std::string health = "GET /api/v1/health HTTP/1.1\r\nHost: x\r\n\r\n";
+  const std::string predict = predict_request(c), health = kHealthRequest;
   const auto send_all = [](int fd, const std::string& bytes) {
     timeval tv{20, 0};
     ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
@@ -980,12 +985,7 @@ TEST_F(ServiceTest, PipelinedRequestsAreAnsweredInOrder) {
 TEST_F(ServiceTest, ARefusalPipelinedBehindOtherRequestsComesAfterTheirAnswers) {
   Client c = client();
   c.sign_up("piper");
-  const std::string job = tiny_job("wall1", 400, 1.0).dump();
-  const std::string predict =
-      "POST /api/v1/predict HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " + c.token +
-      "\r\nContent-Type: application/json\r\nContent-Length: " + std::to_string(job.size()) +
-      "\r\n\r\n" + job;
-  const std::string health = "GET /api/v1/health HTTP/1.1\r\nHost: x\r\n\r\n";
+  const std::string predict = predict_request(c), health = kHealthRequest;
   const std::string too_big =
       "POST /api/v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Length: 99999999999\r\n\r\n";
   const std::string web = dir_ + "/web";
