@@ -119,11 +119,16 @@ class CudaBackend {
   };
 
   static constexpr bool kHostThreads = false;
+  // parallel_max_later's answer comes while later work runs: the host then
+  // waits on the copy of one number, not on an idle device (sim/dynamics_pipeline.h).
+  static constexpr bool kMaxLater = true;
   void set_pool(ThreadPool*) {}  // the GPU needs no host threads
   int threads() const { return 0; }
 
   ~CudaBackend() {
     if (temp_) cudaFree(temp_);
+    if (max_host_) cudaFreeHost(max_host_);
+    if (max_done_) cudaEventDestroy(max_done_);
   }
 
   template <class T>
@@ -265,6 +270,38 @@ class CudaBackend {
     std::memcpy(&v, &bits, sizeof v);
     return v;
   }
+  // parallel_max without waiting: the largest value goes to host memory as
+  // the device gets to it; max_later_result() waits for it. Work launched in
+  // between runs meanwhile.
+  template <class F>
+  void parallel_max_later(size_t n, F f) {
+    max_later_n_ = n;
+    if (n == 0 || !ok_) return;
+    if (!max_host_ &&
+        !check(cudaMallocHost(reinterpret_cast<void**>(&max_host_), sizeof(unsigned long long)),
+               "cudaMallocHost"))
+      return;
+    if (!max_done_ && !check(cudaEventCreateWithFlags(&max_done_, cudaEventDisableTiming), "event"))
+      return;
+    resize(max_bits_, 1);
+    check(cudaMemsetAsync(max_bits_.data(), 0, sizeof(unsigned long long)), "memset");
+    constexpr uint32_t kBlock = 256;
+    const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
+    cuda_detail::for_each_max_kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f,
+                                                         max_bits_.data());
+    check(cudaGetLastError(), "kernel launch");
+    check(cudaMemcpyAsync(max_host_, max_bits_.data(), sizeof(unsigned long long),
+                          cudaMemcpyDeviceToHost),
+          "copy");
+    check(cudaEventRecord(max_done_), "event");
+  }
+  double max_later_result() {
+    if (max_later_n_ == 0 || !ok_ || !max_host_ || !max_done_) return 0;
+    if (!check(cudaEventSynchronize(max_done_), "event")) return 0;
+    double v = 0;
+    std::memcpy(&v, max_host_, sizeof v);
+    return v;
+  }
   double reduce_max(const double* d, size_t n) {
     if (n == 0) return 0;
     resize(scalar_, 1);
@@ -387,6 +424,9 @@ class CudaBackend {
   Buffer<uint64_t> seg_cell_;
   Buffer<double> scalar_;
   Buffer<unsigned long long> max_bits_;  // parallel_max's result, as the bits of a double
+  unsigned long long* max_host_ = nullptr;  // parallel_max_later's, in pinned host memory
+  cudaEvent_t max_done_ = nullptr;          // recorded when it is there
+  size_t max_later_n_ = 0;
   uint32_t sms_ = 0;                      // the device's SMs (sm_count)
 };
 
