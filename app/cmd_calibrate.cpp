@@ -58,7 +58,9 @@ const std::vector<FlagSpec>& calibrate_flags() {
        "fewer particles keeping them within ten times the usual work (default 0)"},
       {"meshes", true,
        "with --jobs: folder of the sweep's STL walls (default tests/data/meshes, if there)"},
-      {"work", true, "with --jobs: folder for the jobs' run directories (default OUT.work)"},
+      {"work", true,
+       "with --jobs: folder for the jobs' run directories (default OUT.work; one the sweep makes "
+       "goes when it ends)"},
       {"no-render", false, "with --jobs: no rendered jobs (a build without a renderer)"},
       {"help", false, "show this help"},
   };

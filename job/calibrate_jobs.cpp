@@ -449,6 +449,25 @@ Status validate(const JobSweepSpec& s) {
 
 Expected<CalibrateSummary> calibrate_jobs(const JobSweepSpec& spec, const CalibrateHooks& hooks) {
   if (Status s = validate(spec); !s) return s;
+  // What the sweep leaves in its work folder goes when it ends, however it
+  // ends: the last job's spec and run folder, and (a folder it made, whole)
+  // the jobs' output, whose failures the notes have said. A folder that was
+  // there keeps the rest of what it held.
+  std::error_code ec;
+  const bool made = !fs::exists(spec.work_dir, ec);
+  struct Tidy {
+    const std::string& dir;
+    bool made;
+    ~Tidy() {
+      std::error_code e;
+      if (made) {
+        fs::remove_all(dir, e);
+      } else {
+        fs::remove(dir + "/job.json", e);
+        fs::remove_all(dir + "/run", e);
+      }
+    }
+  } tidy{spec.work_dir, made};
   try {
     return run_sweep(spec, hooks);
   } catch (const std::bad_alloc&) {

@@ -37,7 +37,7 @@ struct JobSweepSpec {
   // hole from tests/data/meshes); "" or missing = parametric walls only.
   std::string mesh_dir;
   std::string out_path;    // job log CSV, rewritten (whole, renamed into place) after every job
-  std::string work_dir;    // where run directories are made and removed again
+  std::string work_dir;    // where run directories are made; tidied when the sweep ends
   std::string executable;  // the `collidoscope` binary each job is started from
 };
 

@@ -159,6 +159,7 @@ TEST(CmdCalibrate, JobSweepTrainAndPredictAScene) {
   auto rows = job::read_job_log(log);
   ASSERT_TRUE(rows) << rows.status().message();
   EXPECT_GE(rows->size(), 1u);
+  EXPECT_FALSE(std::filesystem::exists(work)) << "the sweep's own work folder goes with it";
 
   testing::internal::CaptureStdout();
   const int trained = cmd_gvm({"train", "--logs", std::string(COLLIDO_SOURCE_DIR) +
