@@ -706,7 +706,7 @@ class Router : public Http::Handler {
   void onRequest(const Http::Request& http, Http::ResponseWriter writer) override {
     auto guard = guard_of(writer.peer());
     // The body the guard kept (it hands Pistache the head alone).
-    std::string body = guard ? std::move(guard->handed_body) : http.body();
+    std::string body = guard ? std::move(guard->handed_body) : std::string();
     // A request pipelined behind one still being answered waits for it.
     if (guard && !begin_answer(*guard, [&] {
           return later(http, std::move(writer), guard, std::move(body));
@@ -955,11 +955,8 @@ class Handler : public Http::Handler {
   void onInput(const char* buffer, size_t len, const std::shared_ptr<Tcp::Peer>& peer) override {
     associate();
     auto guard = std::static_pointer_cast<PeerGuard>(peer->tryGetData("collido-guard"));
-    if (!guard) {
-      static_cast<Tcp::Handler&>(*router_).onInput(buffer, len, peer);
-      return;
-    }
-    if (guard->framer.refused()) return;  // everything after a refusal is dropped
+    // onConnection gave it one; bytes that never passed the guard go nowhere.
+    if (!guard || guard->framer.refused()) return;  // after a refusal everything is dropped
     std::vector<RequestFramer::Whole> whole;
     bool ask_continue = false;
     const RequestFramer::Refusal refusal =

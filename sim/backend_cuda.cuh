@@ -257,18 +257,10 @@ class CudaBackend {
   template <class F>
   double parallel_max(size_t n, F f) {
     if (n == 0 || !ok_) return 0;
-    resize(max_bits_, 1);
-    check(cudaMemsetAsync(max_bits_.data(), 0, sizeof(unsigned long long)), "memset");
-    constexpr uint32_t kBlock = 256;
-    const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
-    cuda_detail::for_each_max_kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f,
-                                                          max_bits_.data());
-    check(cudaGetLastError(), "kernel launch");
+    launch_max(n, f);
     unsigned long long bits = 0;
     to_host(&bits, max_bits_.data(), sizeof bits);
-    double v = 0;
-    std::memcpy(&v, &bits, sizeof v);
-    return v;
+    return bits_as_double(bits);
   }
   // parallel_max without waiting: the largest value goes to host memory as
   // the device gets to it; max_later_result() waits for it. Work launched in
@@ -283,13 +275,7 @@ class CudaBackend {
       return;
     if (!max_done_ && !check(cudaEventCreateWithFlags(&max_done_, cudaEventDisableTiming), "event"))
       return;
-    resize(max_bits_, 1);
-    check(cudaMemsetAsync(max_bits_.data(), 0, sizeof(unsigned long long)), "memset");
-    constexpr uint32_t kBlock = 256;
-    const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
-    cuda_detail::for_each_max_kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f,
-                                                         max_bits_.data());
-    check(cudaGetLastError(), "kernel launch");
+    launch_max(n, f);
     check(cudaMemcpyAsync(max_host_, max_bits_.data(), sizeof(unsigned long long),
                           cudaMemcpyDeviceToHost),
           "copy");
@@ -298,9 +284,7 @@ class CudaBackend {
   double max_later_result() {
     if (max_later_n_ == 0 || !ok_ || !max_host_ || !max_done_) return 0;
     if (!check(cudaEventSynchronize(max_done_), "event")) return 0;
-    double v = 0;
-    std::memcpy(&v, max_host_, sizeof v);
-    return v;
+    return bits_as_double(*max_host_);
   }
   double reduce_max(const double* d, size_t n) {
     if (n == 0) return 0;
@@ -404,6 +388,25 @@ class CudaBackend {
     ok_ = false;
     return false;
   }
+  // The pass both parallel_max calls share: max_bits_ zeroed, then the
+  // largest f(i) left in it (as the bits of a double >= 0, which order as
+  // the doubles do).
+  template <class F>
+  void launch_max(size_t n, F f) {
+    resize(max_bits_, 1);
+    check(cudaMemsetAsync(max_bits_.data(), 0, sizeof(unsigned long long)), "memset");
+    constexpr uint32_t kBlock = 256;
+    const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
+    cuda_detail::for_each_max_kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f,
+                                                         max_bits_.data());
+    check(cudaGetLastError(), "kernel launch");
+  }
+  static double bits_as_double(unsigned long long bits) {
+    double v = 0;
+    std::memcpy(&v, &bits, sizeof v);
+    return v;
+  }
+
   // CUB's scratch space, grown on demand and kept for later frames.
   void* temp(size_t bytes) {
     if (bytes > temp_bytes_) {

@@ -676,7 +676,7 @@ class DynamicsPipeline final : public Simulation {
     // waits for its release), the forces go ahead on the lists while the host
     // waits for the largest move, and are made again after a build when it
     // calls one: the device computes while the host reads one number (the
-    // wait cost 17-19 us a step on the H200; this wins back 6-8 of them,
+    // wait cost 17-19 us a step on the H200; this wins back 5-9 of them,
     // docs/benchmarks.md). The forces a step keeps are those of the lists a
     // check before them would have given.
     const bool check_later =
@@ -691,7 +691,7 @@ class DynamicsPipeline final : public Simulation {
     if (check_later) {
       if constexpr (B::kMaxLater) disp_max_ = backend_.max_later_result();
       disp_fresh_ = false;
-      if (4 * disp_max_ > skin_ * skin_) {
+      if (moved_half_skin()) {
         build_lists();
         forces(dt, false, release_at, releasing);
       }
@@ -939,7 +939,7 @@ class DynamicsPipeline final : public Simulation {
   // half kick and drift; with lists, the largest squared move since they were
   // built, for the check that follows.
   // later: the largest move is read after the forces are launched (one_step).
-  void open_step(double dt, bool later = false) {
+  void open_step(double dt, bool later) {
     const bool disp = lists_ && nl_valid_;
     const OpenStep op{arrays(),      rotation_,
                       close_pending_, disp,
@@ -1041,11 +1041,15 @@ class DynamicsPipeline final : public Simulation {
           return P.state[i] == kActive ? dot(d, d) : 0.0;
         });
       }
-      rebuild = 4 * disp_max_ > skin_ * skin_;
+      rebuild = moved_half_skin();
     }
     disp_fresh_ = false;
     if (rebuild) build_lists();
   }
+
+  // Whether the largest move since the lists were built (disp_max_, squared)
+  // passes half the skin: then a pair now touching may be missing from them.
+  bool moved_half_skin() const { return 4 * disp_max_ > skin_ * skin_; }
 
   // How far the lists reach past the live prefix: the particles due next are
   // listed where they wait, so their release needs no build (a waiting
