@@ -27,7 +27,7 @@ class CpuBackend {
   static constexpr bool kPairRecordsInBatches = true;
   // Its loops run on host threads (a pool), which a small scene may leave idle.
   static constexpr bool kHostThreads = true;
-  static constexpr bool kMaxLater = false;  // parallel_max answers at once
+  static constexpr bool kRunsAhead = false;  // parallel_max answers at once
   // The pool that runs this backend's loops (nullptr: default_pool()).
   void set_pool(ThreadPool* pool) { pool_ = pool ? pool : &default_pool(); }
   int threads() const { return pool_->size(); }

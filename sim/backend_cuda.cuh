@@ -29,35 +29,65 @@ struct Plus64 {
   __host__ __device__ uint64_t operator()(uint64_t a, uint64_t b) const { return a + b; }
 };
 
+// Every loop kernel returns at once, all its threads alike, while the halt
+// word it is given (when it is given one) is set: a dynamics step launched
+// ahead of the host's look at the lists' check then does nothing (see
+// CudaBackend::parallel_max_halting).
+__device__ __forceinline__ bool halted(const unsigned long long* halt) {
+  return halt && *halt;
+}
+
 template <class F>
-__global__ void for_each_kernel(uint32_t n, F f) {
+__global__ void for_each_kernel(uint32_t n, F f, const unsigned long long* halt) {
+  if (halted(halt)) return;
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i < n) f(i);
 }
 
+// What the last block of a max pass decides: whether the largest value passed
+// `limit`; then *halt = mark. count: the blocks done so far. The pass's
+// largest value and count are left at 0 for the next pass (no memset to
+// launch before it).
+struct MaxDecision {
+  unsigned int* count = nullptr;  // nullptr: nothing to decide
+  unsigned long long* halt = nullptr;
+  double limit = 0;
+  unsigned long long mark = 0;
+};
+
 // f(i) for every i, and the largest value any returned (values >= 0, whose
 // bits order as the numbers do) into *out: a warp's and then the block's
-// largest, one atomic per block.
+// largest, one atomic per block; with a decision, the last block to finish
+// takes the whole pass's largest (and zeroes *out) and compares it with the limit.
 template <class F>
-__global__ void for_each_max_kernel(uint32_t n, F f, unsigned long long* out) {
+__global__ void for_each_max_kernel(uint32_t n, F f, unsigned long long* out,
+                                    const unsigned long long* halt, MaxDecision decide) {
+  if (halted(halt)) return;
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   double v = i < n ? f(i) : 0.0;
   for (int o = 16; o > 0; o >>= 1) v = fmax(v, __shfl_down_sync(0xffffffffu, v, o));
   __shared__ double warp_max[32];
   if ((threadIdx.x & 31) == 0) warp_max[threadIdx.x >> 5] = v;
   __syncthreads();
-  if (threadIdx.x == 0) {
-    double m = 0;
-    for (uint32_t w = 0; w < (blockDim.x + 31) / 32; ++w) m = fmax(m, warp_max[w]);
-    atomicMax(out, static_cast<unsigned long long>(__double_as_longlong(m)));
-  }
+  if (threadIdx.x != 0) return;
+  double m = 0;
+  for (uint32_t w = 0; w < (blockDim.x + 31) / 32; ++w) m = fmax(m, warp_max[w]);
+  atomicMax(out, static_cast<unsigned long long>(__double_as_longlong(m)));
+  if (!decide.count) return;
+  __threadfence();  // this block's largest is seen by whichever block ends last
+  if (atomicAdd(decide.count, 1u) != gridDim.x - 1) return;
+  *decide.count = 0;
+  const double largest = __longlong_as_double(static_cast<long long>(atomicExch(out, 0ull)));
+  if (largest > decide.limit) *decide.halt = decide.mark;
 }
 
 // The same with at least two 256-thread blocks per SM: caps a heavy loop body
 // at 128 registers so it keeps a quarter of the SM's threads in flight to hide
 // its gathers (uncapped, the pair forces took 132 and ran one block per SM).
 template <class F>
-__global__ void __launch_bounds__(256, 2) for_each_kernel_heavy(uint32_t n, F f) {
+__global__ void __launch_bounds__(256, 2)
+    for_each_kernel_heavy(uint32_t n, F f, const unsigned long long* halt) {
+  if (halted(halt)) return;
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i < n) f(i);
 }
@@ -66,7 +96,9 @@ __global__ void __launch_bounds__(256, 2) for_each_kernel_heavy(uint32_t n, F f)
 // tree walk: uncapped it took 112, which left 14 % of the SM's warps to hide
 // its node fetches.
 template <class F>
-__global__ void __launch_bounds__(256, 3) for_each_kernel_walk(uint32_t n, F f) {
+__global__ void __launch_bounds__(256, 3)
+    for_each_kernel_walk(uint32_t n, F f, const unsigned long long* halt) {
+  if (halted(halt)) return;
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i < n) f(i);
 }
@@ -74,7 +106,9 @@ __global__ void __launch_bounds__(256, 3) for_each_kernel_walk(uint32_t n, F f) 
 // f(i, group) for every i < n, `size` consecutive lanes an item (a power of
 // two up to 32, so a group never spans two warps); a group leaves together.
 template <class F>
-__global__ void __launch_bounds__(256, 2) for_each_lanes_kernel(uint32_t n, uint32_t size, F f) {
+__global__ void __launch_bounds__(256, 2)
+    for_each_lanes_kernel(uint32_t n, uint32_t size, F f, const unsigned long long* halt) {
+  if (halted(halt)) return;
   const uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
   const uint32_t i = t / size;
   if (i >= n) return;
@@ -119,16 +153,14 @@ class CudaBackend {
   };
 
   static constexpr bool kHostThreads = false;
-  // parallel_max_later's answer comes while later work runs: the host then
-  // waits on the copy of one number, not on an idle device (sim/dynamics_pipeline.h).
-  static constexpr bool kMaxLater = true;
+  // Work can be launched ahead of a decision the device takes itself
+  // (parallel_max_halting): the host need not wait for the number.
+  static constexpr bool kRunsAhead = true;
   void set_pool(ThreadPool*) {}  // the GPU needs no host threads
   int threads() const { return 0; }
 
   ~CudaBackend() {
     if (temp_) cudaFree(temp_);
-    if (max_host_) cudaFreeHost(max_host_);
-    if (max_done_) cudaEventDestroy(max_done_);
   }
 
   template <class T>
@@ -193,7 +225,8 @@ class CudaBackend {
     if (n == 0 || !ok_) return;
     const size_t threads = n * lanes;
     const uint32_t blocks = static_cast<uint32_t>((threads + 255) / 256);
-    cuda_detail::for_each_lanes_kernel<<<blocks, 256>>>(static_cast<uint32_t>(n), lanes, f);
+    cuda_detail::for_each_lanes_kernel<<<blocks, 256>>>(static_cast<uint32_t>(n), lanes, f,
+                                                        halt_word());
     check(cudaGetLastError(), "kernel launch");
   }
   template <class T>
@@ -257,34 +290,50 @@ class CudaBackend {
   template <class F>
   double parallel_max(size_t n, F f) {
     if (n == 0 || !ok_) return 0;
-    launch_max(n, f);
+    resize(max_bits_, 1);
+    check(cudaMemsetAsync(max_bits_.data(), 0, sizeof(unsigned long long)), "memset");
+    constexpr uint32_t kBlock = 256;
+    const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
+    cuda_detail::for_each_max_kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f,
+                                                         max_bits_.data(), halt_word(), {});
+    check(cudaGetLastError(), "kernel launch");
     unsigned long long bits = 0;
     to_host(&bits, max_bits_.data(), sizeof bits);
     return bits_as_double(bits);
   }
-  // parallel_max without waiting: the largest value goes to host memory as
-  // the device gets to it; max_later_result() waits for it. Work launched in
-  // between runs meanwhile.
+  // parallel_max that leaves the decision on the device: when the largest
+  // value passes `limit`, the halt word is set to `mark` (non-zero), and every
+  // loop launched after it returns at once until halt() reads and clears it.
+  // A window of work can so be launched ahead of a check that may void it
+  // (the dynamics' lists), with no wait for the device each time.
   template <class F>
-  void parallel_max_later(size_t n, F f) {
-    max_later_n_ = n;
+  void parallel_max_halting(size_t n, F f, double limit, unsigned long long mark) {
     if (n == 0 || !ok_) return;
-    if (!max_host_ &&
-        !check(cudaMallocHost(reinterpret_cast<void**>(&max_host_), sizeof(unsigned long long)),
-               "cudaMallocHost"))
-      return;
-    if (!max_done_ && !check(cudaEventCreateWithFlags(&max_done_, cudaEventDisableTiming), "event"))
-      return;
-    launch_max(n, f);
-    check(cudaMemcpyAsync(max_host_, max_bits_.data(), sizeof(unsigned long long),
-                          cudaMemcpyDeviceToHost),
-          "copy");
-    check(cudaEventRecord(max_done_), "event");
+    if (halt_.size() == 0) {
+      resize(halt_, 3);  // the word, the count of blocks done, the largest value
+      if (!ok_ ||
+          !check(cudaMemsetAsync(halt_.data(), 0, 3 * sizeof(unsigned long long)), "memset"))
+        return;
+    }
+    cuda_detail::MaxDecision d;
+    d.count = reinterpret_cast<unsigned int*>(halt_.data() + 1);
+    d.halt = halt_.data();
+    d.limit = limit;
+    d.mark = mark;
+    constexpr uint32_t kBlock = 256;
+    const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
+    cuda_detail::for_each_max_kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f,
+                                                         halt_.data() + 2, halt_word(), d);
+    check(cudaGetLastError(), "kernel launch");
   }
-  double max_later_result() {
-    if (max_later_n_ == 0 || !ok_ || !max_host_ || !max_done_) return 0;
-    if (!check(cudaEventSynchronize(max_done_), "event")) return 0;
-    return bits_as_double(*max_host_);
+  // The halt word (0 when nothing halted), read once the work launched before
+  // has run, and cleared.
+  unsigned long long halt() {
+    if (halt_.size() == 0 || !ok_) return 0;
+    unsigned long long mark = 0;
+    to_host(&mark, halt_.data(), sizeof mark);
+    if (mark) check(cudaMemsetAsync(halt_.data(), 0, sizeof mark), "memset");
+    return mark;
   }
   double reduce_max(const double* d, size_t n) {
     if (n == 0) return 0;
@@ -343,7 +392,7 @@ class CudaBackend {
  private:
   // One thread per index in 256-thread blocks, for either loop kernel.
   template <class F>
-  void launch(void (*kernel)(uint32_t, F), size_t n, F f) {
+  void launch(void (*kernel)(uint32_t, F, const unsigned long long*), size_t n, F f) {
     if (n == 0 || !ok_) return;
     if (n > UINT32_MAX) {  // a 32-bit index would wrap: an error, not a loop over part of it
       ok_ = false;
@@ -352,9 +401,11 @@ class CudaBackend {
     }
     constexpr uint32_t kBlock = 256;
     const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
-    kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f);
+    kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f, halt_word());
     check(cudaGetLastError(), "kernel launch");
   }
+  // The halt word loops read: none until a halting pass has been asked for.
+  const unsigned long long* halt_word() const { return halt_.size() ? halt_.data() : nullptr; }
 
   // The device's SMs, read once.
   uint32_t sm_count() {
@@ -388,19 +439,6 @@ class CudaBackend {
     ok_ = false;
     return false;
   }
-  // The pass both parallel_max calls share: max_bits_ zeroed, then the
-  // largest f(i) left in it (as the bits of a double >= 0, which order as
-  // the doubles do).
-  template <class F>
-  void launch_max(size_t n, F f) {
-    resize(max_bits_, 1);
-    check(cudaMemsetAsync(max_bits_.data(), 0, sizeof(unsigned long long)), "memset");
-    constexpr uint32_t kBlock = 256;
-    const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
-    cuda_detail::for_each_max_kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f,
-                                                         max_bits_.data());
-    check(cudaGetLastError(), "kernel launch");
-  }
   static double bits_as_double(unsigned long long bits) {
     double v = 0;
     std::memcpy(&v, &bits, sizeof v);
@@ -427,9 +465,7 @@ class CudaBackend {
   Buffer<uint64_t> seg_cell_;
   Buffer<double> scalar_;
   Buffer<unsigned long long> max_bits_;  // parallel_max's result, as the bits of a double
-  unsigned long long* max_host_ = nullptr;  // parallel_max_later's, in pinned host memory
-  cudaEvent_t max_done_ = nullptr;          // recorded when it is there
-  size_t max_later_n_ = 0;
+  Buffer<unsigned long long> halt_;  // parallel_max_halting's word, block count and largest value
   uint32_t sms_ = 0;                      // the device's SMs (sm_count)
 };
 

@@ -291,6 +291,8 @@ Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const Particl
     return invalid_argument("simd_pairs must be -1 (where the CPU has AVX2) or 0");
   if (c.wall_lists < -1 || c.wall_lists > 1)
     return invalid_argument("wall_lists must be -1 (the backend's choice), 0 or 1");
+  if (c.run_ahead < 0 || c.run_ahead > 1024)
+    return invalid_argument("run_ahead must be 0 (automatic) or a count of steps up to 1024");
   if (!(c.lanes == 0 || c.lanes == 1 || c.lanes == 2 || c.lanes == 4 ||
         c.lanes == 8))
     return invalid_argument("lanes must be 0 (the backend's choice), 1, 2, 4 or 8");

@@ -156,6 +156,12 @@ struct DynamicsConfig {
   // the numbering has scattered (kScatteredCells); 0 never; N at the first
   // list build and every N-th after (counted from the start, a resume included).
   int renumber_every = -1;
+  // With lists on the GPU, once every particle is released: the steps launched
+  // between two looks at the lists' check, which the device takes itself
+  // (a step after the one that calls a build does nothing; the host then
+  // builds and launches it again). 0: automatic, from the lists' life; 1: a
+  // look every step. The trajectories are the same bit for bit.
+  int run_ahead = 0;
   // Without particle contacts, whether the still wall's candidates are kept in
   // lists with the skin too (with them they always are), or searched every
   // step. -1: the backend's choice (wall_lists_without_pairs); 0 searched; 1 listed.
@@ -245,6 +251,9 @@ struct FrameStats {
 struct StepTimes {
   uint64_t steps = 0;
   uint64_t neighbour_builds = 0;  // neighbour-list builds within those steps
+  // GPU steps launched ahead of the lists' check (run_ahead) that a build made
+  // void, so they were launched again.
+  uint64_t steps_retaken = 0;
   double drift_ms = 0, grid_ms = 0, pair_ms = 0, wall_ms = 0, kick_ms = 0;
 };
 
@@ -351,9 +360,9 @@ inline constexpr double kScatteredCells = 4;
 
 // Whether a scene without particle contacts keeps its still wall's candidates
 // in lists (DynamicsConfig::wall_lists): the CPU does by default; the GPU
-// searches every step, since its lists' check waits on the host every step and
-// a GPU job without pairs had no such wait (the H200 log's jobs without pairs
-// ran a median 2.0 times as long with lists; docs/dynamics.md).
+// searches every step: with the lists' check waiting on the host every step the
+// H200 log's jobs without pairs ran a median 2.0 times as long, and without the
+// wait (run_ahead) the lists win only at 10^6 particles (docs/dynamics.md).
 bool wall_lists_without_pairs(const DynamicsConfig& config);
 
 // The contact laws and the critical step they allow, from the material, the

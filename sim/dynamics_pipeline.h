@@ -100,7 +100,13 @@ class DynamicsPipeline final : public Simulation {
   Status step(uint64_t steps, double dt) override {
     if (!(dt > 0) || !std::isfinite(dt))
       return invalid_argument("time step must be positive, got " + std::to_string(dt));
-    for (uint64_t k = 0; k < steps; ++k) one_step(dt);
+    const uint64_t last = steps_ + steps;
+    do {
+      while (steps_ < last) {
+        one_step(dt);
+        if (window_.size() >= window_steps()) settle_window();
+      }
+    } while (settle_window());  // a step voided by a build is taken again
     close_pending_step();
     backend_.sync();
     return backend_.status();
@@ -110,12 +116,20 @@ class DynamicsPipeline final : public Simulation {
     if (!(duration > 0) || !std::isfinite(duration))
       return invalid_argument("frame duration must be positive, got " + std::to_string(duration));
     const double end = time_ + duration;
-    uint64_t substeps = 0;
+    const uint64_t first = steps_;
     double dt_min = 1e300, dt_max = 0, dt = 0, travel = 0, fastest = 0;
-    int since_check = kSpeedCheckInterval;
-    while (time_ < end * (1 - 1e-15) && end - time_ > 1e-300) {
-      const double remaining = end - time_;
-      if (since_check >= kSpeedCheckInterval) {
+    bool checked = false;
+    uint64_t checked_at = 0;
+    // A step taken again after a build (settle_window) starts where the first
+    // try did, so it is given the same length: the steps do not depend on
+    // whether they ran ahead.
+    for (;;) {
+      if (!(time_ < end * (1 - 1e-15) && end - time_ > 1e-300)) {
+        if (settle_window()) continue;
+        break;
+      }
+      if (!checked || steps_ - checked_at >= uint64_t(kSpeedCheckInterval)) {
+        if (settle_window()) continue;
         // The fastest speed, read every few steps: it sizes the automatic step
         // and, with a fixed one, tells how far a step carries a particle.
         close_pending_step();
@@ -123,17 +137,18 @@ class DynamicsPipeline final : public Simulation {
         dt = ts_.explicit_step > 0 ? ts_.explicit_step : automatic_step(vmax);
         if (ts_.r_min > 0) travel = std::max(travel, vmax * dt / ts_.r_min);
         fastest = std::max(fastest, vmax);
-        since_check = 0;
+        checked = true, checked_at = steps_;
       }
+      const double remaining = end - time_;
       // Land exactly on the frame's end: split what remains into equal steps.
       const double steps_left = std::ceil(remaining / dt * (1 - 1e-12));
       const double h = steps_left <= 1 ? remaining : remaining / steps_left;
       one_step(h);
-      ++since_check;
-      ++substeps;
+      if (window_.size() >= window_steps()) settle_window();
       dt_min = std::min(dt_min, h), dt_max = std::max(dt_max, h);
       if (Status e = backend_.status(); !e) return e;
     }
+    const uint64_t substeps = steps_ - first;
     if (Status e = measure(stats); !e) return e;
     stats->substeps = substeps;
     stats->dt_min = substeps ? dt_min : 0;
@@ -673,30 +688,26 @@ class DynamicsPipeline final : public Simulation {
     const double release_at = verlet ? time_ + dt : time_;
     if (releasing) grow_live(release_at);
     // On the GPU, where only the particles' moves can call a list build (none
-    // waits for its release), the forces go ahead on the lists while the host
-    // waits for the largest move, and are made again after a build when it
-    // calls one: the device computes while the host reads one number (the
-    // wait cost 17-19 us a step on the H200; this wins back 5-9 of them,
-    // docs/benchmarks.md). The forces a step keeps are those of the lists a
-    // check before them would have given.
-    const bool check_later =
-        B::kMaxLater && verlet && !releasing && lists_ && nl_valid_ && live_ <= nl_cover_;
-    if (verlet) open_step(dt, check_later);
+    // waits for its release), the device takes the lists' check itself and the
+    // host goes on launching steps without reading it (see settle_window; the
+    // wait for the number cost 17-19 us a step on the H200, docs/benchmarks.md).
+    const bool ahead = B::kRunsAhead && !timing_ && verlet && !releasing && lists_ && nl_valid_ &&
+                       live_ <= nl_cover_;
+    if (ahead) window_.push_back(WindowStep{steps_, time_, dt, hist_in_});
+    if (verlet) open_step(dt, ahead);
     if (releasing && !cfg_.particle_contacts) all_released_ = time_ >= last_release_;
     lap(times_.drift_ms);
-    if (!check_later) update_candidates();  // nothing to do without lists or particle contacts
+    if (!ahead) update_candidates();  // nothing to do without lists or particle contacts
     lap(times_.grid_ms);
     // Forces where the positions now are: after Verlet's drift, at the step's end.
     forces(dt, false, release_at, releasing);
-    if (check_later) {
-      if constexpr (B::kMaxLater) disp_max_ = backend_.max_later_result();
-      disp_fresh_ = false;
-      if (moved_half_skin()) {
-        build_lists();
-        forces(dt, false, release_at, releasing);
-      }
-    }
     if (releasing) released_to_ = release_at;
+    end_step(dt, verlet);
+  }
+
+  // A step's host side after its forces: the springs' generations turn, and
+  // Verlet's close waits for the next pass.
+  void end_step(double dt, bool verlet) {
     if (rotation_) swap_history();
     if (verlet) {
       close_pending_ = true, pending_dt_ = dt;
@@ -707,6 +718,52 @@ class DynamicsPipeline final : public Simulation {
     times_.steps += timing_;
     time_ += dt;
     ++steps_;
+  }
+
+  // How many steps the host launches before it reads the lists' check: the
+  // scene's count (run_ahead), or a quarter of the last lists' life, 1 to 32
+  // (kSpeedCheckInterval before it is known). A look costs a wait for the
+  // device (17-19 us on the H200); a build voids the steps launched after the
+  // one that called it, on average half a window, whose launches are lost: at
+  // 10^4 particles with a build every 3 steps, windows of 8 launched 799 steps
+  // again in 400 (docs/benchmarks.md).
+  size_t window_steps() const {
+    if (cfg_.run_ahead > 0) return size_t(cfg_.run_ahead);
+    if (nl_life_steps_ == 0) return kSpeedCheckInterval;
+    return size_t(std::clamp<uint64_t>(nl_life_steps_ / 4, 1, 32));
+  }
+
+  // A step launched ahead of the lists' check (one_step): where it started.
+  struct WindowStep {
+    uint64_t steps;
+    double time, dt;
+    int hist_in;
+  };
+
+  // Reads the lists' check of the steps launched ahead. When one of them found
+  // a particle past half the skin, the device did nothing from its forces on
+  // (every later loop returned at once), so the state is that step's after
+  // its first pass: the host steps back to it, builds the lists there and
+  // makes its forces, as a look before them would have. Returns whether it
+  // stepped back (the caller takes the later steps again).
+  bool settle_window() {
+    if (window_.empty()) return false;
+    unsigned long long mark = 0;
+    if constexpr (B::kRunsAhead) mark = backend_.halt();
+    const std::vector<WindowStep> window = std::move(window_);
+    window_.clear();
+    if (!mark) return false;
+    const auto at = std::find_if(window.begin(), window.end(),
+                                 [&](const WindowStep& w) { return w.steps + 1 == mark; });
+    if (at == window.end()) return false;  // never: the device marks a step of the window
+    times_.steps_retaken += uint64_t(window.end() - at);
+    steps_ = at->steps, time_ = at->time, hist_in_ = at->hist_in;
+    close_pending_ = false;  // the step's first pass closed the one before it
+    disp_fresh_ = false;
+    build_lists();
+    forces(at->dt, false, time_ + at->dt, false);
+    end_step(at->dt, true);
+    return true;
   }
 
   // Adds the time since the last lap to `slot` (after a sync) when stages are timed.
@@ -938,8 +995,8 @@ class DynamicsPipeline final : public Simulation {
   // separate passes would take: the last step's pending close, this step's
   // half kick and drift; with lists, the largest squared move since they were
   // built, for the check that follows.
-  // later: the largest move is read after the forces are launched (one_step).
-  void open_step(double dt, bool later) {
+  // ahead: the device decides whether the lists still hold (see settle_window).
+  void open_step(double dt, bool ahead) {
     const bool disp = lists_ && nl_valid_;
     const OpenStep op{arrays(),      rotation_,
                       close_pending_, disp,
@@ -947,16 +1004,20 @@ class DynamicsPipeline final : public Simulation {
                       domain_at(wall_pose(time_)),
                       domain_at(wall_pose(time_ + dt)), x_ref_.data(), release_.data(),
                       free_release_time()};
-    if (disp && later) {
-      if constexpr (B::kMaxLater)
-        backend_.parallel_max_later(live_, [=] COLLIDO_HD(uint32_t i) { return op(i); });
+    if (disp && ahead) {
+      // moved_half_skin's test, 4 d > skin^2, as d > skin^2 / 4 (the same
+      // decision: both scalings by 4 are exact).
+      if constexpr (B::kRunsAhead)
+        backend_.parallel_max_halting(
+            live_, [=] COLLIDO_HD(uint32_t i) { return op(i); }, 0.25 * (skin_ * skin_),
+            steps_ + 1);
     } else if (disp) {
       disp_max_ = backend_.parallel_max(live_, [=] COLLIDO_HD(uint32_t i) { return op(i); });
     } else {
       backend_.parallel_for(live_, [=] COLLIDO_HD(uint32_t i) { op(i); });
     }
     close_pending_ = false;
-    disp_fresh_ = disp;
+    disp_fresh_ = disp && !ahead;  // ahead, the host never holds the number
   }
 
   // Closes a step left pending (see one_step) on its own pass.
@@ -1093,7 +1154,8 @@ class DynamicsPipeline final : public Simulation {
   void build_lists() {
     if (nl_valid_) {
       nl_life_ = time_ - nl_built_at_;
-      grow_skin_after(steps_ - nl_built_step_);
+      nl_life_steps_ = steps_ - nl_built_step_;
+      grow_skin_after(nl_life_steps_);
     }
     nl_built_at_ = time_;
     nl_built_step_ = steps_;
@@ -2124,6 +2186,9 @@ class DynamicsPipeline final : public Simulation {
   bool close_pending_ = false;
   double pending_dt_ = 0;
   bool disp_fresh_ = false;  // disp_max_ is the largest move of the current positions
+  // The steps launched since the host last read the lists' check (GPU).
+  std::vector<WindowStep> window_;
+  uint64_t nl_life_steps_ = 0;  // steps the last lists lasted (0 until a second build)
   double disp_max_ = 0;      // squared, since the lists were built
   // Each list holds the partners whose pair the particle owns (upper, sorted);
   // lo_start_, lo_j_ and lo_rec_ give each particle the partners owning their

@@ -611,7 +611,7 @@ void neighbour_list_finds_every_contact() {
 TEST(Dynamics, NeighbourListFindsEveryContactTheGridDoes) { neighbour_list_finds_every_contact(); }
 
 // Without particle contacts the CPU lists the wall's candidates and the GPU
-// searches them every step (its lists' check waits on the host each step),
+// searches them every step (faster there below 10^6 particles),
 // unless the scene says otherwise.
 TEST(Dynamics, WallListsWithoutPairsAreTheBackendsChoice) {
   DynamicsConfig c;
@@ -962,6 +962,94 @@ void steps_one_at_a_time_or_together_agree() {
   EXPECT_LE(worst, 1e-9);
 }
 TEST(Dynamics, StepsOneAtATimeOrTogetherAgreeBitForBit) { steps_one_at_a_time_or_together_agree(); }
+
+// On the GPU, once every particle is released, the host launches several
+// steps before it reads the lists' check, which the device takes itself; a
+// build voids the steps after the one that called it, and they are launched
+// again. The run is that of a look every step, bit for bit, with builds called
+// mid-window: a dense frictional scene with a thin skin (builds every few
+// steps), stepped by step() and by frames; particles escaping over a box's
+// lid; the wall's lists alone; a turning drum. The CPU looks every step; it
+// runs the same scenes.
+void steps_run_ahead_as_a_look_every_step_would() {
+  struct Scene {
+    TriangleMesh wall;
+    ParticleSet p;
+    DynamicsConfig cfg;
+  };
+  std::vector<Scene> scenes;
+  {
+    Scene s{make_cylinder(50, 100, 40), lattice(10, 10.5, -0.05, 1, 5.0, 7), {}};
+    s.cfg.particle_contacts = true;
+    s.cfg.material.friction = 0.4;
+    s.cfg.material.restitution = 0.5;
+    s.cfg.neighbour_skin = 0.02;
+    scenes.push_back(s);
+  }
+  {
+    Scene s{make_box(20, 20, 20), lattice(4, 2, 20.2, 0.3, 100.0, 17), {}};
+    s.cfg.particle_contacts = true;
+    s.cfg.material.friction = 0.3;
+    s.cfg.domain_margin = 0.3;
+    scenes.push_back(s);
+  }
+  {
+    Scene s = scenes[0];
+    s.cfg.particle_contacts = false;
+    s.cfg.wall_lists = 1;
+    scenes.push_back(s);
+  }
+  {
+    Scene s = scenes[0];
+    s.cfg.wall_motion.kind = WallMotionKind::kRotate;
+    s.cfg.wall_motion.axis = {1, 0, 0};
+    s.cfg.wall_motion.center = {0, 0, 50};
+    s.cfg.wall_motion.angular_speed = 20;
+    scenes.push_back(s);
+  }
+  for (size_t scene = 0; scene < scenes.size(); ++scene) {
+    const Scene& sc = scenes[scene];
+    ParticleSet end[3];
+    std::vector<uint8_t> flags[3];
+    uint64_t builds[3] = {}, retaken[3] = {};
+    const int ahead[3] = {1, 0, 5};  // a look every step; kSpeedCheckInterval; 5
+    for (int a = 0; a < 3; ++a) {
+      DynamicsConfig cfg = sc.cfg;
+      cfg.run_ahead = ahead[a];
+      auto s = make_sim(sc.wall, cfg, sc.p);
+      ASSERT_TRUE(s);
+      const double dt = s->time_step_info().spring_step;
+      ASSERT_TRUE(s->step(300, dt));
+      FrameStats st;
+      for (int f = 0; f < 4; ++f) ASSERT_TRUE(s->advance(97.5 * dt, &st));
+      ASSERT_TRUE(s->download(&end[a], &flags[a]));
+      builds[a] = s->stage_times().neighbour_builds;
+      retaken[a] = s->stage_times().steps_retaken;
+    }
+    std::printf("scene %zu: lists built %llu times; steps launched again %llu / %llu / %llu\n",
+                scene, (unsigned long long)builds[0], (unsigned long long)retaken[0],
+                (unsigned long long)retaken[1], (unsigned long long)retaken[2]);
+    EXPECT_GT(builds[0], 5u) << "scene " << scene;
+    // A window of one step takes again only the step that called the build (its forces).
+    EXPECT_LE(retaken[0], builds[0]);
+    for (int a = 1; a < 3; ++a) {
+      EXPECT_EQ(builds[a], builds[0]) << "scene " << scene;
+      EXPECT_EQ(flags[a], flags[0]) << "scene " << scene;
+      EXPECT_EQ(end[a].x, end[0].x) << "scene " << scene;
+      EXPECT_EQ(end[a].z, end[0].z) << "scene " << scene;
+      EXPECT_EQ(end[a].vx, end[0].vx) << "scene " << scene;
+      EXPECT_EQ(end[a].vz, end[0].vz) << "scene " << scene;
+      if (backend_under_test() == Backend::kCuda) {
+        EXPECT_GT(retaken[a], retaken[0]) << "scene " << scene;  // builds called mid-window
+      } else {
+        EXPECT_EQ(retaken[a], 0u);
+      }
+    }
+  }
+}
+TEST(Dynamics, StepsRunAheadAsALookEveryStepWould) {
+  steps_run_ahead_as_a_look_every_step_would();
+}
 
 // The engine numbers the particles by release and runs a step's passes over
 // the released prefix only. Each particle still starts moving at the first
@@ -1322,6 +1410,9 @@ TEST_F(DynamicsCuda, StepsOneAtATimeOrTogetherAgreeBitForBit) {
   steps_one_at_a_time_or_together_agree();
 }
 TEST_F(DynamicsCuda, RenumberingKeepsTheSprings) { renumbering_keeps_the_springs(); }
+TEST_F(DynamicsCuda, StepsRunAheadAsALookEveryStepWould) {
+  steps_run_ahead_as_a_look_every_step_would();
+}
 TEST_F(DynamicsCuda, FrictionTurnsSlidingIntoRolling) {
   friction_makes_it_roll();
 }
