@@ -106,6 +106,12 @@ class CpuBackend {
   // Sum and maximum of n doubles (0 when n == 0); per-frame statistics and the time step.
   double reduce_sum(const double* d, size_t n) { return std::accumulate(d, d + n, 0.0); }
   double reduce_max(const double* d, size_t n) { return n ? *std::max_element(d, d + n) : 0.0; }
+  // Each column's reduce_sum, or reduce_max for the columns of max_mask.
+  void reduce_columns(const double* const* columns, size_t count, size_t n,
+                      unsigned long long max_mask, double* out) {
+    for (size_t c = 0; c < count; ++c)
+      out[c] = (max_mask >> c) & 1ull ? reduce_max(columns[c], n) : reduce_sum(columns[c], n);
+  }
 
   // Stable LSD radix sort of (key, value) pairs into kout/vout, 8 bits a pass;
   // passes whose byte is the same for every key are skipped (so key_bits, the

@@ -167,12 +167,15 @@ class DynamicsPipeline final : public Simulation {
     update_candidates();
     forces(0.0, /*measure=*/true, time_);
     kinematics_stats();
-    double col[kStatColumns];
-    for (size_t c = 0; c < kStatColumns; ++c) {
-      const bool max = c == kStatOverlapWall || c == kStatOverlapPair || c == kStatSpeed;
-      col[c] = max ? backend_.reduce_max(scratch_.data() + c * n_, live_)
-                   : backend_.reduce_sum(scratch_.data() + c * n_, live_);
-    }
+    // The columns and, last, the deepest wall overlap of any step since the
+    // last measure, in one reduction.
+    const double* columns[kStatColumns + 1];
+    for (size_t c = 0; c < kStatColumns; ++c) columns[c] = scratch_.data() + c * n_;
+    columns[kStatColumns] = peak_overlap_.data();
+    const unsigned long long largest = (1ull << kStatOverlapWall) | (1ull << kStatOverlapPair) |
+                                       (1ull << kStatSpeed) | (1ull << kStatColumns);
+    double col[kStatColumns + 1];
+    backend_.reduce_columns(columns, kStatColumns + 1, live_, largest, col);
     col[kStatWaiting] += double(n_ - live_);  // beyond the live prefix every particle waits
     // Every particle is out once none is due after the releases decided and none due waits.
     if (!all_released_ && released_to_ >= last_release_ && col[kStatHeld] < 0.5)
@@ -194,8 +197,7 @@ class DynamicsPipeline final : public Simulation {
     st->history_overflow =
         static_cast<uint64_t>(col[kStatOverflowWall] + col[kStatOverflowPair] + 0.5);
     // The deepest wall overlap of any step since the last measure, then a fresh start.
-    st->peak_wall_overlap =
-        std::max(col[kStatOverlapWall], backend_.reduce_max(peak_overlap_.data(), live_));
+    st->peak_wall_overlap = std::max(col[kStatOverlapWall], col[kStatColumns]);
     backend_.fill(peak_overlap_.data(), live_, 0.0);
     return backend_.status();
   }
