@@ -2184,13 +2184,13 @@ class DynamicsPipeline final : public Simulation {
   double wl_per_particle_ = 0;  // wall triangles a particle in its lists, on average (at most)
   double nl_built_at_ = 0, nl_life_ = 0;  // s: when they were last built, how long the one before lasted
   uint64_t nl_built_step_ = 0;            // the step count at the last build
+  uint64_t nl_life_steps_ = 0;  // steps the last lists lasted (0 until a second build)
   // Velocity Verlet's close of the last step (its dt) waits for the next pass.
   bool close_pending_ = false;
   double pending_dt_ = 0;
   bool disp_fresh_ = false;  // disp_max_ is the largest move of the current positions
   // The steps launched since the host last read the lists' check (GPU).
   std::vector<WindowStep> window_;
-  uint64_t nl_life_steps_ = 0;  // steps the last lists lasted (0 until a second build)
   double disp_max_ = 0;      // squared, since the lists were built
   // Each list holds the partners whose pair the particle owns (upper, sorted);
   // lo_start_, lo_j_ and lo_rec_ give each particle the partners owning their
