@@ -967,7 +967,7 @@ TEST(Dynamics, StepsOneAtATimeOrTogetherAgreeBitForBit) { steps_one_at_a_time_or
 // steps before it reads the lists' check, which the device takes itself; a
 // build voids the steps after the one that called it, and they are launched
 // again. The run is that of a look every step, bit for bit, with builds called
-// mid-window: a dense frictional scene with a thin skin (builds every few
+// mid-window: a dense frictional scene with a thin skin (a build every 20-40
 // steps), stepped by step() and by frames; particles escaping over a box's
 // lid; the wall's lists alone; a turning drum. The CPU looks every step; it
 // runs the same scenes.
@@ -1012,7 +1012,7 @@ void steps_run_ahead_as_a_look_every_step_would() {
     ParticleSet end[3];
     std::vector<uint8_t> flags[3];
     uint64_t builds[3] = {}, retaken[3] = {};
-    const int ahead[3] = {1, 0, 5};  // a look every step; kSpeedCheckInterval; 5
+    const int ahead[3] = {1, 0, 5};  // a look every step; automatic; 5
     for (int a = 0; a < 3; ++a) {
       DynamicsConfig cfg = sc.cfg;
       cfg.run_ahead = ahead[a];
