@@ -28,6 +28,15 @@ namespace {
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 
+// Where a sweep keeps the job it runs, in its work folder: the spec, and the
+// job's run folder (calibrate_jobs removes both when the sweep ends).
+std::string job_spec_path(const std::string& work_dir) {
+  return work_dir + "/job.json";
+}
+std::string job_run_dir(const std::string& work_dir) {
+  return work_dir + "/run";
+}
+
 // Parametric walls: the paper's two vessels, an open funnel, and closed shapes of
 // several sizes and triangle counts. Left out on purpose (the unseen-scene check in
 // docs/gvm.md uses them): the Wuson and plate-with-holes meshes, and a wide short
@@ -282,7 +291,7 @@ Expected<JobMeasure> run_one(const Planned& p, const JobSweepSpec& sw, const std
                              const std::atomic<bool>* cancel, std::string* backend_ran) {
   JobSpec spec = p.spec;
   spec.out_dir = dir;
-  const std::string spec_path = sw.work_dir + "/job.json";
+  const std::string spec_path = job_spec_path(sw.work_dir);
   if (Status st = write_file_atomic(spec_path, spec_to_json(spec)); !st) return st;
   JobMeasure m;
   m.load_avg = load_average();
@@ -362,7 +371,7 @@ Expected<CalibrateSummary> run_sweep(const JobSweepSpec& sw, const CalibrateHook
   // 0 not run, 1 measured, 2 failed, 3 measured and then failed on a repeat
   // (its measure is kept; a failing job is not run again).
   std::vector<int> state(plans.size(), 0);
-  const std::string dir = sw.work_dir + "/run";
+  const std::string dir = job_run_dir(sw.work_dir);
   size_t rows_written = 0;
   for (int pass = 0; pass < sw.repeats && !summary.out_of_budget; ++pass)
     for (size_t i = 0; i < plans.size(); ++i) {
@@ -463,8 +472,8 @@ Expected<CalibrateSummary> calibrate_jobs(const JobSweepSpec& spec, const Calibr
       if (made) {
         fs::remove_all(dir, e);
       } else {
-        fs::remove(dir + "/job.json", e);
-        fs::remove_all(dir + "/run", e);
+        fs::remove(job_spec_path(dir), e);
+        fs::remove_all(job_run_dir(dir), e);
       }
     }
   } tidy{spec.work_dir, made};

@@ -702,9 +702,17 @@ TEST(JobSweep, QuickSweepWritesJobRows) {
   s.out_path = tmp("jobs.csv");
   s.work_dir = tmp("sweep-work");
   s.executable = COLLIDO_BINARY;
+  // A work folder that was there keeps what it held and the children's log;
+  // the last job's spec and run folder go (CmdCalibrate checks one the sweep makes).
+  std::filesystem::create_directories(s.work_dir);
+  std::ofstream(s.work_dir + "/mine.txt") << "kept\n";
   auto summary = calibrate_jobs(s, {});
   ASSERT_TRUE(summary) << summary.status().message();
   EXPECT_EQ(summary->measured + summary->failed, 3u);
+  EXPECT_TRUE(std::filesystem::exists(s.work_dir + "/mine.txt"));
+  EXPECT_TRUE(std::filesystem::exists(s.work_dir + "/jobs.log"));
+  EXPECT_FALSE(std::filesystem::exists(s.work_dir + "/job.json"));
+  EXPECT_FALSE(std::filesystem::exists(s.work_dir + "/run"));
   auto rows = read_job_log(s.out_path);
   ASSERT_TRUE(rows) << rows.status().message();
   ASSERT_EQ(rows->size(), summary->measured);
