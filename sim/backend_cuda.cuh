@@ -360,11 +360,7 @@ class CudaBackend {
     if (n == 0 || !ok_) return 0;
     resize(max_bits_, 1);
     check(cudaMemsetAsync(max_bits_.data(), 0, sizeof(unsigned long long)), "memset");
-    constexpr uint32_t kBlock = 256;
-    const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
-    cuda_detail::for_each_max_kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f,
-                                                         max_bits_.data(), halt_word(), {});
-    check(cudaGetLastError(), "kernel launch");
+    launch_max(n, f, max_bits_.data(), {});
     unsigned long long bits = 0;
     to_host(&bits, max_bits_.data(), sizeof bits);
     return bits_as_double(bits);
@@ -388,11 +384,7 @@ class CudaBackend {
     d.halt = halt_.data();
     d.limit = limit;
     d.mark = mark;
-    constexpr uint32_t kBlock = 256;
-    const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
-    cuda_detail::for_each_max_kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f,
-                                                         halt_.data() + 2, halt_word(), d);
-    check(cudaGetLastError(), "kernel launch");
+    launch_max(n, f, halt_.data() + 2, d);
   }
   // The halt word (0 when nothing halted), read once the work launched before
   // has run, and cleared.
@@ -470,6 +462,16 @@ class CudaBackend {
     constexpr uint32_t kBlock = 256;
     const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
     kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f, halt_word());
+    check(cudaGetLastError(), "kernel launch");
+  }
+  // The max pass both parallel_max calls launch: the largest f(i) into *out
+  // (which starts at 0), and the decision when there is one.
+  template <class F>
+  void launch_max(size_t n, F f, unsigned long long* out, cuda_detail::MaxDecision decide) {
+    constexpr uint32_t kBlock = 256;
+    const uint32_t blocks = static_cast<uint32_t>((n + kBlock - 1) / kBlock);
+    cuda_detail::for_each_max_kernel<<<blocks, kBlock>>>(static_cast<uint32_t>(n), f, out,
+                                                         halt_word(), decide);
     check(cudaGetLastError(), "kernel launch");
   }
   // The halt word loops read: none until a halting pass has been asked for.
