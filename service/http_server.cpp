@@ -665,8 +665,11 @@ struct Shared {
   std::vector<Route> routes;
   std::unique_ptr<RequestPool> pool;  // runs the routes that compute (Runs::kOnPool)
   uint64_t max_upload = 0;
-  size_t max_request = 0;  // Pistache's limit: a head (bodies stay in the guard)
 };
+
+// Pistache's own limit, which covers headers and body together: it sees heads
+// alone (the guard holds each route to its body limit and keeps the body).
+constexpr size_t kPistacheMaxRequest = 2 * RequestFramer::kMaxHeadBytes;
 
 // Tcp::Handler::associateTransport is private (Transport is its friend); the
 // inner handler below needs it. An explicit instantiation may name a private
@@ -936,12 +939,12 @@ class Handler : public Http::Handler {
 
   explicit Handler(std::shared_ptr<const Shared> shared)
       : shared_(shared), router_(std::make_shared<Router>(shared)) {
-    router_->setMaxRequestSize(shared->max_request);
+    router_->setMaxRequestSize(kPistacheMaxRequest);
   }
   // Each reactor thread gets a copy (Prototype::clone): with a Router of its own.
   Handler(const Handler& other) : Http::Handler(other), shared_(other.shared_),
         router_(std::make_shared<Router>(other.shared_)) {
-    router_->setMaxRequestSize(shared_->max_request);
+    router_->setMaxRequestSize(kPistacheMaxRequest);
   }
 
   void onRequest(const Http::Request&, Http::ResponseWriter) override {}  // the Router answers
@@ -1140,16 +1143,12 @@ Expected<std::unique_ptr<Server>> Server::start(JobService* service, const Serve
   try {
     Address addr(options.host, Port(options.port));
     impl->endpoint = std::make_unique<Http::Endpoint>(addr);
-    // Pistache's own limit covers headers and body together; it sees heads
-    // alone (the guard holds each route to its body limit and keeps the body).
-    shared->max_request = 2 * RequestFramer::kMaxHeadBytes;
-    const size_t max_request = shared->max_request;
     auto opts = Http::Endpoint::options()
                     .threads(options.threads)
                     // Close-on-exec: a child the service starts (sbatch, squeue) that
                     // outlived it would keep the port, and a restart could not listen.
                     .flags(Tcp::Options::ReuseAddr | Tcp::Options::CloseOnExec)
-                    .maxRequestSize(max_request)
+                    .maxRequestSize(kPistacheMaxRequest)
                     .maxResponseSize(size_t(1) << 30);
     impl->endpoint->init(opts);
     impl->endpoint->setHandler(std::make_shared<Handler>(shared));
