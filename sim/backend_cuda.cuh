@@ -374,9 +374,11 @@ class CudaBackend {
   void parallel_max_halting(size_t n, F f, double limit, unsigned long long mark) {
     if (n == 0 || !ok_) return;
     if (halt_.size() == 0) {
-      resize(halt_, 3);  // the word, the count of blocks done, the largest value
+      // The word, the count of blocks done, the pass's largest value, and a
+      // reduction's result read back with the word (halt_and_max).
+      resize(halt_, 4);
       if (!ok_ ||
-          !check(cudaMemsetAsync(halt_.data(), 0, 3 * sizeof(unsigned long long)), "memset"))
+          !check(cudaMemsetAsync(halt_.data(), 0, 4 * sizeof(unsigned long long)), "memset"))
         return;
     }
     cuda_detail::MaxDecision d;
@@ -394,6 +396,29 @@ class CudaBackend {
     to_host(&mark, halt_.data(), sizeof mark);
     if (mark) check(cudaMemsetAsync(halt_.data(), 0, sizeof mark), "memset");
     return mark;
+  }
+  // halt() and reduce_max(d, n) in one wait for the device: the largest of
+  // d[0, n) is reduced beside the halt word and both come back in one copy.
+  // When the word is set, the work it voided may have left d stale: the
+  // value is then the caller's to throw away.
+  unsigned long long halt_and_max(const double* d, size_t n, double* largest) {
+    *largest = 0;
+    if (halt_.size() == 0) {
+      *largest = reduce_max(d, n);
+      return 0;
+    }
+    if (!ok_) return 0;
+    double* slot = reinterpret_cast<double*>(halt_.data() + 3);
+    if (n > 0 && !cub_call("reduce", [&](void* t, size_t& bytes) {
+          return cub::DeviceReduce::Max(t, bytes, d, slot, static_cast<int>(n));
+        }))
+      return 0;
+    unsigned long long words[4] = {};
+    to_host(words, halt_.data(), sizeof words);
+    if (!ok_) return 0;
+    if (words[0]) check(cudaMemsetAsync(halt_.data(), 0, sizeof words[0]), "memset");
+    if (n > 0) *largest = bits_as_double(words[3]);
+    return words[0];
   }
   double reduce_max(const double* d, size_t n) {
     if (n == 0) return 0;

@@ -129,11 +129,10 @@ class DynamicsPipeline final : public Simulation {
         break;
       }
       if (!checked || steps_ - checked_at >= uint64_t(kSpeedCheckInterval)) {
-        if (settle_window()) continue;
         // The fastest speed, read every few steps: it sizes the automatic step
         // and, with a fixed one, tells how far a step carries a particle.
-        close_pending_step();
-        const double vmax = fastest_speed();
+        double vmax = 0;
+        if (settle_window_and_fastest(&vmax)) continue;
         dt = ts_.explicit_step > 0 ? ts_.explicit_step : automatic_step(vmax);
         if (ts_.r_min > 0) travel = std::max(travel, vmax * dt / ts_.r_min);
         fastest = std::max(fastest, vmax);
@@ -752,19 +751,42 @@ class DynamicsPipeline final : public Simulation {
     if (window_.empty()) return false;
     unsigned long long mark = 0;
     if constexpr (B::kRunsAhead) mark = backend_.halt();
-    const std::vector<WindowStep> window = std::move(window_);
-    window_.clear();
-    if (!mark) return false;
-    const auto at = std::find_if(window.begin(), window.end(),
-                                 [&](const WindowStep& w) { return w.steps + 1 == mark; });
-    if (at == window.end()) return false;  // never: the device marks a step of the window
-    times_.steps_retaken += uint64_t(window.end() - at);
-    steps_ = at->steps, time_ = at->time, hist_in_ = at->hist_in;
+    return step_back_to(mark);
+  }
+
+  // settle_window, then the pending step closed and the fastest speed read
+  // (*vmax), where the steps run ahead in one wait for the device instead of
+  // two. When it steps back, *vmax is void and the caller asks again.
+  bool settle_window_and_fastest(double* vmax) {
+    if constexpr (B::kRunsAhead) {
+      if (!window_.empty()) {
+        close_pending_step();  // voided by a halt, as the window's steps are
+        return step_back_to(backend_.halt_and_max(speed_.data(), live_, vmax));
+      }
+    }
+    if (settle_window()) return true;
+    close_pending_step();
+    *vmax = fastest_speed();
+    return false;
+  }
+
+  // The window's end (see settle_window): `mark` is the halt word read back,
+  // 0 when every step of the window stands.
+  bool step_back_to(unsigned long long mark) {
+    // A set mark names a step of the window (the device marks only those).
+    const auto at = std::find_if(window_.begin(), window_.end(),
+                                 [&](const WindowStep& w) { return mark && w.steps + 1 == mark; });
+    const bool back = at != window_.end();
+    const WindowStep from = back ? *at : WindowStep{};
+    times_.steps_retaken += uint64_t(window_.end() - at);
+    window_.clear();  // keeps its capacity for the next window
+    if (!back) return false;
+    steps_ = from.steps, time_ = from.time, hist_in_ = from.hist_in;
     close_pending_ = false;  // the step's first pass closed the one before it
     disp_fresh_ = false;
     build_lists();
-    forces(at->dt, false, time_ + at->dt, false);
-    end_step(at->dt, true);
+    forces(from.dt, false, time_ + from.dt, false);
+    end_step(from.dt, true);
     return true;
   }
 
