@@ -28,6 +28,10 @@ enum class Method {
 // offers both traversals: all but the tree, which walks from each particle,
 // and the reference, which tests every triangle.
 inline bool uses_grid(Method m) { return m != Method::kBvh && m != Method::kReference; }
+// Whether a method divides the wall into pieces (gravity, circumcircle, midpoint4).
+inline bool divides(Method m) {
+  return m == Method::kGravity || m == Method::kCircumcircle || m == Method::kMidpoint4;
+}
 // How a dividing method divides (gravity, circumcircle, midpoint4; any other: midpoint4).
 inline DivisionMethod division_of(Method m) {
   return m == Method::kGravity        ? DivisionMethod::kGravity

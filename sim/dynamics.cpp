@@ -392,7 +392,8 @@ Expected<std::unique_ptr<Simulation>> Simulation::create(const TriangleMesh& wal
 }
 
 bool wall_lists_without_pairs(const DynamicsConfig& c) {
-  return c.wall_lists > 0 || (c.wall_lists < 0 && c.backend == Backend::kCpu);
+  return c.wall_lists > 0 ||
+         (c.wall_lists < 0 && (c.backend == Backend::kCpu || divides(c.method)));
 }
 
 TimeStepInfo contact_time_step(const DynamicsConfig& c, double r_min, double r_max, double r_mean,

@@ -545,10 +545,11 @@ void release_in_groups(const TriangleMesh& wall, const DynamicsConfig& cfg, Part
 // frictional scenes, one with radii from 0.5 to 1.5, one that pours
 // (groups of 100 released near their neighbours, while a list stands), and the first again with the
 // wall divided (its pieces listed) and as a tree; and the first and the pour
-// without particle contacts, where the wall alone is listed.
+// without particle contacts, where the wall alone is listed, and the first
+// without them on the divided wall (the GPU's default lists those).
 void neighbour_list_finds_every_contact() {
   const TriangleMesh wall = make_cylinder(50, 100, 40);
-  for (int scene = 0; scene < 7; ++scene) {
+  for (int scene = 0; scene < 8; ++scene) {
     const bool pairs = scene < 5;
     // 2.1 apart: colliding at once; the pour 2.0002 apart, each group released
     // just clear of its neighbours (the lists must hold it at once).
@@ -564,6 +565,7 @@ void neighbour_list_finds_every_contact() {
     cfg.material.restitution = 0.5;
     if (scene == 3) cfg.method = Method::kCircumcircle;
     if (scene == 4) cfg.method = Method::kBvh;
+    if (scene == 7) cfg.method = Method::kMidpoint4;
     // Groups of 100: more than the lists hold past the released at first, so
     // a release must rebuild them; later a group is held before it is released.
     if (scene == 2 || scene == 6) release_in_groups(wall, cfg, &p, 10);
@@ -611,7 +613,8 @@ void neighbour_list_finds_every_contact() {
 TEST(Dynamics, NeighbourListFindsEveryContactTheGridDoes) { neighbour_list_finds_every_contact(); }
 
 // Without particle contacts the CPU lists the wall's candidates and the GPU
-// searches them every step (faster there below 10^6 particles),
+// searches a binned wall every step (faster there below 10^6 particles) and
+// lists a divided one (whose search visits the pieces of up to 27 cells),
 // unless the scene says otherwise.
 TEST(Dynamics, WallListsWithoutPairsAreTheBackendsChoice) {
   DynamicsConfig c;
@@ -619,6 +622,16 @@ TEST(Dynamics, WallListsWithoutPairsAreTheBackendsChoice) {
   EXPECT_TRUE(wall_lists_without_pairs(c));
   c.backend = Backend::kCuda;
   EXPECT_FALSE(wall_lists_without_pairs(c));
+  for (Method m : {Method::kGravity, Method::kCircumcircle, Method::kMidpoint4}) {
+    c.method = m;
+    EXPECT_TRUE(wall_lists_without_pairs(c)) << to_string(m);
+  }
+  c.method = Method::kBvh;
+  EXPECT_FALSE(wall_lists_without_pairs(c));
+  c.wall_lists = 0;
+  c.method = Method::kMidpoint4;
+  EXPECT_FALSE(wall_lists_without_pairs(c));  // the scene's word stands
+  c.method = Method::kBin;
   c.wall_lists = 1;
   EXPECT_TRUE(wall_lists_without_pairs(c));
   c.backend = Backend::kCpu;
