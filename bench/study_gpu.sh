@@ -1,18 +1,27 @@
 #!/usr/bin/env bash
 # The full study and the GPU test suites on the GPU machine, as docs/study.md
 # reports them. Usage (repo root, with the carried prefix of gtest/nlohmann
-# that bench/make_gpu_carry.sh unpacks):
+# that bench/make_gpu_carry.sh unpacks; where gpu-carry/bins.tgz holds binaries
+# built here by bench/make_gpu_bins.sh, those run and nothing is built there):
 #   bash bench/study_gpu.sh OUT_DIR [tests|study-walls|study-meshes|study-dynamics|bench|bench-large]...
 # The study's parts land in OUT_DIR/{walls,meshes,dynamics}; one table of them:
 #   /usr/bin/python3 bench/study_merge.py bench/data/study_gpu OUT_DIR/{walls,meshes,dynamics}/study.json
 set -uo pipefail
 out=${1:?OUT_DIR}; shift
-cmake -S . -B build-dev -DCMAKE_BUILD_TYPE=Release -DCMAKE_PREFIX_PATH="$PWD/gpu-carry/prefix" \
-  -DCOLLIDO_CUDA=ON -DCMAKE_CUDA_ARCHITECTURES=90 -DCOLLIDO_WITH_RENDER=OFF \
-  -DCOLLIDO_WITH_MESH_IMPORT=OFF -DCOLLIDO_WITH_SERVICE=OFF >"$out/cmake.log" 2>&1 || { tail -20 "$out/cmake.log"; exit 1; }
 targets=(collidoscope)
 for step in "$@"; do [ "$step" = tests ] && targets+=(detect_test bvh_test dynamics_test contact_models_test); done
-cmake --build build-dev -j16 --target "${targets[@]}" >"$out/build.log" 2>&1 || { grep -m20 error "$out/build.log"; exit 1; }
+if [ -f gpu-carry/bins.tgz ]; then
+  # Binaries built here beforehand (bench/make_gpu_bins.sh): no build on the machine.
+  tar xzf gpu-carry/bins.tgz
+  echo "binaries built from $(cat build-dev/source_rev)"
+  src=$(cat build-dev/source_dir)
+  if [ ! -e "$src" ]; then mkdir -p "$(dirname "$src")" && ln -s "$PWD" "$src"; fi
+else
+  cmake -S . -B build-dev -DCMAKE_BUILD_TYPE=Release -DCMAKE_PREFIX_PATH="$PWD/gpu-carry/prefix" \
+    -DCOLLIDO_CUDA=ON -DCMAKE_CUDA_ARCHITECTURES=90 -DCOLLIDO_WITH_RENDER=OFF \
+    -DCOLLIDO_WITH_MESH_IMPORT=OFF -DCOLLIDO_WITH_SERVICE=OFF >"$out/cmake.log" 2>&1 || { tail -20 "$out/cmake.log"; exit 1; }
+  cmake --build build-dev -j16 --target "${targets[@]}" >"$out/build.log" 2>&1 || { grep -m20 error "$out/build.log"; exit 1; }
+fi
 for step in "$@"; do
   case $step in
     tests)
