@@ -142,7 +142,7 @@ class DynamicsPipeline final : public Simulation {
       // Land exactly on the frame's end: split what remains into equal steps.
       const double steps_left = std::ceil(remaining / dt * (1 - 1e-12));
       const double h = steps_left <= 1 ? remaining : remaining / steps_left;
-      one_step(h);
+      if (!one_step(h)) continue;  // stepped back: the steps from there again
       if (window_.size() >= window_steps()) settle_window();
       dt_min = std::min(dt_min, h), dt_max = std::max(dt_max, h);
       if (Status e = backend_.status(); !e) return e;
@@ -605,10 +605,10 @@ class DynamicsPipeline final : public Simulation {
   // Grows the live prefix to hold every particle due by t: past it, each
   // place's earliest release lies after t. It only grows, and renumbering
   // moves particles within it only, so the places past it keep their values.
-  void grow_live(double t) {
-    const size_t due = size_t(std::upper_bound(due_from_.begin(), due_from_.end(), t) -
-                              due_from_.begin());
-    live_ = std::max(live_, due);
+  void grow_live(double t) { live_ = std::max(live_, due_by(t)); }
+  // How many particles are due by time t (they are numbered by release).
+  size_t due_by(double t) const {
+    return size_t(std::upper_bound(due_from_.begin(), due_from_.end(), t) - due_from_.begin());
   }
 
   // Renumbers the live particles in the order of their cells (the grid just
@@ -677,7 +677,9 @@ class DynamicsPipeline final : public Simulation {
   // of a step and done in the next step's first pass (one pass over the
   // particles instead of two), or by close_pending_step() before anything
   // reads the state.
-  void one_step(double dt) {
+  // One step of length dt; false when it was not taken (a step launched
+  // before it was voided: the state is that step's, taken again).
+  bool one_step(double dt) {
     if (timing_) lap_ = std::chrono::steady_clock::now();
     const bool releasing = !all_released_;
     const bool verlet = cfg_.integrator == Integrator::kVelocityVerlet;
@@ -687,14 +689,21 @@ class DynamicsPipeline final : public Simulation {
     // the first boundary at or after its release time. The forces are
     // evaluated there too, in the pass that takes the decisions.
     const double release_at = verlet ? time_ + dt : time_;
-    if (releasing) grow_live(release_at);
-    // On the GPU, where only the particles' moves can call a list build (none
-    // waits for its release), the device takes the lists' check itself and the
-    // host goes on launching steps without reading it (see settle_window; the
-    // wait for the number cost 17-19 us a step on the H200, docs/benchmarks.md).
-    const bool ahead = B::kRunsAhead && !timing_ && verlet && !releasing && lists_ && nl_valid_ &&
-                       live_ <= nl_cover_;
-    if (ahead) window_.push_back(WindowStep{steps_, time_, dt, hist_in_});
+    const size_t live = releasing ? std::max(live_, due_by(release_at)) : live_;
+    // On the GPU the device takes the lists' check itself and the host goes on
+    // launching steps without reading it (see settle_window; the wait for the
+    // number cost 17-19 us a step on the H200, docs/benchmarks.md), unless the
+    // particles due now reach past the lists' cover (a build the host calls).
+    // The releases themselves are decided on the device (decide_releases).
+    const bool ahead =
+        B::kRunsAhead && !timing_ && verlet && lists_ && nl_valid_ && live <= nl_cover_;
+    // A step that looks must see the steps launched before it stand; when one
+    // of them called a build, the caller takes the steps from there again.
+    if (!ahead && settle_window()) return false;
+    live_ = live;
+    if (ahead)
+      window_.push_back(
+          WindowStep{steps_, time_, dt, hist_in_, live_, released_to_, all_released_});
     if (verlet) open_step(dt, ahead);
     if (releasing && !cfg_.particle_contacts) all_released_ = time_ >= last_release_;
     lap(times_.drift_ms);
@@ -704,6 +713,7 @@ class DynamicsPipeline final : public Simulation {
     forces(dt, false, release_at, releasing);
     if (releasing) released_to_ = release_at;
     end_step(dt, verlet);
+    return true;
   }
 
   // A step's host side after its forces: the springs' generations turn, and
@@ -739,6 +749,9 @@ class DynamicsPipeline final : public Simulation {
     uint64_t steps;
     double time, dt;
     int hist_in;
+    size_t live;         // the live prefix the step ran over
+    double released_to;  // the releases' state before it
+    bool all_released;
   };
 
   // Reads the lists' check of the steps launched ahead. When one of them found
@@ -782,10 +795,16 @@ class DynamicsPipeline final : public Simulation {
     window_.clear();  // keeps its capacity for the next window
     if (!back) return false;
     steps_ = from.steps, time_ = from.time, hist_in_ = from.hist_in;
+    live_ = from.live, released_to_ = from.released_to, all_released_ = from.all_released;
     close_pending_ = false;  // the step's first pass closed the one before it
     disp_fresh_ = false;
+    // The rest of the step as one_step takes it (only Verlet runs ahead).
+    const bool releasing = !all_released_;
+    const double release_at = time_ + from.dt;
+    if (releasing && !cfg_.particle_contacts) all_released_ = time_ >= last_release_;
     build_lists();
-    forces(from.dt, false, time_ + from.dt, false);
+    forces(from.dt, false, release_at, releasing);
+    if (releasing) released_to_ = release_at;
     end_step(from.dt, true);
     return true;
   }

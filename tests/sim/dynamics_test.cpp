@@ -976,14 +976,16 @@ void steps_one_at_a_time_or_together_agree() {
 }
 TEST(Dynamics, StepsOneAtATimeOrTogetherAgreeBitForBit) { steps_one_at_a_time_or_together_agree(); }
 
-// On the GPU, once every particle is released, the host launches several
-// steps before it reads the lists' check, which the device takes itself; a
-// build voids the steps after the one that called it, and they are launched
-// again. The run is that of a look every step, bit for bit, with builds called
-// mid-window: a dense frictional scene with a thin skin (a build every 20-40
-// steps), stepped by step() and by frames; particles escaping over a box's
-// lid; the wall's lists alone; a turning drum. The CPU looks every step; it
-// runs the same scenes.
+// On the GPU the host launches several steps before it reads the lists'
+// check, which the device takes itself; a build voids the steps after the one
+// that called it, and they are launched again. The run is that of a look
+// every step, bit for bit, with builds called mid-window: a dense frictional
+// scene with a thin skin (a build every 20-40 steps), stepped by step() and by
+// frames; particles escaping over a box's lid; the wall's lists alone; a
+// turning drum; and the first while its particles are released over 150 steps,
+// with and without particle contacts (a release past the lists' cover is a
+// build the host calls, the releases decided on the device). The CPU looks
+// every step; it runs the same scenes.
 void steps_run_ahead_as_a_look_every_step_would() {
   struct Scene {
     TriangleMesh wall;
@@ -1018,6 +1020,11 @@ void steps_run_ahead_as_a_look_every_step_would() {
     s.cfg.wall_motion.axis = {1, 0, 0};
     s.cfg.wall_motion.center = {0, 0, 50};
     s.cfg.wall_motion.angular_speed = 20;
+    scenes.push_back(s);
+  }
+  for (bool pairs : {true, false}) {
+    Scene s = scenes[pairs ? 0 : 2];
+    release_in_groups(s.wall, s.cfg, &s.p, 50);
     scenes.push_back(s);
   }
   for (size_t scene = 0; scene < scenes.size(); ++scene) {
