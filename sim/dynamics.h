@@ -156,9 +156,9 @@ struct DynamicsConfig {
   // the numbering has scattered (kScatteredCells); 0 never; N at the first
   // list build and every N-th after (counted from the start, a resume included).
   int renumber_every = -1;
-  // With lists on the GPU: the steps launched between two looks at the lists' check, which the device takes itself
-  // (a step after the one that calls a build does nothing; the host then
-  // builds and launches it again). 0: automatic, from the lists' life; 1: a
+  // With lists on the GPU: the steps launched between two looks at the lists'
+  // check, which the device takes itself (a step after the one that calls a
+  // build does nothing; the host then builds and launches it again). 0: automatic, from the lists' life; 1: a
   // look every step. The trajectories are the same bit for bit.
   int run_ahead = 0;
   // Without particle contacts, whether the still wall's candidates are kept in

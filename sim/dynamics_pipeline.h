@@ -710,10 +710,15 @@ class DynamicsPipeline final : public Simulation {
     if (!ahead) update_candidates();  // nothing to do without lists or particle contacts
     lap(times_.grid_ms);
     // Forces where the positions now are: after Verlet's drift, at the step's end.
+    forces_and_end(dt, release_at, releasing, verlet);
+    return true;
+  }
+
+  // A step's forces where the positions now are, and its host side after them.
+  void forces_and_end(double dt, double release_at, bool releasing, bool verlet) {
     forces(dt, false, release_at, releasing);
     if (releasing) released_to_ = release_at;
     end_step(dt, verlet);
-    return true;
   }
 
   // A step's host side after its forces: the springs' generations turn, and
@@ -777,8 +782,7 @@ class DynamicsPipeline final : public Simulation {
         return step_back_to(backend_.halt_and_max(speed_.data(), live_, vmax));
       }
     }
-    if (settle_window()) return true;
-    close_pending_step();
+    close_pending_step();  // nothing was launched ahead
     *vmax = fastest_speed();
     return false;
   }
@@ -803,9 +807,7 @@ class DynamicsPipeline final : public Simulation {
     const double release_at = time_ + from.dt;
     if (releasing && !cfg_.particle_contacts) all_released_ = time_ >= last_release_;
     build_lists();
-    forces(from.dt, false, release_at, releasing);
-    if (releasing) released_to_ = release_at;
-    end_step(from.dt, true);
+    forces_and_end(from.dt, release_at, releasing, true);
     return true;
   }
 
