@@ -34,9 +34,12 @@ const std::vector<FlagSpec> kFlags = {
     {"simd-pairs", true,
      "auto | off: CPU pairs evaluated once four at a time in AVX2 vectors "
      "(default auto: where the CPU has AVX2)"},
+    {"method", true,
+     "bin | gravity | circumcircle | midpoint4 | bvh: how the box is prepared (default bin)"},
     {"wall-lists", true,
      "auto | on | off: without pair contacts, the still wall's candidates kept in lists with the "
-     "skin, or searched every step (default auto: the CPU lists, the GPU searches)"},
+     "skin, or searched every step (default auto: the CPU lists; the GPU searches a binned wall "
+     "and lists a divided one)"},
     {"lanes", true,
      "auto | 1 | 2 | 4 | 8: GPU threads sharing a particle's pairs (default auto: the backend's "
      "choice)"},
@@ -126,6 +129,9 @@ int bench_run(const Args& args) {
   const std::string simd = p->get("simd-pairs", "auto");
   if (simd != "auto" && simd != "off")
     return usage_error("bench run", "--simd-pairs must be auto or off");
+  sim::Method method = sim::Method::kBin;
+  if (!sim::parse_method(p->get("method", "bin"), &method) || method == sim::Method::kReference)
+    return usage_error("bench run", "--method must be bin, gravity, circumcircle, midpoint4 or bvh");
   const std::string wall_lists = p->get("wall-lists", "auto");
   if (wall_lists != "auto" && wall_lists != "on" && wall_lists != "off")
     return usage_error("bench run", "--wall-lists must be auto, on or off");
@@ -170,10 +176,11 @@ int bench_run(const Args& args) {
   }
 
   std::printf("# bench run: %s%s, %s contacts, friction %.2g, rolling %.2g, wall motion %s, "
-              "%lld timed steps\n",
+              "wall %s, %lld timed steps\n",
               sim::to_string(backend),
               backend == sim::Backend::kCuda ? (" (" + sim::cuda_device_name() + ")").c_str() : "",
-              sim::to_string(model), friction, rolling, motion.c_str(), (long long)steps);
+              sim::to_string(model), friction, rolling, motion.c_str(), sim::to_string(method),
+              (long long)steps);
   std::printf(
       "| particles | pair contacts | ms/step | steps/s | particle-steps/s | wall contacts | pair "
       "contacts | device MB | skin (radii) | list builds |\n"
@@ -185,6 +192,7 @@ int bench_run(const Args& args) {
   };
   std::vector<Breakdown> breakdown;
   std::string retaken;  // GPU steps launched ahead that a build voided, per row
+  std::string pieces;   // a divided box's pieces, per count
   for (uint64_t n : counts) {
     sim::TriangleMesh wall;
     sim::ParticleSet ps;
@@ -193,6 +201,7 @@ int bench_run(const Args& args) {
     for (bool with_pairs : pair_modes) {
       sim::DynamicsConfig cfg;
       cfg.backend = backend;
+      cfg.method = method;
       cfg.pool = &pool;
       cfg.particle_contacts = with_pairs;
       cfg.material.friction = friction;
@@ -220,6 +229,8 @@ int bench_run(const Args& args) {
         return kExitFailure;
       }
       const double dt = (*s)->time_step_info().spring_step;
+      if (sim::divides(method) && with_pairs == pair_modes.front())
+        pieces += " " + std::to_string(n) + ": " + std::to_string((*s)->wall_info().triangles_used) + ";";
       if (warmup && !(*s)->step(uint64_t(warmup), dt)) return kExitFailure;
       (*s)->set_stage_timing(false);  // counts (list builds) from here
       const auto t0 = std::chrono::steady_clock::now();
@@ -250,6 +261,7 @@ int bench_run(const Args& args) {
       std::fflush(stdout);
     }
   }
+  if (!pieces.empty()) std::printf("\n# the box's pieces, per particle count:%s\n", pieces.c_str());
   if (!retaken.empty())
     std::printf("\n# steps launched ahead, voided by a list build and launched again:%s\n",
                 retaken.c_str());

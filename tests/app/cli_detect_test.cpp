@@ -31,6 +31,8 @@ TEST(CliDetect, BadArgumentsExitTwo) {
   EXPECT_EQ(cmd_detect({}), kExitUsage);
   EXPECT_EQ(cmd_detect({"--help"}), kExitOk);
   EXPECT_EQ(cmd_bench({"nothing"}), kExitUsage);
+  EXPECT_EQ(cmd_bench({"run", "--method", "magic"}), kExitUsage);
+  EXPECT_EQ(cmd_bench({"run", "--method", "reference"}), kExitUsage);  // not a wall for dynamics
 }
 
 // A missing file or a bad wall spec is bad input, exit 2 as for every command
