@@ -131,7 +131,8 @@ int bench_run(const Args& args) {
     return usage_error("bench run", "--simd-pairs must be auto or off");
   sim::Method method = sim::Method::kBin;
   if (!sim::parse_method(p->get("method", "bin"), &method) || method == sim::Method::kReference)
-    return usage_error("bench run", "--method must be bin, gravity, circumcircle, midpoint4 or bvh");
+    return usage_error("bench run",
+                       "--method must be bin, gravity, circumcircle, midpoint4 or bvh");
   const std::string wall_lists = p->get("wall-lists", "auto");
   if (wall_lists != "auto" && wall_lists != "on" && wall_lists != "off")
     return usage_error("bench run", "--wall-lists must be auto, on or off");
@@ -175,12 +176,13 @@ int bench_run(const Args& args) {
     }
   }
 
-  std::printf("# bench run: %s%s, %s contacts, friction %.2g, rolling %.2g, wall motion %s, "
-              "wall %s, %lld timed steps\n",
-              sim::to_string(backend),
-              backend == sim::Backend::kCuda ? (" (" + sim::cuda_device_name() + ")").c_str() : "",
-              sim::to_string(model), friction, rolling, motion.c_str(), sim::to_string(method),
-              (long long)steps);
+  std::printf(
+      "# bench run: %s%s, %s contacts, friction %.2g, rolling %.2g, wall motion %s, "
+      "wall %s, %lld timed steps\n",
+      sim::to_string(backend),
+      backend == sim::Backend::kCuda ? (" (" + sim::cuda_device_name() + ")").c_str() : "",
+      sim::to_string(model), friction, rolling, motion.c_str(), sim::to_string(method),
+      (long long)steps);
   std::printf(
       "| particles | pair contacts | ms/step | steps/s | particle-steps/s | wall contacts | pair "
       "contacts | device MB | skin (radii) | list builds |\n"
@@ -230,7 +232,8 @@ int bench_run(const Args& args) {
       }
       const double dt = (*s)->time_step_info().spring_step;
       if (sim::divides(method) && with_pairs == pair_modes.front())
-        pieces += " " + std::to_string(n) + ": " + std::to_string((*s)->wall_info().triangles_used) + ";";
+        pieces +=
+            " " + std::to_string(n) + ": " + std::to_string((*s)->wall_info().triangles_used) + ";";
       if (warmup && !(*s)->step(uint64_t(warmup), dt)) return kExitFailure;
       (*s)->set_stage_timing(false);  // counts (list builds) from here
       const auto t0 = std::chrono::steady_clock::now();

@@ -328,8 +328,10 @@ class CudaBackend {
     std::fill(out, out + count, 0.0);
     if (n == 0 || count == 0 || !ok_) return;
     if (count > size_t(cuda_detail::kMaxColumns) || n > UINT32_MAX) {
-      for (size_t c = 0; c < count; ++c)
-        out[c] = (max_mask >> c) & 1ull ? reduce_max(columns[c], n) : reduce_sum(columns[c], n);
+      // The statistics are 18 columns over a particle count that launch() indexes.
+      ok_ = false;
+      error_ = "a reduction of " + std::to_string(count) + " columns of " + std::to_string(n) +
+               " is more than one launch takes";
       return;
     }
     cuda_detail::Columns cols{};
@@ -560,7 +562,8 @@ class CudaBackend {
   Buffer<uint64_t> seg_cell_;
   Buffer<double> scalar_, partials_;
   Buffer<unsigned long long> max_bits_;  // parallel_max's result, as the bits of a double
-  Buffer<unsigned long long> halt_;  // parallel_max_halting's word, block count and largest value
+  // parallel_max_halting's word, block count and largest value, and halt_and_max's result.
+  Buffer<unsigned long long> halt_;
   uint32_t sms_ = 0;                      // the device's SMs (sm_count)
 };
 

@@ -158,8 +158,9 @@ struct DynamicsConfig {
   int renumber_every = -1;
   // With lists on the GPU: the steps launched between two looks at the lists'
   // check, which the device takes itself (a step after the one that calls a
-  // build does nothing; the host then builds and launches it again). 0: automatic, from the lists' life; 1: a
-  // look every step. The trajectories are the same bit for bit.
+  // build does nothing; the host then builds and launches it again). 0:
+  // automatic, from the lists' life; 1: a look every step. The trajectories
+  // are the same bit for bit.
   int run_ahead = 0;
   // Without particle contacts, whether the still wall's candidates are kept in
   // lists with the skin too (with them they always are), or searched every
@@ -362,9 +363,9 @@ inline constexpr double kScatteredCells = 4;
 // searches a binned wall every step: with the lists' check waiting on the host
 // every step the H200 log's jobs without pairs ran a median 2.0 times as long,
 // and without the wait (run_ahead) the lists win only at 10^6 particles. A
-// divided wall is listed on the GPU too: a search visits the pieces of up to
-// 27 cells (about a thousand at the sweep's densities), and a pour of 2,925
-// into a finely divided cylinder took 620 us a step searched (docs/dynamics.md).
+// divided wall is listed on the GPU too: a search visits every piece in up to
+// 27 cells around a particle, and a pour of 2,925 into a finely divided
+// cylinder took 620 us a step searched, 50 listed (docs/dynamics.md).
 bool wall_lists_without_pairs(const DynamicsConfig& config);
 
 // The contact laws and the critical step they allow, from the material, the

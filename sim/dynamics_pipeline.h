@@ -738,16 +738,23 @@ class DynamicsPipeline final : public Simulation {
 
   // How many steps the host launches before it reads the lists' check: the
   // scene's count (run_ahead), or a quarter of the last lists' life, 1 to 32
-  // (kSpeedCheckInterval before it is known). A look costs a wait for the
+  // (kFirstWindowSteps before it is known). A look costs a wait for the
   // device (17-19 us on the H200); a build voids the steps launched after the
   // one that called it, on average half a window, whose launches are lost: at
   // 10^4 particles with a build every 3 steps, windows of 8 launched 799 steps
   // again in 400 (docs/benchmarks.md).
   size_t window_steps() const {
     if (cfg_.run_ahead > 0) return size_t(cfg_.run_ahead);
-    if (nl_life_steps_ == 0) return kSpeedCheckInterval;
+    if (nl_life_steps_ == 0) return kFirstWindowSteps;
     return size_t(std::clamp<uint64_t>(nl_life_steps_ / 4, 1, 32));
   }
+
+  // The window before the lists have lasted once: as many steps as advance
+  // takes between two reads of the fastest speed (kSpeedCheckInterval). Those
+  // reads share the window's wait only when a window is open at the check
+  // (settle_window_and_fastest); a full window of 8 is settled after its last
+  // step and the speed read just after, two waits in a row.
+  static constexpr size_t kFirstWindowSteps = kSpeedCheckInterval;
 
   // A step launched ahead of the lists' check (one_step): where it started.
   struct WindowStep {
@@ -2227,7 +2234,7 @@ class DynamicsPipeline final : public Simulation {
   double wl_per_particle_ = 0;  // wall triangles a particle in its lists, on average (at most)
   double nl_built_at_ = 0, nl_life_ = 0;  // s: when they were last built, how long the one before lasted
   uint64_t nl_built_step_ = 0;            // the step count at the last build
-  uint64_t nl_life_steps_ = 0;  // steps the last lists lasted (0 until a second build)
+  uint64_t nl_life_steps_ = 0;            // steps the last lists lasted (0 until a second build)
   // Velocity Verlet's close of the last step (its dt) waits for the next pass.
   bool close_pending_ = false;
   double pending_dt_ = 0;
