@@ -254,6 +254,10 @@ struct StepTimes {
   // GPU steps launched ahead of the lists' check (run_ahead) that a build made
   // void, so they were launched again.
   uint64_t steps_retaken = 0;
+  // Reads of the steps launched ahead (their lists' check) and of the fastest
+  // speed, each a wait for the device on the GPU: the count shows whether
+  // advance shares one wait between them.
+  uint64_t waits = 0;
   double drift_ms = 0, grid_ms = 0, pair_ms = 0, wall_ms = 0, kick_ms = 0;
 };
 

@@ -143,7 +143,10 @@ class DynamicsPipeline final : public Simulation {
       const double steps_left = std::ceil(remaining / dt * (1 - 1e-12));
       const double h = steps_left <= 1 ? remaining : remaining / steps_left;
       if (!one_step(h)) continue;  // stepped back: the steps from there again
-      if (window_.size() >= window_steps()) settle_window();
+      // A full window is settled now, unless the speed check comes next: it
+      // settles the window in the same wait (settle_window_and_fastest).
+      if (window_.size() >= window_steps() && steps_ - checked_at < kSpeedCheckInterval)
+        settle_window();
       dt_min = std::min(dt_min, h), dt_max = std::max(dt_max, h);
       if (Status e = backend_.status(); !e) return e;
     }
@@ -750,10 +753,9 @@ class DynamicsPipeline final : public Simulation {
   }
 
   // The window before the lists have lasted once: as many steps as advance
-  // takes between two reads of the fastest speed (kSpeedCheckInterval). Those
-  // reads share the window's wait only when a window is open at the check
-  // (settle_window_and_fastest); a full window of 8 is settled after its last
-  // step and the speed read just after, two waits in a row.
+  // takes between two reads of the fastest speed (kSpeedCheckInterval), so
+  // that in advance the window ends at the speed check and one wait reads both
+  // (settle_window_and_fastest).
   static constexpr size_t kFirstWindowSteps = kSpeedCheckInterval;
 
   // A step launched ahead of the lists' check (one_step): where it started.
@@ -774,6 +776,7 @@ class DynamicsPipeline final : public Simulation {
   // stepped back (the caller takes the later steps again).
   bool settle_window() {
     if (window_.empty()) return false;
+    ++times_.waits;
     unsigned long long mark = 0;
     if constexpr (B::kRunsAhead) mark = backend_.halt();
     return step_back_to(mark);
@@ -783,6 +786,7 @@ class DynamicsPipeline final : public Simulation {
   // (*vmax), where the steps run ahead in one wait for the device instead of
   // two. When it steps back, *vmax is void and the caller asks again.
   bool settle_window_and_fastest(double* vmax) {
+    ++times_.waits;
     if constexpr (B::kRunsAhead) {
       if (!window_.empty()) {
         close_pending_step();  // voided by a halt, as the window's steps are

@@ -1071,6 +1071,42 @@ TEST(Dynamics, StepsRunAheadAsALookEveryStepWould) {
   steps_run_ahead_as_a_look_every_step_would();
 }
 
+// In advance, a window of as many steps as lie between two reads of the
+// fastest speed ends at that read, and one wait for the device serves both:
+// particles at rest without gravity (lists built once, never again), windows
+// of 8, frames of 98 steps. Each frame reads the speed at its start and every
+// 8 steps (13 reads) and settles its last 2 steps at its end. Settling each
+// full window apart from the read would wait about twice as often. On the CPU
+// nothing runs ahead and only the speed is read.
+void advance_waits_once_for_the_window_and_the_speed() {
+  DynamicsConfig cfg;
+  cfg.particle_contacts = true;
+  cfg.gravity = {0, 0, 0};
+  cfg.run_ahead = 8;
+  auto s = make_sim(make_box(20, 20, 20), cfg, lattice(4, 6, 5, 0.5, 0.0, 3));
+  ASSERT_TRUE(s);
+  const double dt = s->time_step_info().spring_step;
+  FrameStats st;
+  ASSERT_TRUE(s->advance(10 * dt, &st));  // the lists built
+  const StepTimes before = s->stage_times();
+  const uint64_t steps_before = s->steps_taken();
+  const int frames = 5;
+  uint64_t bound = 0;
+  for (int f = 0; f < frames; ++f) {
+    ASSERT_TRUE(s->advance(97.5 * dt, &st));
+    ASSERT_EQ(st.substeps, 98u);
+    bound += 13 + (backend_under_test() == Backend::kCuda ? 1 : 0);
+  }
+  const StepTimes& after = s->stage_times();
+  EXPECT_EQ(after.neighbour_builds, before.neighbour_builds);
+  EXPECT_EQ(after.steps_retaken, before.steps_retaken);
+  EXPECT_EQ(s->steps_taken() - steps_before, 98u * frames);
+  EXPECT_EQ(after.waits - before.waits, bound);
+}
+TEST(Dynamics, AdvanceWaitsOnceForTheWindowAndTheSpeed) {
+  advance_waits_once_for_the_window_and_the_speed();
+}
+
 // The engine numbers the particles by release and runs a step's passes over
 // the released prefix only. Each particle still starts moving at the first
 // step that begins at or after its release time, none sooner and none later:
@@ -1432,6 +1468,9 @@ TEST_F(DynamicsCuda, StepsOneAtATimeOrTogetherAgreeBitForBit) {
 TEST_F(DynamicsCuda, RenumberingKeepsTheSprings) { renumbering_keeps_the_springs(); }
 TEST_F(DynamicsCuda, StepsRunAheadAsALookEveryStepWould) {
   steps_run_ahead_as_a_look_every_step_would();
+}
+TEST_F(DynamicsCuda, AdvanceWaitsOnceForTheWindowAndTheSpeed) {
+  advance_waits_once_for_the_window_and_the_speed();
 }
 TEST_F(DynamicsCuda, FrictionTurnsSlidingIntoRolling) {
   friction_makes_it_roll();
