@@ -33,10 +33,11 @@ namespace {
 
 constexpr const char* kKind = "collidoscope-job-cost-model";
 constexpr const char* kDetectionKind = "collidoscope-resource-predictor";
-constexpr int kVersion = 5;  // 2: each member has its prior; 3: the wall footprint in the memory priors;
+constexpr int kVersion = 6;  // 2: each member has its prior; 3: the wall footprint in the memory priors;
                               // 4: a divided wall's lookups charged to the particles near it;
                               // 5: the lookups priced by the pieces within reach, GPU load
-                              // learnt as a log
+                              // learnt as a log; 6: no lookups on the GPU (its divided
+                              // walls listed)
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // Memory: the share of out-of-fold jobs whose peak may exceed the point by more than
 // 5 %: the issue allows 5 % of held-out runs, and 4 % of the out-of-fold ones leaves a
@@ -192,7 +193,14 @@ void time_terms(const JobInputs& in, const CostDrivers& d, bool per_frame, doubl
   // of 41,000 in a ball by gravity was priced 5-7 times its 1.0 s on the H200;
   // charged to those near the wall, the H200 log's total 12.3 -> 11.9 % (the
   // CPU's 17.1 -> 17.4; docs/gvm.md).
-  const double near_steps = active * d.near_wall_share;
+  // On the GPU a standing divided wall is listed like a binned one since stop 52
+  // (sim::wall_lists_without_pairs; with particle contacts before), so its
+  // lookups are paid at the lists' builds, under the steps' latency: on the H200
+  // log swept after that change, total 12.8 % with these terms, 12.1 without the
+  // pieces' one and 11.0 without both; a fill of 8,276 in a circumcircle ball
+  // was priced at 27 s for 6.4. On the CPU dropping them changed nothing (17.1 ->
+  // 17.2 %), and they stay.
+  const double near_steps = is_cuda(in) ? 0 : active * d.near_wall_share;
   // And a lookup's work is the pieces within a particle's reach, about pieces x r^2 /
   // wall area: in the CPU log's divided jobs without particle contacts the time per
   // near lookup grows with it (slopes 1.0 and 1.4 in log-log for circumcircle and
