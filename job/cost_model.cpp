@@ -33,11 +33,11 @@ namespace {
 
 constexpr const char* kKind = "collidoscope-job-cost-model";
 constexpr const char* kDetectionKind = "collidoscope-resource-predictor";
-constexpr int kVersion = 6;  // 2: each member has its prior; 3: the wall footprint in the memory priors;
-                              // 4: a divided wall's lookups charged to the particles near it;
-                              // 5: the lookups priced by the pieces within reach, GPU load
-                              // learnt as a log; 6: no lookups on the GPU (its divided
-                              // walls listed)
+constexpr int kVersion = 6;  // 2: each member has its prior; 3: the wall footprint in the memory
+                             // priors; 4: a divided wall's lookups charged to the particles near
+                             // it; 5: the lookups priced by the pieces within reach, GPU load
+                             // learnt as a log; 6: no lookups on the GPU (its divided
+                             // walls listed)
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // Memory: the share of out-of-fold jobs whose peak may exceed the point by more than
 // 5 %: the issue allows 5 % of held-out runs, and 4 % of the out-of-fold ones leaves a
