@@ -1091,17 +1091,17 @@ void advance_waits_once_for_the_window_and_the_speed() {
   const StepTimes before = s->stage_times();
   const uint64_t steps_before = s->steps_taken();
   const int frames = 5;
-  uint64_t bound = 0;
+  uint64_t expected = 0;
   for (int f = 0; f < frames; ++f) {
     ASSERT_TRUE(s->advance(97.5 * dt, &st));
     ASSERT_EQ(st.substeps, 98u);
-    bound += 13 + (backend_under_test() == Backend::kCuda ? 1 : 0);
+    expected += 13 + (backend_under_test() == Backend::kCuda ? 1 : 0);
   }
   const StepTimes& after = s->stage_times();
   EXPECT_EQ(after.neighbour_builds, before.neighbour_builds);
   EXPECT_EQ(after.steps_retaken, before.steps_retaken);
   EXPECT_EQ(s->steps_taken() - steps_before, 98u * frames);
-  EXPECT_EQ(after.waits - before.waits, bound);
+  EXPECT_EQ(after.waits - before.waits, expected);
 }
 TEST(Dynamics, AdvanceWaitsOnceForTheWindowAndTheSpeed) {
   advance_waits_once_for_the_window_and_the_speed();
