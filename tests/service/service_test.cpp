@@ -662,9 +662,10 @@ TEST_F(ServiceTest, ARefusalGoesOutWhileItsBodyIsStillComing) {
   std::vector<std::thread> clients;
   for (int c = 0; c < kClients; ++c)
     clients.emplace_back([&] {
-      const std::string head = "POST /api/v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: "
-                               "application/json\r\nContent-Length: " +
-                               std::to_string(kBody) + "\r\n\r\n";
+      const std::string head =
+          "POST /api/v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: "
+          "application/json\r\nContent-Length: " +
+          std::to_string(kBody) + "\r\n\r\n";
       const std::string piece(kPiece, ' ');
       for (int i = 0; i < kEach && std::chrono::steady_clock::now() < deadline; ++i) {
         const int fd = connect_loopback(server_->port());
