@@ -653,7 +653,7 @@ TEST_F(ServiceTest, ClientClosingMidVideoLeavesTheServerRunning) {
 // Bodies over the limit sent in small pieces make that event likely: 400
 // refusals of 1 MiB bodies sent 4 KiB at a time by four clients at once,
 // each answered within 3 s (without the fix 1 to 6 of them were not, in each
-// of 7 runs; about 4 s, and at most 20 s plus one wait of 3 s in all).
+// of 5 runs; about 4 s, and at most 20 s plus one wait of 3 s in all).
 TEST_F(ServiceTest, ARefusalGoesOutWhileItsBodyIsStillComing) {
   constexpr int kClients = 4, kEach = 100;
   constexpr size_t kBody = 1 << 20, kPiece = 4096;  // over the 64 KiB limit
