@@ -393,11 +393,8 @@ class CudaBackend {
   // The halt word (0 when nothing halted), read once the work launched before
   // has run, and cleared.
   unsigned long long halt() {
-    if (halt_.size() == 0 || !ok_) return 0;
-    unsigned long long mark = 0;
-    to_host(&mark, halt_.data(), sizeof mark);
-    if (mark) check(cudaMemsetAsync(halt_.data(), 0, sizeof mark), "memset");
-    return mark;
+    double none;
+    return halt_and_max(nullptr, 0, &none);
   }
   // halt() and reduce_max(d, n) in one wait for the device: the largest of
   // d[0, n) is reduced beside the halt word and both come back in one copy.

@@ -120,6 +120,11 @@ class DynamicsPipeline final : public Simulation {
     double dt_min = 1e300, dt_max = 0, dt = 0, travel = 0, fastest = 0;
     bool checked = false;
     uint64_t checked_at = 0;
+    // The fastest speed is read every few steps: it sizes the automatic step
+    // and, with a fixed one, tells how far a step carries a particle.
+    const auto speed_check_due = [&] {
+      return !checked || steps_ - checked_at >= uint64_t(kSpeedCheckInterval);
+    };
     // A step taken again after a build (settle_window) starts where the first
     // try did, so it is given the same length: the steps do not depend on
     // whether they ran ahead.
@@ -128,9 +133,7 @@ class DynamicsPipeline final : public Simulation {
         if (settle_window()) continue;
         break;
       }
-      if (!checked || steps_ - checked_at >= uint64_t(kSpeedCheckInterval)) {
-        // The fastest speed, read every few steps: it sizes the automatic step
-        // and, with a fixed one, tells how far a step carries a particle.
+      if (speed_check_due()) {
         double vmax = 0;
         if (settle_window_and_fastest(&vmax)) continue;
         dt = ts_.explicit_step > 0 ? ts_.explicit_step : automatic_step(vmax);
@@ -145,8 +148,7 @@ class DynamicsPipeline final : public Simulation {
       if (!one_step(h)) continue;  // stepped back: the steps from there again
       // A full window is settled now, unless the speed check comes next: it
       // settles the window in the same wait (settle_window_and_fastest).
-      if (window_.size() >= window_steps() && steps_ - checked_at < kSpeedCheckInterval)
-        settle_window();
+      if (window_.size() >= window_steps() && !speed_check_due()) settle_window();
       dt_min = std::min(dt_min, h), dt_max = std::max(dt_max, h);
       if (Status e = backend_.status(); !e) return e;
     }

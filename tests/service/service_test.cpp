@@ -649,7 +649,7 @@ TEST_F(ServiceTest, ClientClosingMidVideoLeavesTheServerRunning) {
 // A refusal is written while its body is still coming in, and Pistache 0.0.5
 // takes an event that finds the socket both readable and writable as a read
 // only: the 413 once waited until the client, its body sent, gave up (curl
-// after 30 s; 1 in 200 runs of BadInputGetsClearErrorsAndTheServerGoesOn).
+// after 30 s; 3 in 800 runs of BadInputGetsClearErrorsAndTheServerGoesOn).
 // Bodies over the limit sent in small pieces make that event likely: 400
 // refusals of 1 MiB bodies sent 4 KiB at a time by four clients at once,
 // each answered within 3 s (without the fix 1 to 6 of them were not, in each
