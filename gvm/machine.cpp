@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <utility>
 
@@ -36,6 +37,109 @@ inline double activate(Activation a, double z) {
       break;
   }
   return 1.0 / (1.0 + std::exp(-z));
+}
+
+// The training loop's row kernels are built twice, for AVX2 and for any x86-64, and the
+// loader picks one (an ifunc): each lane does the same IEEE operations at either width
+// (AVX2 brings no fused multiply-add), so both give the same bits.
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define COLLIDO_ROW_KERNEL __attribute__((target_clones("avx2", "default")))
+#else
+#define COLLIDO_ROW_KERNEL
+#endif
+
+// o[n] = f(beta * z[n]) for n rows, the activation chosen once outside the loop, so
+// that the loop runs in vectors (it is most of a Monte Carlo proposal's cost; with the
+// choice per row it ran one row at a time). The same bits as activate() row by row.
+COLLIDO_ROW_KERNEL void activate_rows(Activation a, double beta, const double* z, double* o,
+                                      size_t n) {
+  switch (a) {
+    case Activation::kSoftsign:
+      for (size_t r = 0; r < n; ++r) o[r] = activate(Activation::kSoftsign, beta * z[r]);
+      return;
+    case Activation::kTanh:
+      for (size_t r = 0; r < n; ++r) o[r] = activate(Activation::kTanh, beta * z[r]);
+      return;
+    case Activation::kSigmoid:
+      break;
+  }
+  for (size_t r = 0; r < n; ++r) o[r] = activate(Activation::kSigmoid, beta * z[r]);
+}
+
+// The sums an output's least-squares affine fit needs, over its rows: of u = m (s - shift),
+// of u^2 and of s t, where s is the output sum with neuron j's outputs o_old replaced by
+// o_new (when given) and m masks the rows without a target. Four partial sums, row n into
+// lane n % 4, added in one fixed order at the end: a single running sum is a chain of
+// dependent adds the compiler may not reorder, and this order gives the same bits on
+// every machine and vector width.
+struct FitSums {
+  double su, suu, sst;
+};
+template <bool kNew>
+COLLIDO_ROW_KERNEL FitSums fit_sums(const double* s, const double* o_new, const double* o_old,
+                                    double vk, const double* mk, const double* tc, double shift,
+                                    size_t rows) {
+  using V4 = double __attribute__((vector_size(32)));
+  V4 su = {0, 0, 0, 0}, suu = su, sst = su;
+  const size_t whole = rows / 4 * 4;
+  // Rows [n, n + 4) from memory; the last rows copied into lanes padded with zeros.
+  double pad_s[4] = {0, 0, 0, 0}, pad_new[4] = {0, 0, 0, 0}, pad_old[4] = {0, 0, 0, 0},
+         pad_m[4] = {0, 0, 0, 0}, pad_t[4] = {0, 0, 0, 0};
+  for (size_t r = whole; r < rows; ++r) {
+    pad_s[r - whole] = s[r], pad_m[r - whole] = mk[r], pad_t[r - whole] = tc[r];
+    if (kNew) pad_new[r - whole] = o_new[r], pad_old[r - whole] = o_old[r];
+  }
+  for (size_t n = 0; n < rows; n += 4) {
+    const bool last = n == whole;
+    const auto at = [&](const double* a, const double* pad) { return last ? pad : a + n; };
+    V4 vs, vm, vt;
+    std::memcpy(&vs, at(s, pad_s), sizeof vs);
+    std::memcpy(&vm, at(mk, pad_m), sizeof vm);
+    std::memcpy(&vt, at(tc, pad_t), sizeof vt);
+    if (kNew) {
+      V4 vn, vo;
+      std::memcpy(&vn, at(o_new, pad_new), sizeof vn);
+      std::memcpy(&vo, at(o_old, pad_old), sizeof vo);
+      vs = vs + vk * (vn - vo);
+    }
+    const V4 u = vm * (vs - shift);  // shifted by the last mean: no cancellation
+    su += u;
+    suu += u * u;
+    sst += vs * vt;  // t is 0 where the target is missing
+  }
+  return {(su[0] + su[1]) + (su[2] + su[3]), (suu[0] + suu[1]) + (suu[2] + suu[3]),
+          (sst[0] + sst[1]) + (sst[2] + sst[3])};
+}
+
+// z[n] = b + w[0] x[0][n] + w[1] x[1][n] + .. for n rows, added in that order (as
+// predict() adds a row's inputs), four rows at a time held in a vector across the inputs.
+COLLIDO_ROW_KERNEL void neuron_sums(double b, const double* w, const double* const* x,
+                                    size_t inputs, double* z, size_t rows) {
+  using V4 = double __attribute__((vector_size(32)));
+  size_t n = 0;
+  for (; n + 4 <= rows; n += 4) {
+    V4 acc = {b, b, b, b};
+    for (size_t i = 0; i < inputs; ++i) {
+      V4 xi;
+      std::memcpy(&xi, x[i] + n, sizeof xi);
+      acc += w[i] * xi;
+    }
+    std::memcpy(z + n, &acc, sizeof acc);
+  }
+  for (; n < rows; ++n) {
+    double acc = b;
+    for (size_t i = 0; i < inputs; ++i) acc += w[i] * x[i][n];
+    z[n] = acc;
+  }
+}
+
+// z_new[n] = z[n] + d * x[n] (x null: z[n] + d), for n rows.
+COLLIDO_ROW_KERNEL void moved_rows(const double* z, double d, const double* x, double* z_new,
+                                   size_t rows) {
+  if (x)
+    for (size_t n = 0; n < rows; ++n) z_new[n] = z[n] + d * x[n];
+  else
+    for (size_t n = 0; n < rows; ++n) z_new[n] = z[n] + d;
 }
 
 // Inputs equal on every training row carry no information; they are scaled to 0 and
@@ -73,6 +177,7 @@ class Trainer {
       for (size_t n = 0; n < n_; ++n) xs_[i * n_ + n] = scale_input(p, i, x(n, i));
     for (size_t i = 0; i < p.inputs; ++i)
       if (p.in_max[i] > p.in_min[i]) active_.push_back(i);
+    for (size_t i : active_) x_active_.push_back(&xs_[i * n_]);
     // Centred scaled targets: the affine fit then needs only sum(s), sum(s^2), sum(s*t).
     // A NaN target means "no value for this output in this row" (a CPU run has no
     // device memory); such entries get weight 0 everywhere.
@@ -156,12 +261,11 @@ class Trainer {
     o_.assign(H * n_, 0.0);
     s_.assign(p_.outputs * n_, 0.0);
     for (size_t j = 0; j < H; ++j) {
-      for (size_t n = 0; n < n_; ++n) {
-        double z = p_.b[j];
-        for (size_t i : active_) z += p_.w[j * p_.inputs + i] * xs_[i * n_ + n];
-        z_[j * n_ + n] = z;
-        o_[j * n_ + n] = activate(p_.activation, p_.beta[j] * z);
-      }
+      double* z = &z_[j * n_];
+      w_active_.clear();
+      for (size_t i : active_) w_active_.push_back(p_.w[j * p_.inputs + i]);
+      neuron_sums(p_.b[j], w_active_.data(), x_active_.data(), active_.size(), z, n_);
+      activate_rows(p_.activation, p_.beta[j], z, &o_[j * n_], n_);
       for (size_t k = 0; k < p_.outputs; ++k) {
         const double vk = p_.v[k * H + j];
         for (size_t n = 0; n < n_; ++n) s_[k * n_ + n] += vk * o_[j * n_ + n];
@@ -195,14 +299,9 @@ class Trainer {
       const double vk = p_.v[k * H + j];
       const double* o_old = &o_[j * n_];
       const double shift = shift_[k];
-      double su = 0.0, suu = 0.0, sst = 0.0;
-      for (size_t n = 0; n < n_; ++n) {
-        const double sn = o_new ? s[n] + vk * (o_new[n] - o_old[n]) : s[n];
-        const double u = mk[n] * (sn - shift);  // shifted by the last mean: no cancellation
-        su += u;
-        suu += u * u;
-        sst += sn * tc[n];  // tc is 0 where the target is missing
-      }
+      const FitSums f = o_new ? fit_sums<true>(s, o_new, o_old, vk, mk, tc, shift, n_)
+                              : fit_sums<false>(s, o_new, o_old, vk, mk, tc, shift, n_);
+      const double su = f.su, suu = f.suu, sst = f.sst;
       const double nk = count_[k];
       const double vss = suu - su * su / nk;
       double c = 0.0, sse = vtt_[k];
@@ -233,14 +332,12 @@ class Trainer {
       old_value = *target;
       new_value = std::clamp(old_value + delta_ * p_.w_max * u, -p_.w_max, p_.w_max);
       const double dw = new_value - old_value;
-      const double* xi = &xs_[i * n_];
-      for (size_t n = 0; n < n_; ++n) z_new_[n] = z[n] + dw * xi[n];
+      moved_rows(z, dw, &xs_[i * n_], z_new_.data(), n_);
     } else if (r == na) {  // the bias b_j
       target = &p_.b[j];
       old_value = *target;
       new_value = std::clamp(old_value + delta_ * p_.w_max * u, -p_.b_max, p_.b_max);
-      const double db = new_value - old_value;
-      for (size_t n = 0; n < n_; ++n) z_new_[n] = z[n] + db;
+      moved_rows(z, new_value - old_value, nullptr, z_new_.data(), n_);
     } else {  // the gain beta_j
       target = &p_.beta[j];
       old_value = *target;
@@ -248,7 +345,7 @@ class Trainer {
       std::copy(z, z + n_, z_new_.begin());
     }
     const double beta = r == na + 1 ? new_value : p_.beta[j];
-    for (size_t n = 0; n < n_; ++n) o_new_[n] = activate(p_.activation, beta * z_new_[n]);
+    activate_rows(p_.activation, beta, z_new_.data(), o_new_.data(), n_);
     const double new_loss = evaluate(o_new_.data(), j, nullptr);
     if (!(new_loss <= loss_)) return false;  // undo: nothing was written yet
     *target = new_value;
@@ -285,6 +382,8 @@ class Trainer {
   std::vector<size_t> active_;
   std::vector<double> xs_, tc_, mask_, count_, vtt_, tmean_, shift_;
   std::vector<double> z_, o_, s_, z_new_, o_new_;
+  std::vector<const double*> x_active_;  // the active inputs' columns of xs_
+  std::vector<double> w_active_;         // one neuron's weights on them
   double loss_ = 0.0;
   double delta_;  // current step, opt_.delta / 100 .. opt_.delta
 };
@@ -422,12 +521,30 @@ void Machine::predict(const double* x, double* y) const {
   }
   for (size_t i = 0; i < I; ++i) xs[i] = scale_input(p_, i, x[i]);  // constant inputs: 0
   for (size_t k = 0; k < K; ++k) y[k] = 0.0;
-  for (size_t j = 0; j < H; ++j) {
+  const auto add_neuron = [&](size_t j, double z) {
+    const double o = activate(p_.activation, p_.beta[j] * z);
+    for (size_t k = 0; k < K; ++k) y[k] += p_.v[k * H + j] * o;
+  };
+  // Four neurons at a time: their sums are four independent chains of adds where one
+  // neuron's was a single chain. Each still adds its inputs in order, and the outputs
+  // take the neurons in order: the same bits.
+  size_t j = 0;
+  for (; j + 4 <= H; j += 4) {
+    const double *w0 = &p_.w[j * I], *w1 = w0 + I, *w2 = w1 + I, *w3 = w2 + I;
+    double z0 = p_.b[j], z1 = p_.b[j + 1], z2 = p_.b[j + 2], z3 = p_.b[j + 3];
+    for (size_t i = 0; i < I; ++i) {
+      z0 += w0[i] * xs[i];
+      z1 += w1[i] * xs[i];
+      z2 += w2[i] * xs[i];
+      z3 += w3[i] * xs[i];
+    }
+    add_neuron(j, z0), add_neuron(j + 1, z1), add_neuron(j + 2, z2), add_neuron(j + 3, z3);
+  }
+  for (; j < H; ++j) {
     double z = p_.b[j];
     const double* w = &p_.w[j * I];
     for (size_t i = 0; i < I; ++i) z += w[i] * xs[i];
-    const double o = activate(p_.activation, p_.beta[j] * z);
-    for (size_t k = 0; k < K; ++k) y[k] += p_.v[k * H + j] * o;
+    add_neuron(j, z);
   }
   for (size_t k = 0; k < K; ++k) {
     const double scaled = p_.out_a[k] + p_.out_c[k] * y[k];

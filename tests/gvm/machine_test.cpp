@@ -179,16 +179,27 @@ TEST(Machine, OutputSignsAreBalancedPlusMinusOne) {
 }
 
 TEST(Machine, IncrementalCachesMatchAFullForwardPass) {
-  Matrix x, y, vx, vy;
-  bump_data(50, 21, &x, &y);
-  GvmOptions opt;
-  opt.epochs = 60;
-  TrainReport rep;
-  auto m = Machine::train(x, y, vx, vy, opt, &rep);
-  ASSERT_TRUE(m);
-  // The trainer's loss comes from cached, incrementally updated neuron outputs;
-  // Machine::loss recomputes everything from the parameters.
-  EXPECT_NEAR(rep.curve.back().train_loss, m->loss(x, y), 1e-12);
+  // The trainer sums its rows four at a time: row counts that leave every remainder,
+  // and a second output missing on every third row (its rows masked out of the sums).
+  for (size_t rows : {5, 6, 7, 8, 49, 50, 51, 52}) {
+    for (bool two_outputs : {false, true}) {
+      Matrix x, y1, y, vx, vy;
+      bump_data(rows, 21 + rows, &x, &y1);
+      for (size_t r = 0; r < rows; ++r)
+        y.push_row(two_outputs ? std::vector<double>{y1(r, 0), r % 3 == 0 ? NAN : x(r, 0) * x(r, 1)}
+                               : std::vector<double>{y1(r, 0)});
+      GvmOptions opt;
+      opt.epochs = 60;
+      TrainReport rep;
+      auto m = Machine::train(x, y, vx, vy, opt, &rep);
+      ASSERT_TRUE(m);
+      // The trainer's loss comes from cached, incrementally updated neuron outputs;
+      // Machine::loss recomputes everything from the parameters.
+      EXPECT_NEAR(rep.curve.back().train_loss, m->loss(x, y), 1e-12)
+          << rows << " rows, " << (two_outputs ? 2 : 1) << " outputs";
+      EXPECT_LT(rep.curve.back().train_loss, rep.curve.front().train_loss) << rows << " rows";
+    }
+  }
 }
 
 TEST(Machine, TrainingLossNeverRises) {
