@@ -192,32 +192,6 @@ RunMeasure LeastSquaresFit::predict(const RunConfig& c) const {
 
 // ---- back-propagation MLP ------------------------------------------------------------
 
-namespace {
-// z[j] = b[j] + w[j][0] x[0] + w[j][1] x[1] + .. for H neurons of I inputs, each added
-// in input order; four neurons at a time, so that their sums are four independent
-// chains of adds where one neuron's was a single chain (the same bits).
-void hidden_sums(const double* w, const double* b, size_t H, size_t I, const double* x,
-                 double* z) {
-  size_t j = 0;
-  for (; j + 4 <= H; j += 4) {
-    const double *w0 = w + j * I, *w1 = w0 + I, *w2 = w1 + I, *w3 = w2 + I;
-    double z0 = b[j], z1 = b[j + 1], z2 = b[j + 2], z3 = b[j + 3];
-    for (size_t i = 0; i < I; ++i) {
-      z0 += w0[i] * x[i];
-      z1 += w1[i] * x[i];
-      z2 += w2[i] * x[i];
-      z3 += w3[i] * x[i];
-    }
-    z[j] = z0, z[j + 1] = z1, z[j + 2] = z2, z[j + 3] = z3;
-  }
-  for (; j < H; ++j) {
-    double s = b[j];
-    for (size_t i = 0; i < I; ++i) s += w[j * I + i] * x[i];
-    z[j] = s;
-  }
-}
-}  // namespace
-
 Expected<MlpRegression> MlpRegression::fit(const Matrix& x, const Matrix& y,
                                            const MlpOptions& opt) {
   if (x.rows() == 0) return invalid_argument("MLP needs at least one row");

@@ -8,6 +8,7 @@
 #include <utility>
 
 #include "gvm/json_io.h"
+#include "gvm/linalg.h"
 #include "gvm/rng.h"
 
 namespace collido::gvm {
@@ -113,8 +114,8 @@ COLLIDO_ROW_KERNEL FitSums fit_sums(const double* s, const double* o_new, const 
 
 // z[n] = b + w[0] x[0][n] + w[1] x[1][n] + .. for n rows, added in that order (as
 // predict() adds a row's inputs), four rows at a time held in a vector across the inputs.
-COLLIDO_ROW_KERNEL void neuron_sums(double b, const double* w, const double* const* x,
-                                    size_t inputs, double* z, size_t rows) {
+COLLIDO_ROW_KERNEL void neuron_over_rows(double b, const double* w, const double* const* x,
+                                         size_t inputs, double* z, size_t rows) {
   using V4 = double __attribute__((vector_size(32)));
   size_t n = 0;
   for (; n + 4 <= rows; n += 4) {
@@ -264,7 +265,7 @@ class Trainer {
       double* z = &z_[j * n_];
       w_active_.clear();
       for (size_t i : active_) w_active_.push_back(p_.w[j * p_.inputs + i]);
-      neuron_sums(p_.b[j], w_active_.data(), x_active_.data(), active_.size(), z, n_);
+      neuron_over_rows(p_.b[j], w_active_.data(), x_active_.data(), active_.size(), z, n_);
       activate_rows(p_.activation, p_.beta[j], z, &o_[j * n_], n_);
       for (size_t k = 0; k < p_.outputs; ++k) {
         const double vk = p_.v[k * H + j];
@@ -511,40 +512,22 @@ Expected<Machine> Machine::from_params(MachineParams p) {
 
 void Machine::predict(const double* x, double* y) const {
   const size_t I = p_.inputs, K = p_.outputs, H = p_.hidden;
-  // Scale each input once, not once per neuron: the divisions dominated a prediction.
-  double small[64];
+  // The scaled inputs, then the neurons' sums.
+  double small[128];
   std::vector<double> large;
   double* xs = small;
-  if (I > 64) {
-    large.resize(I);
+  if (I + H > 128) {
+    large.resize(I + H);
     xs = large.data();
   }
+  double* z = xs + I;
+  // Scale each input once, not once per neuron: the divisions dominated a prediction.
   for (size_t i = 0; i < I; ++i) xs[i] = scale_input(p_, i, x[i]);  // constant inputs: 0
   for (size_t k = 0; k < K; ++k) y[k] = 0.0;
-  const auto add_neuron = [&](size_t j, double z) {
-    const double o = activate(p_.activation, p_.beta[j] * z);
+  hidden_sums(p_.w.data(), p_.b.data(), H, I, xs, z);
+  for (size_t j = 0; j < H; ++j) {
+    const double o = activate(p_.activation, p_.beta[j] * z[j]);
     for (size_t k = 0; k < K; ++k) y[k] += p_.v[k * H + j] * o;
-  };
-  // Four neurons at a time: their sums are four independent chains of adds where one
-  // neuron's was a single chain. Each still adds its inputs in order, and the outputs
-  // take the neurons in order: the same bits.
-  size_t j = 0;
-  for (; j + 4 <= H; j += 4) {
-    const double *w0 = &p_.w[j * I], *w1 = w0 + I, *w2 = w1 + I, *w3 = w2 + I;
-    double z0 = p_.b[j], z1 = p_.b[j + 1], z2 = p_.b[j + 2], z3 = p_.b[j + 3];
-    for (size_t i = 0; i < I; ++i) {
-      z0 += w0[i] * xs[i];
-      z1 += w1[i] * xs[i];
-      z2 += w2[i] * xs[i];
-      z3 += w3[i] * xs[i];
-    }
-    add_neuron(j, z0), add_neuron(j + 1, z1), add_neuron(j + 2, z2), add_neuron(j + 3, z3);
-  }
-  for (; j < H; ++j) {
-    double z = p_.b[j];
-    const double* w = &p_.w[j * I];
-    for (size_t i = 0; i < I; ++i) z += w[i] * xs[i];
-    add_neuron(j, z);
   }
   for (size_t k = 0; k < K; ++k) {
     const double scaled = p_.out_a[k] + p_.out_c[k] * y[k];
