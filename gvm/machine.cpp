@@ -179,6 +179,8 @@ class Trainer {
     for (size_t i = 0; i < p.inputs; ++i)
       if (p.in_max[i] > p.in_min[i]) active_.push_back(i);
     for (size_t i : active_) x_active_.push_back(&xs_[i * n_]);
+    z_new_.assign(n_, 0.0);  // a proposal's scratch, sized once
+    o_new_.assign(n_, 0.0);
     // Centred scaled targets: the affine fit then needs only sum(s), sum(s^2), sum(s*t).
     // A NaN target means "no value for this output in this row" (a CPU run has no
     // device memory); such entries get weight 0 everywhere.
@@ -323,8 +325,7 @@ class Trainer {
     const size_t j = idx / (na + 2), r = idx % (na + 2);
     const double u = rng_.uniform(-1.0, 1.0);
     double* z = &z_[j * n_];
-    z_new_.resize(n_);
-    o_new_.resize(n_);
+    const double* z_moved = z_new_.data();  // the neuron's sums after the move
     double* target;
     double old_value, new_value;
     if (r < na) {  // a weight w_ji
@@ -343,10 +344,10 @@ class Trainer {
       target = &p_.beta[j];
       old_value = *target;
       new_value = std::clamp(old_value + delta_ * p_.beta_max * u, -p_.beta_max, p_.beta_max);
-      std::copy(z, z + n_, z_new_.begin());
+      z_moved = z;  // a gain moves no sums
     }
     const double beta = r == na + 1 ? new_value : p_.beta[j];
-    activate_rows(p_.activation, beta, z_new_.data(), o_new_.data(), n_);
+    activate_rows(p_.activation, beta, z_moved, o_new_.data(), n_);
     const double new_loss = evaluate(o_new_.data(), j, nullptr);
     if (!(new_loss <= loss_)) return false;  // undo: nothing was written yet
     *target = new_value;
@@ -355,7 +356,7 @@ class Trainer {
       double* s = &s_[k * n_];
       for (size_t n = 0; n < n_; ++n) s[n] += vk * (o_new_[n] - o_[j * n_ + n]);
     }
-    std::copy(z_new_.begin(), z_new_.end(), z);
+    if (z_moved != z) std::copy(z_new_.begin(), z_new_.end(), z);
     std::copy(o_new_.begin(), o_new_.end(), o_.begin() + j * n_);
     loss_ = new_loss;
     return true;
