@@ -45,8 +45,8 @@ const std::vector<FlagSpec>& calibrate_flags() {
        "CPU threads of every run (default 0 = all cores; 1 is steadier on "
        "a machine shared with other work)"},
       {"repeats", true,
-       "runs per configuration; smallest times, largest memory kept (default 3 on cpu, 2 on "
-       "cuda)"},
+       "runs per configuration; smallest times (with --jobs the median times), largest memory "
+       "kept (default 3 on cpu, 2 on cuda)"},
       {"budget", true,
        "seconds; start no run after this, keep the rows measured by then (default 0 = none on "
        "cpu, 330 on cuda; with --jobs 480 on cuda)"},

@@ -348,9 +348,10 @@ int gvm_merge(const Args& args) {
     print_help(
         "usage: collidoscope gvm merge RUNS.csv... --out MERGED.csv\n\n"
         "Concatenates run logs and combines the rows of one configuration (equal in every\n"
-        "input column), as `calibrate` combines its repeats: the smallest time per frame,\n"
-        "the fastest run's total time and GPU load, the largest memory. Two sweeps with the\n"
-        "same seed on one machine become one log with two passes.",
+        "input column), as `calibrate` combines its repeats: for detection frames the\n"
+        "smallest time per frame and the fastest run's total time and GPU load, for jobs the\n"
+        "median of each time and of the GPU load; the largest memory. Sweeps with the same\n"
+        "seed on one machine become one log with their passes.",
         merge_flags());
     return kExitOk;
   }

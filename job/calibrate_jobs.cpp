@@ -367,7 +367,7 @@ Expected<CalibrateSummary> run_sweep(const JobSweepSpec& sw, const CalibrateHook
        std::to_string(sw.seed) + ", " + std::to_string(refused) +
        " draws refused while sizing -> " + sw.out_path);
 
-  std::vector<JobRecord> best(plans.size());
+  std::vector<std::vector<JobRecord>> runs(plans.size());  // each plan's measured repeats
   // 0 not run, 1 measured, 2 failed, 3 measured and then failed on a repeat
   // (its measure is kept; a failing job is not run again).
   std::vector<int> state(plans.size(), 0);
@@ -405,15 +405,11 @@ Expected<CalibrateSummary> run_sweep(const JobSweepSpec& sw, const CalibrateHook
         continue;
       }
       JobRecord row{plans[i].inputs, *m};
-      if (state[i] == 0) {
-        best[i] = row;
-      } else {
-        best[i] = merge_job_repeats({best[i], row}).front();
-      }
+      runs[i].push_back(row);
       state[i] = 1;
       std::vector<JobRecord> rows;
       for (size_t j = 0; j < plans.size(); ++j)
-        if (state[j] == 1 || state[j] == 3) rows.push_back(best[j]);
+        if (state[j] == 1 || state[j] == 3) rows.push_back(merge_job_repeats(runs[j]).front());
       if (Status s = write_job_log(sw.out_path, rows); !s) return s;
       rows_written = rows.size();
       pr.triangles = int64_t(row.inputs.triangles);

@@ -23,6 +23,7 @@
 #include "gvm/linalg.h"
 #include "gvm/rng.h"
 #include "job/assess.h"
+#include "sim/placement.h"
 
 namespace collido::job {
 
@@ -33,11 +34,12 @@ namespace {
 
 constexpr const char* kKind = "collidoscope-job-cost-model";
 constexpr const char* kDetectionKind = "collidoscope-resource-predictor";
-constexpr int kVersion = 6;  // 2: each member has its prior; 3: the wall footprint in the memory
+constexpr int kVersion = 7;  // 2: each member has its prior; 3: the wall footprint in the memory
                              // priors; 4: a divided wall's lookups charged to the particles near
                              // it; 5: the lookups priced by the pieces within reach, GPU load
                              // learnt as a log; 6: no lookups on the GPU (its divided
-                             // walls listed)
+                             // walls listed); 7: terms for friction and a fill's
+                             // layer
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // Memory: the share of out-of-fold jobs whose peak may exceed the point by more than
 // 5 %: the issue allows 5 % of held-out runs, and 4 % of the out-of-fold ones leaves a
@@ -169,11 +171,26 @@ bool is_cuda(const JobInputs& in) { return in.backend == "cuda"; }
 // too; on logs since, its weight is near 0), active particle-steps, pair
 // contact-steps, a divided wall's lookups by the particles near it) and the
 // frames (snapshots, rendering per pixel and particle, each encoder per pixel).
+// Three terms came from the stages' residuals (stop 55): friction's state, spins and
+// two generations of contact springs a particle, allocated and cleared in the set-up
+// (on the H200 log it took the held-out total from 11.0 to 9.8 %, on the CPU's 17.1 ->
+// 16.9), the springs' work each active particle-step (CPU 16.7 -> 16.6; on the H200 it
+// kept the time per frame ahead of the MLP on every split), and a fill's search of the
+// layers of its lattice, a layer's sites at least, which a few particles in a wide box
+// pay (CPU 16.8 -> 16.6; docs/gvm.md).
 // Each backend has weights of its own. The time per frame is the same sum without the set-up,
 // divided by the frames, with the total's weights (fitted on the per-frame times
 // directly it was worse: 56 against 32 % on the CPU log; docs/gvm.md).
-constexpr size_t kTimeTerms = 28;  // per backend
+constexpr size_t kTimeTerms = 31;  // per backend
 constexpr size_t kMaxPriorTerms = 2 * kTimeTerms;
+
+// A fill's lattice sites in one layer of the wall's box: the placement searches whole
+// layers from the bottom up, so a few particles in a wide box cost a layer's sites (a
+// fill's region, when the scene gives one, is not among the inputs). 0 for an inlet.
+double fill_layer_sites(const JobInputs& in) {
+  if (in.placement != "fill" || !(in.r_max > 0)) return 0;
+  return sim::fill_sites_along(in.box[0], in.r_max) * sim::fill_sites_along(in.box[1], in.r_max);
+}
 
 // The time terms of a job (see above); the set-up's are zero when per_frame, and the
 // others divided by the frames written. Written into t[0, kTimeTerms).
@@ -211,6 +228,7 @@ void time_terms(const JobInputs& in, const CostDrivers& d, bool per_frame, doubl
   // time per frame from 38.6 to 34.3 % and the total from 27.9 to 27.3 %; on the
   // H200's it made the time per frame worse (46.0 -> 48.4 %), so the GPU goes without.
   const double frame_cost = is_cuda(in) ? 0 : frames;
+  const double friction = in.friction > 0 ? 1 : 0;
   const double v[kTimeTerms] = {
       setup,  // set-up: a fixed cost
       steps, steps * contacts, steps * n, steps * n * contacts, active, active * contacts,
@@ -224,7 +242,9 @@ void time_terms(const JobInputs& in, const CostDrivers& d, bool per_frame, doubl
       frame_cost, frames * n,                                          // frames, snapshots
       render, frames * pixels, frames * pixels * double(in.has_format("mp4")),
       frames * pixels * double(in.has_format("webm")), frames * pixels * double(in.has_format("gif")),
-      frames * n * render};  // rendering
+      frames * n * render,  // rendering
+      setup * n * friction, active * friction,  // friction: its state, its springs' work
+      setup * fill_layer_sites(in)};             // a fill's search
   for (size_t i = 0; i < kTimeTerms; ++i) t[i] = per_frame ? v[i] / frames : v[i];
 }
 

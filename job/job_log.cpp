@@ -456,26 +456,52 @@ Status write_job_log(const std::string& path, const std::vector<JobRecord>& rows
   return write_file_atomic(path, format_job_log(rows));
 }
 
+namespace {
+
+// The median of a job's repeats of one time: the middle one, or the mean of the
+// middle two.
+double median_of(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+}  // namespace
+
 std::vector<JobRecord> merge_job_repeats(const std::vector<JobRecord>& rows) {
   std::vector<JobRecord> out;
+  std::vector<std::vector<JobMeasure>> repeats;  // out[i]'s runs
   for (const JobRecord& r : rows) {
     auto it = std::find_if(out.begin(), out.end(),
                            [&](const JobRecord& o) { return same_inputs(o.inputs, r.inputs); });
     if (it == out.end()) {
       out.push_back(r);
-      continue;
+      repeats.push_back({r.measure});
+    } else {
+      repeats[size_t(it - out.begin())].push_back(r.measure);
     }
-    JobMeasure& m = it->measure;
-    const JobMeasure& n = r.measure;
-    const double host = std::max(m.peak_host_bytes, n.peak_host_bytes);
-    const double device = std::max(m.peak_device_bytes, n.peak_device_bytes);
-    const double bytes = std::max(m.output_bytes, n.output_bytes);
-    const double per_frame = std::min(m.per_frame_s, n.per_frame_s);
-    if (n.total_s < m.total_s) m = n;  // the fastest run's times, load and steps
-    m.peak_host_bytes = host;
-    m.peak_device_bytes = device;
-    m.output_bytes = bytes;
-    m.per_frame_s = per_frame;
+  }
+  for (size_t i = 0; i < out.size(); ++i) {
+    const std::vector<JobMeasure>& runs = repeats[i];
+    if (runs.size() < 2) continue;
+    JobMeasure& m = out[i].measure;
+    auto median = [&](double JobMeasure::*field) {
+      std::vector<double> v;
+      for (const JobMeasure& run : runs) v.push_back(run.*field);
+      return median_of(std::move(v));
+    };
+    auto largest = [&](double JobMeasure::*field) {
+      double most = 0;
+      for (const JobMeasure& run : runs) most = std::max(most, run.*field);
+      return most;
+    };
+    for (double JobMeasure::*time : {&JobMeasure::total_s, &JobMeasure::prepare_s,
+                                     &JobMeasure::simulate_s, &JobMeasure::render_s,
+                                     &JobMeasure::per_frame_s, &JobMeasure::gpu_load})
+      m.*time = median(time);
+    for (double JobMeasure::*peak :
+         {&JobMeasure::peak_host_bytes, &JobMeasure::peak_device_bytes, &JobMeasure::output_bytes})
+      m.*peak = largest(peak);
   }
   return out;
 }

@@ -113,8 +113,14 @@ Expected<std::vector<JobRecord>> read_job_log(const std::string& path);
 Status write_job_log(const std::string& path, const std::vector<JobRecord>& rows);
 
 // Combines repeated runs of one job (rows whose inputs are equal in every column):
-// other work on a machine only adds time, so the fastest run's times and GPU load are
-// kept, and the largest memory and output (peaks). First-appearance order.
+// the median of their times (total, each stage's, per frame; the middle one, or the
+// mean of the middle two, each time on its own, so the stages of a merged row add up
+// to its total only nearly) and of their GPU loads, and the largest memory and output
+// (peaks); the first run's other notes. First-appearance order. The median, not the
+// fastest run: on the 2-vCPU VM a run's pace moves both ways around its usual value,
+// and the fastest of a few runs is one end of that scatter (docs/gvm.md, "The logs":
+// a model held out on the same 846 jobs scored 17.1 % against the fastest of two runs,
+// 17.5 against the fastest of four, 14.2 against the median of four).
 std::vector<JobRecord> merge_job_repeats(const std::vector<JobRecord>& rows);
 
 // Which kind of log a CSV text is, from its header line: detection frames

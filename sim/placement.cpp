@@ -324,6 +324,21 @@ class VesselSides {
   Rule rule_ = Rule::kEvery;
 };
 
+// The lattice starts 1.1 r from the region's faces, so that on a floor at the
+// region's bottom the first layer is clear of it and kept (a radius from the
+// faces, it touched the floor and fills began a layer up).
+double fill_spacing(double r) { return 2 * r * 1.05; }
+double fill_margin(double r) { return 1.1 * r; }
+
+}  // namespace
+
+double fill_sites_along(double side, double r_max) {
+  const double n = std::floor((side - 2 * fill_margin(r_max)) / fill_spacing(r_max)) + 1;
+  return n < 1 ? 0.0 : n;
+}
+
+namespace {
+
 // Lattice sites in the region, a layer (fixed z) at a time from the bottom, that
 // lie inside the wall (closed, or an open vessel's) and clear of its surface,
 // until `count` are found.
@@ -334,13 +349,10 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
               hi = pl.has_region ? pl.region_hi : box.hi;
   if (!(lo.x < hi.x && lo.y < hi.y && lo.z < hi.z))
     return invalid_argument("placement.region: min must lie below max on every axis");
-  // The lattice starts 1.1 r from the region's faces, so that on a floor at
-  // the region's bottom the first layer is clear of it and kept (a radius
-  // from the faces, it touched the floor and fills began a layer up).
-  const double r = ps.r_max, spacing = 2 * r * 1.05, jitter = 0.02 * r, margin = 1.1 * r;
+  const double r = ps.r_max, spacing = fill_spacing(r), jitter = 0.02 * r,
+               margin = fill_margin(r);
   auto sites = [&](double a, double b) {
-    const double n = std::floor((b - a - 2 * margin) / spacing) + 1;
-    return n < 1 ? uint64_t(0) : uint64_t(std::min(n, 1e7));
+    return uint64_t(std::min(fill_sites_along(b - a, r), 1e7));
   };
   const uint64_t nx = sites(lo.x, hi.x), ny = sites(lo.y, hi.y), nz = sites(lo.z, hi.z);
   // A layer's sites cost a few hundred bytes each (their positions, the

@@ -48,6 +48,12 @@ Expected<ParticleSet> place_particles(const TriangleMesh& wall, const ParticleSp
                                       const PlacementSpec& placement, Vec3d gravity, uint64_t seed,
                                       ThreadPool* pool = nullptr);
 
+// A fill's lattice: sites 2.1 r_max apart, the first 1.1 r_max in from the region's
+// faces (on a floor at the region's bottom the first layer is then clear of it).
+// The sites along one side of length `side` (0 where none fits): a fill searches
+// whole layers of them, from the bottom up.
+double fill_sites_along(double side, double r_max);
+
 // When a placement's particles take part, known before placing them: a fill
 // places all at once; an inlet (pour, jet) releases `slots` particles every
 // `period` seconds, each slot at its own phase, until the last at about last_release.
