@@ -173,11 +173,11 @@ bool is_cuda(const JobInputs& in) { return in.backend == "cuda"; }
 // frames (snapshots, rendering per pixel and particle, each encoder per pixel).
 // Three terms came from the stages' residuals (stop 55): friction's state, spins and
 // two generations of contact springs a particle, allocated and cleared in the set-up
-// (on the H200 log it took the held-out total from 11.0 to 9.8 %, on the CPU's 17.1 ->
-// 16.9), the springs' work each active particle-step (CPU 16.7 -> 16.6; on the H200 it
-// kept the time per frame ahead of the MLP on every split), and a fill's search of the
-// layers of its lattice, a layer's sites at least, which a few particles in a wide box
-// pay (CPU 16.8 -> 16.6; docs/gvm.md).
+// (on the H200 log it took the held-out total from 11.0 to 9.8 %, on stop 44's CPU log
+// 17.1 -> 16.9), the springs' work each active particle-step (CPU 16.7 -> 16.6; on the
+// H200 it kept the time per frame ahead of the MLP on every split), and a fill's search
+// of the layers of its lattice, a layer's sites at least, which a few particles in a
+// wide box pay (CPU 16.8 -> 16.6; docs/gvm.md).
 // Each backend has weights of its own. The time per frame is the same sum without the set-up,
 // divided by the frames, with the total's weights (fitted on the per-frame times
 // directly it was worse: 56 against 32 % on the CPU log; docs/gvm.md).
@@ -235,16 +235,17 @@ void time_terms(const JobInputs& in, const CostDrivers& d, bool per_frame, doubl
       d.pair_contacts * steps,  // the steps
       near_steps * divided[0], near_steps * divided[1], near_steps * divided[2],
       near_steps * density * divided[0], near_steps * density * divided[1],
-      near_steps * density * divided[2],
-      setup * in.pieces * divided[0], setup * in.pieces * divided[1],
-      setup * in.pieces * divided[2],  // set-up: dividing the wall
+      near_steps * density * divided[2], setup * in.pieces * divided[0],
+      setup * in.pieces * divided[1],
+      setup * in.pieces * divided[2],                                  // set-up: dividing the wall
       setup * in.wall_cells, setup * double(in.triangles), setup * n,  // bins, wall, placement
       frame_cost, frames * n,                                          // frames, snapshots
       render, frames * pixels, frames * pixels * double(in.has_format("mp4")),
-      frames * pixels * double(in.has_format("webm")), frames * pixels * double(in.has_format("gif")),
+      frames * pixels * double(in.has_format("webm")),
+      frames * pixels * double(in.has_format("gif")),
       frames * n * render,  // rendering
-      setup * n * friction, active * friction,  // friction: its state, its springs' work
-      setup * fill_layer_sites(in)};             // a fill's search
+      // friction: its state, its springs' work; a fill's search of its layers
+      setup * n * friction, active * friction, setup * fill_layer_sites(in)};
   for (size_t i = 0; i < kTimeTerms; ++i) t[i] = per_frame ? v[i] / frames : v[i];
 }
 

@@ -495,9 +495,9 @@ std::vector<JobRecord> merge_job_repeats(const std::vector<JobRecord>& rows) {
       for (const JobMeasure& run : runs) most = std::max(most, run.*field);
       return most;
     };
-    for (double JobMeasure::*time : {&JobMeasure::total_s, &JobMeasure::prepare_s,
-                                     &JobMeasure::simulate_s, &JobMeasure::render_s,
-                                     &JobMeasure::per_frame_s, &JobMeasure::gpu_load})
+    for (double JobMeasure::*time :
+         {&JobMeasure::total_s, &JobMeasure::prepare_s, &JobMeasure::simulate_s,
+          &JobMeasure::render_s, &JobMeasure::per_frame_s, &JobMeasure::gpu_load})
       m.*time = median(time);
     for (double JobMeasure::*peak :
          {&JobMeasure::peak_host_bytes, &JobMeasure::peak_device_bytes, &JobMeasure::output_bytes})

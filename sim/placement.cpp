@@ -327,8 +327,12 @@ class VesselSides {
 // The lattice starts 1.1 r from the region's faces, so that on a floor at the
 // region's bottom the first layer is clear of it and kept (a radius from the
 // faces, it touched the floor and fills began a layer up).
-double fill_spacing(double r) { return 2 * r * 1.05; }
-double fill_margin(double r) { return 1.1 * r; }
+double fill_spacing(double r) {
+  return 2 * r * 1.05;
+}
+double fill_margin(double r) {
+  return 1.1 * r;
+}
 
 }  // namespace
 
@@ -349,8 +353,7 @@ Status fill(const TriangleMesh& wall, const ParticleSpec& ps, const PlacementSpe
               hi = pl.has_region ? pl.region_hi : box.hi;
   if (!(lo.x < hi.x && lo.y < hi.y && lo.z < hi.z))
     return invalid_argument("placement.region: min must lie below max on every axis");
-  const double r = ps.r_max, spacing = fill_spacing(r), jitter = 0.02 * r,
-               margin = fill_margin(r);
+  const double r = ps.r_max, spacing = fill_spacing(r), jitter = 0.02 * r, margin = fill_margin(r);
   auto sites = [&](double a, double b) {
     return uint64_t(std::min(fill_sites_along(b - a, r), 1e7));
   };

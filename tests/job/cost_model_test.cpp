@@ -190,7 +190,7 @@ TEST(JobLog, RepeatsKeepTheMedianTimeAndTheLargestPeak) {
   const auto merged = merge_job_repeats({a, other, b, c});
   ASSERT_EQ(merged.size(), 2u);
   EXPECT_EQ(merged[0].inputs.particles, 100u);  // first appearance order
-  EXPECT_EQ(merged[0].measure.total_s, 1.5);     // the middle of 1.0, 1.5, 4.0
+  EXPECT_EQ(merged[0].measure.total_s, 1.5);    // the middle of 1.0, 1.5, 4.0
   EXPECT_EQ(merged[0].measure.simulate_s, 0.7);  // of 0.5, 0.7, 1.2: from another run
   EXPECT_EQ(merged[0].measure.peak_host_bytes, 2.0e8);
   EXPECT_EQ(merged[0].measure.output_bytes, 4e6);
@@ -642,7 +642,8 @@ TEST(JobCostModelPrior, AFillPaysForALayerOfItsLattice) {
     return sim::fill_sites_along(in.box[0], in.r_max) * sim::fill_sites_along(in.box[1], in.r_max);
   };
   auto total = [&](const JobInputs& in) {
-    return kSetup + kPerParticleStep * double(in.particles) * double(in.steps) + kPerSite * sites(in);
+    return kSetup + kPerParticleStep * double(in.particles) * double(in.steps) +
+           kPerSite * sites(in);
   };
   const auto rows = jobs_by_law("bin", kSetup, total, [](int q, JobInputs* in) {
     in->box[0] *= std::pow(2.0, q), in->box[1] *= std::pow(2.0, q);  // 361 .. 25,600 sites
