@@ -26,14 +26,6 @@ KEY = ["wall", "particles", "method", "placement", "steps", "render_width", "for
 TIMES = ["total_s", "prepare_s", "simulate_s", "render_s"]
 
 
-def correlation(x, y):
-    mx, my = statistics.fmean(x), statistics.fmean(y)
-    sxy = sum((a - mx) * (b - my) for a, b in zip(x, y))
-    sxx = sum((a - mx) ** 2 for a in x)
-    syy = sum((b - my) ** 2 for b in y)
-    return sxy / math.sqrt(sxx * syy) if sxx > 0 and syy > 0 else float("nan")
-
-
 def main():
     paths = sys.argv[1:]
     if len(paths) < 2:
@@ -74,7 +66,7 @@ def main():
         for b in stages[i + 1:]:
             both = [k for k in deviation[a] if k in deviation[b]]
             if len(both) > 2:
-                r = correlation([deviation[a][k] for k in both], [deviation[b][k] for k in both])
+                r = statistics.correlation([deviation[a][k] for k in both], [deviation[b][k] for k in both])
                 print(f"stages move together: {a} and {b}: correlation {r:.2f} over {len(both)} runs")
     for k in range(len(logs)):
         ratios = sorted(math.exp(deviation["total_s"][(job, k)]) for job in common

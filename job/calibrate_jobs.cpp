@@ -368,6 +368,7 @@ Expected<CalibrateSummary> run_sweep(const JobSweepSpec& sw, const CalibrateHook
        " draws refused while sizing -> " + sw.out_path);
 
   std::vector<std::vector<JobRecord>> runs(plans.size());  // each plan's measured repeats
+  std::vector<JobRecord> merged(plans.size());              // and their row, kept up to date
   // 0 not run, 1 measured, 2 failed, 3 measured and then failed on a repeat
   // (its measure is kept; a failing job is not run again).
   std::vector<int> state(plans.size(), 0);
@@ -406,10 +407,11 @@ Expected<CalibrateSummary> run_sweep(const JobSweepSpec& sw, const CalibrateHook
       }
       JobRecord row{plans[i].inputs, *m};
       runs[i].push_back(row);
+      merged[i] = merge_job_repeats(runs[i]).front();
       state[i] = 1;
       std::vector<JobRecord> rows;
       for (size_t j = 0; j < plans.size(); ++j)
-        if (state[j] == 1 || state[j] == 3) rows.push_back(merge_job_repeats(runs[j]).front());
+        if (state[j] == 1 || state[j] == 3) rows.push_back(merged[j]);
       if (Status s = write_job_log(sw.out_path, rows); !s) return s;
       rows_written = rows.size();
       pr.triangles = int64_t(row.inputs.triangles);
