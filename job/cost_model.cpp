@@ -515,6 +515,20 @@ void job_measure_to_array(const JobMeasure& m, double* out) {
   out[kOutputBytes] = m.output_bytes;
 }
 
+namespace {
+
+// The measured values of cost k that one run of the job gave: each run's where the
+// row merges repeats (total time and time per frame), else the row's own.
+std::vector<double> one_run_values(const JobMeasure& m, size_t k) {
+  if (k == kTotal && !m.total_s_runs.empty()) return m.total_s_runs;
+  if (k == kPerFrame && !m.per_frame_s_runs.empty()) return m.per_frame_s_runs;
+  double all[kJobOutputs];
+  job_measure_to_array(m, all);
+  return {all[k]};
+}
+
+}  // namespace
+
 double encode_cost(size_t k, double v, bool cuda) {
   switch (k) {
     case kDevice: return cuda ? std::log10(1 + v) : kNaN;
@@ -778,7 +792,9 @@ Expected<JobCostModel> JobCostModel::train(const std::vector<JobRecord>& rows,
     model.point_offset_[k] = std::clamp(allowed - std::log10(1 / 0.95), 0.0, std::log10(1.03));
   }
 
-  // Out-of-fold residuals: each row through the member that never saw it.
+  // Out-of-fold residuals: each row through the member that never saw it. The
+  // interval is for one run, as a user's job is: where a row merges repeats, each
+  // of its runs is a residual (the point is fitted to their median).
   for (size_t k = 0; k < kJobOutputs; ++k) {
     if (model.members_[k].empty()) continue;
     std::vector<double> res;
@@ -787,7 +803,8 @@ Expected<JobCostModel> JobCostModel::train(const std::vector<JobRecord>& rows,
       const bool cuda = is_cuda(rows[r].inputs);
       const double p = model.member_point(k, size_t(fold[r]), terms[k][r].data(),
                                           terms[k][r].size(), cuda, x.row(r));
-      res.push_back(y(r, k) - p);
+      for (double run : one_run_values(rows[r].measure, k))
+        res.push_back(encode_cost(k, run, cuda) - p);
       model.held_out_[k].push_back({decode_cost(k, y(r, k), cuda), decode_cost(k, p, cuda)});
     }
     std::sort(res.begin(), res.end());
@@ -1250,10 +1267,11 @@ JobErrors score(const std::vector<JobRecord>& rows,
       if ((k == kDevice || k == kGpuLoad) && !is_cuda(r.inputs)) continue;
       sum[k] += std::fabs(pred[k] - truth[k]) / std::fabs(truth[k]);
       ++e.rows[k];
-      if (interval) {
-        ++iv_rows[k];
-        inside[k] += truth[k] >= iv[k].p10 && truth[k] <= iv[k].p90;
-      }
+      if (interval)  // held by each run: the interval is for one run
+        for (double run : one_run_values(r.measure, k)) {
+          ++iv_rows[k];
+          inside[k] += run >= iv[k].p10 && run <= iv[k].p90;
+        }
     }
     ++host_rows;
     host_under += pred[kHost] < 0.95 * truth[kHost];

@@ -212,7 +212,9 @@ struct JobErrors {
   size_t rows[kJobOutputs] = {};
   double host_under5 = 0;          // share of rows whose host peak is under-predicted by > 5 %
   double device_under5 = 0;        // the same for device memory (cuda rows)
-  double coverage[kJobOutputs] = {};  // share of rows inside [p10, p90] (GVM only; NaN else)
+  // Share inside [p10, p90] (GVM only; NaN else): of the rows, and for the times of
+  // rows that keep their runs (JobMeasure::total_s_runs), of each run.
+  double coverage[kJobOutputs] = {};
 };
 
 struct JobModelScore {

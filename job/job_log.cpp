@@ -77,9 +77,9 @@ JobInputs job_inputs(const JobAssessment& a, const std::string& backend, const s
 }
 
 const std::vector<std::string>& job_log_optional_columns() {
-  static const std::vector<std::string> cols = {"active_steps", "wall_contact_steps",
-                                                "pair_contact_steps", "bin_entries",
-                                                "wall_buckets"};
+  static const std::vector<std::string> cols = {
+      "active_steps", "wall_contact_steps", "pair_contact_steps", "bin_entries",
+      "wall_buckets", "total_s_runs",       "per_frame_s_runs"};
   return cols;
 }
 
@@ -169,6 +169,13 @@ Status validate(const JobMeasure& m) {
   for (const auto& [name, v] : notes)  // NaN: not recorded
     if (std::isinf(v) || v < 0) return invalid_argument(std::string(name) + " must be >= 0 or empty");
   if (m.gpu_load > 1) return invalid_argument("gpu_load must be <= 1");
+  if (m.total_s_runs.size() != m.per_frame_s_runs.size())
+    return invalid_argument("total_s_runs and per_frame_s_runs must list as many runs");
+  for (const auto& [name, runs] :
+       {std::pair<const char*, const std::vector<double>*>{"total_s_runs", &m.total_s_runs},
+        {"per_frame_s_runs", &m.per_frame_s_runs}})
+    for (double v : *runs)
+      if (!std::isfinite(v) || v <= 0) return invalid_argument(std::string(name) + " must be > 0");
   return Status::ok();
 }
 
@@ -226,6 +233,13 @@ std::string cell(const JobRecord& r, const std::string& c) {
   if (c == "pair_contact_steps") return note(m.pair_contact_steps);
   if (c == "bin_entries") return note(i.bin_entries);
   if (c == "wall_buckets") return note(i.wall_buckets);
+  auto runs = [&](const std::vector<double>& v) {
+    std::string out;
+    for (double t : v) out += (out.empty() ? "" : ";") + n(t);
+    return out;
+  };
+  if (c == "total_s_runs") return runs(m.total_s_runs);
+  if (c == "per_frame_s_runs") return runs(m.per_frame_s_runs);
   return "";
 }
 
@@ -305,6 +319,21 @@ bool read_cell(JobRecord* r, const std::string& c, const std::string& v, std::st
   if (c == "pair_contact_steps") return note(&m.pair_contact_steps);
   if (c == "bin_entries") return note(&i.bin_entries);
   if (c == "wall_buckets") return note(&i.wall_buckets);
+  auto runs = [&](std::vector<double>* out) {  // empty: the row is one run
+    *what = "numbers joined by ';'";
+    out->clear();
+    if (v.empty()) return true;
+    std::stringstream ss(v);
+    std::string part;
+    while (std::getline(ss, part, ';')) {
+      double t = 0;
+      if (!g::parse_double(g::trim(part), &t)) return false;
+      out->push_back(t);
+    }
+    return true;
+  };
+  if (c == "total_s_runs") return runs(&m.total_s_runs);
+  if (c == "per_frame_s_runs") return runs(&m.per_frame_s_runs);
   *what = "a known column";
   return false;
 }
@@ -470,7 +499,7 @@ double median_of(std::vector<double> v) {
 
 std::vector<JobRecord> merge_job_repeats(const std::vector<JobRecord>& rows) {
   std::vector<JobRecord> out;
-  std::vector<std::vector<JobMeasure>> repeats;  // out[i]'s runs
+  std::vector<std::vector<JobMeasure>> repeats;  // out[i]'s rows
   for (const JobRecord& r : rows) {
     auto it = std::find_if(out.begin(), out.end(),
                            [&](const JobRecord& o) { return same_inputs(o.inputs, r.inputs); });
@@ -495,13 +524,27 @@ std::vector<JobRecord> merge_job_repeats(const std::vector<JobRecord>& rows) {
       for (const JobMeasure& run : runs) most = std::max(most, run.*field);
       return most;
     };
-    for (double JobMeasure::*time :
-         {&JobMeasure::total_s, &JobMeasure::prepare_s, &JobMeasure::simulate_s,
-          &JobMeasure::render_s, &JobMeasure::per_frame_s, &JobMeasure::gpu_load})
+    for (double JobMeasure::*time : {&JobMeasure::prepare_s, &JobMeasure::simulate_s,
+                                     &JobMeasure::render_s, &JobMeasure::gpu_load})
       m.*time = median(time);
     for (double JobMeasure::*peak :
          {&JobMeasure::peak_host_bytes, &JobMeasure::peak_device_bytes, &JobMeasure::output_bytes})
       m.*peak = largest(peak);
+    // Every run's total and time per frame (a merged row's own runs, or the row
+    // itself), and their medians.
+    std::vector<double> totals, per_frame;
+    auto add = [](std::vector<double>* to, const std::vector<double>& merged, double own) {
+      if (merged.empty()) to->push_back(own);
+      to->insert(to->end(), merged.begin(), merged.end());
+    };
+    for (const JobMeasure& run : runs) {
+      add(&totals, run.total_s_runs, run.total_s);
+      add(&per_frame, run.per_frame_s_runs, run.per_frame_s);
+    }
+    m.total_s = median_of(totals);
+    m.per_frame_s = median_of(per_frame);
+    m.total_s_runs = std::move(totals);
+    m.per_frame_s_runs = std::move(per_frame);
   }
   return out;
 }

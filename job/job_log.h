@@ -70,6 +70,11 @@ struct JobMeasure {
   double active_steps = kNotRecorded, wall_contact_steps = kNotRecorded,
          pair_contact_steps = kNotRecorded;
   static constexpr double kNotRecorded = __builtin_nan("");
+  // Each run's total time and time per frame where the row merges repeats of one job
+  // (merge_job_repeats; the row's own times are their medians), in run order; empty
+  // where the row is one run. A user's job is one run, so the cost model sets its
+  // interval by these (docs/gvm.md, "Intervals for one run").
+  std::vector<double> total_s_runs, per_frame_s_runs;
 };
 
 struct JobRecord {
@@ -116,11 +121,14 @@ Status write_job_log(const std::string& path, const std::vector<JobRecord>& rows
 // the median of their times (total, each stage's, per frame; the middle one, or the
 // mean of the middle two, each time on its own, so the stages of a merged row add up
 // to its total only nearly) and of their GPU loads, and the largest memory and output
-// (peaks); the first run's other notes. First-appearance order. The median, not the
-// fastest run: on the 2-vCPU VM a run's pace moves both ways around its usual value,
-// and the fastest of a few runs is one end of that scatter (docs/gvm.md, "The logs":
-// a model held out on the same 846 jobs scored 17.1 % against the fastest of two runs,
-// 17.5 against the fastest of four, 14.2 against the median of four).
+// (peaks); the first run's other notes. First-appearance order. The merged row keeps
+// every run's total and time per frame (JobMeasure::total_s_runs; a row that merged
+// runs before gives each of its own, and the median is over all of them). The
+// median, not the fastest run: on the 2-vCPU VM a run's pace moves both ways around
+// its usual value, and the fastest of a few runs is one end of that scatter
+// (docs/gvm.md, "The logs": a model held out on the same 846 jobs scored 17.1 %
+// against the fastest of two runs, 17.5 against the fastest of four, 14.2 against
+// the median of four).
 std::vector<JobRecord> merge_job_repeats(const std::vector<JobRecord>& rows);
 
 // Which kind of log a CSV text is, from its header line: detection frames
