@@ -56,6 +56,8 @@ JobInputs job_inputs(const JobAssessment& a, const std::string& backend, const s
   in.release_s = a.release.last_release;
   in.particle_contacts = s.dynamics.particle_contacts;
   in.friction = s.dynamics.material.friction;
+  in.restitution =
+      (s.dynamics.wall_material_set ? s.dynamics.wall_material : s.dynamics.material).restitution;
   in.gravity = sim::length(s.dynamics.gravity);
   in.duration = s.duration;
   in.fps = s.fps;
@@ -79,7 +81,7 @@ JobInputs job_inputs(const JobAssessment& a, const std::string& backend, const s
 const std::vector<std::string>& job_log_optional_columns() {
   static const std::vector<std::string> cols = {
       "active_steps", "wall_contact_steps", "pair_contact_steps", "bin_entries",
-      "wall_buckets", "total_s_runs",       "per_frame_s_runs"};
+      "wall_buckets", "total_s_runs",       "per_frame_s_runs",   "restitution"};
   return cols;
 }
 
@@ -124,8 +126,10 @@ Status validate(const JobInputs& in) {
   for (const auto& [name, v] : nonneg)
     if (!std::isfinite(v) || v < 0) return invalid_argument(std::string(name) + " must be >= 0");
   for (const auto& [name, v] : {std::pair<const char*, double>{"bin_entries", in.bin_entries},
-                                {"wall_buckets", in.wall_buckets}})  // NaN: not recorded
+                                {"wall_buckets", in.wall_buckets},
+                                {"restitution", in.restitution}})  // NaN: not recorded
     if (std::isinf(v) || v < 0) return invalid_argument(std::string(name) + " must be >= 0 or empty");
+  if (in.restitution > 1) return invalid_argument("restitution must be <= 1 or empty");
   if (in.r_min > in.r_max) return invalid_argument("r_min must be <= r_max");
   if (!known(in.method, {"bin", "bvh", "gravity", "circumcircle", "midpoint4"}))
     return invalid_argument("method must be bin, gravity, circumcircle or midpoint4");
@@ -233,6 +237,7 @@ std::string cell(const JobRecord& r, const std::string& c) {
   if (c == "pair_contact_steps") return note(m.pair_contact_steps);
   if (c == "bin_entries") return note(i.bin_entries);
   if (c == "wall_buckets") return note(i.wall_buckets);
+  if (c == "restitution") return note(i.restitution);
   auto runs = [&](const std::vector<double>& v) {
     std::string out;
     for (double t : v) out += (out.empty() ? "" : ";") + n(t);
@@ -319,6 +324,7 @@ bool read_cell(JobRecord* r, const std::string& c, const std::string& v, std::st
   if (c == "pair_contact_steps") return note(&m.pair_contact_steps);
   if (c == "bin_entries") return note(&i.bin_entries);
   if (c == "wall_buckets") return note(&i.wall_buckets);
+  if (c == "restitution") return note(&i.restitution);
   auto runs = [&](std::vector<double>* out) {  // empty: the row is one run
     *what = "numbers joined by ';'";
     out->clear();
@@ -344,7 +350,8 @@ bool same_inputs(const JobInputs& a, const JobInputs& b) {
   return a.wall == b.wall && a.particles == b.particles && a.triangles == b.triangles &&
          a.pieces == b.pieces && a.wall_cells == b.wall_cells &&
          same_or_both_nan(a.bin_entries, b.bin_entries) &&
-         same_or_both_nan(a.wall_buckets, b.wall_buckets) && a.wall_area == b.wall_area &&
+         same_or_both_nan(a.wall_buckets, b.wall_buckets) &&
+         same_or_both_nan(a.restitution, b.restitution) && a.wall_area == b.wall_area &&
          a.box[0] == b.box[0] && a.box[1] == b.box[1] && a.box[2] == b.box[2] &&
          a.r_min == b.r_min && a.r_max == b.r_max && a.method == b.method &&
          a.placement == b.placement && a.release_s == b.release_s &&

@@ -51,6 +51,7 @@ JobRecord sample_record(uint64_t particles) {
   in.release_s = 1.25;
   in.particle_contacts = true;
   in.friction = 0.3;
+  in.restitution = 0.55;
   in.duration = 2;
   in.fps = 15;
   in.frames = 30;
@@ -95,6 +96,7 @@ TEST(JobLog, RoundTripsEveryColumnExactly) {
   EXPECT_EQ(format_job_log(*back), text);  // 17 digits: every double comes back as written
   EXPECT_EQ((*back)[0].inputs.device, "Some CPU, with a comma");
   EXPECT_EQ((*back)[0].inputs.release_s, 1.25);
+  EXPECT_EQ((*back)[0].inputs.restitution, 0.55);
   EXPECT_EQ((*back)[1].inputs.formats, "none");
   EXPECT_TRUE((*back)[0].inputs.has_format("gif"));
   EXPECT_FALSE((*back)[0].inputs.has_format("webm"));
@@ -131,11 +133,22 @@ TEST(JobLog, OptionalColumnsMayBeAbsent) {
   EXPECT_TRUE(std::isnan((*back)[0].measure.wall_contact_steps));
   EXPECT_TRUE(std::isnan((*back)[0].inputs.bin_entries));
   EXPECT_TRUE(std::isnan((*back)[0].inputs.wall_buckets));
+  EXPECT_TRUE(std::isnan((*back)[0].inputs.restitution));
   EXPECT_EQ((*back)[0].inputs.wall_cells, 31415.5);
   EXPECT_EQ((*back)[0].measure.total_s, 1.5);
   JobRecord neg = sample_record(100);
   neg.measure.wall_contact_steps = -1;
   EXPECT_FALSE(validate(neg.measure));
+  for (double e : {-0.1, 1.5}) {
+    JobInputs bad = sample_record(100).inputs;
+    bad.restitution = e;
+    EXPECT_FALSE(validate(bad)) << e;
+  }
+  // A row of an old log and one that records the restitution are different jobs.
+  JobRecord old_row = sample_record(100);
+  old_row.inputs.restitution = JobMeasure::kNotRecorded;
+  EXPECT_EQ(merge_job_repeats({old_row, sample_record(100)}).size(), 2u);
+  EXPECT_EQ(merge_job_repeats({old_row, old_row}).size(), 1u);
 }
 
 TEST(JobLog, ErrorsNameTheLineAndTheColumn) {
@@ -800,6 +813,25 @@ TEST(JobInputs, CarryTheWallsFootprint) {
   EXPECT_EQ(in.bin_entries, double((*d)->info().bin_entries));
   EXPECT_EQ(in.wall_buckets, double((*d)->info().buckets));
   EXPECT_LT(in.bin_entries, 0.5 * in.wall_cells);  // a fraction of the cells visited
+}
+
+// The restitution a job records is its particle-wall contact's: the wall's material
+// where the scene sets one, else the particles'.
+TEST(JobInputs, CarryTheWallContactsRestitution) {
+  JobSpec spec;
+  spec.scene_json = R"({"wall": "wall1", "particles": {"count": 20, "radius": 0.5},
+                        "material": {"restitution": 0.35},
+                        "duration": 0.1, "fps": 10, "backend": "cpu"})";
+  spec.out_dir = tmp("restitution");
+  auto a = assess_job(spec);
+  ASSERT_TRUE(a) << a.status().message();
+  EXPECT_EQ(job_inputs(*a, "cpu", "Some CPU", 1).restitution, 0.35);
+  spec.scene_json = R"({"wall": "wall1", "particles": {"count": 20, "radius": 0.5},
+                        "material": {"restitution": 0.35}, "wall_material": {"restitution": 0.8},
+                        "duration": 0.1, "fps": 10, "backend": "cpu"})";
+  a = assess_job(spec);
+  ASSERT_TRUE(a) << a.status().message();
+  EXPECT_EQ(job_inputs(*a, "cpu", "Some CPU", 1).restitution, 0.8);
 }
 
 // A quick sweep through job-exec children writes job-log rows the model can read.
