@@ -34,9 +34,10 @@ struct JobInputs {
   double release_s = 0;            // s: when an inlet releases its last particle (0 for fill)
   bool particle_contacts = false;
   double friction = 0;           // Coulomb coefficient
-  // Of the particle-wall contact (the wall's material where the scene sets one): how
-  // long a landed particle bounces before it rests on the wall. NaN: a log written
-  // before it was recorded.
+  // Of the particle-wall contact (the wall's material where the scene sets one). How
+  // long landed particles bounce before they rest on the wall follows from it (a
+  // settled fill's cost 6x apart between 0.3 and 0.9); recorded, not yet read by the
+  // cost model (docs/gvm.md, "Restitution"). NaN: a log written before it was recorded.
   double restitution = __builtin_nan("");
   double gravity = 9.81;         // |g|, m/s^2
   double duration = 0;           // simulated seconds
