@@ -73,13 +73,16 @@ inline Status sync_file_system(const std::string& dir) {
   return Status::ok();
 }
 
-// Writes `bytes` to `path` through a temporary name; the file is closed on every path.
-inline Status write_file_atomic(const std::string& path, const std::string& bytes,
-                                Durability durability = Durability::kProcess) {
+// Writes to `path` through a temporary name what write(FILE*) puts there (it
+// answers false when a write failed, errno set): a large file goes out in parts
+// without a copy of it in memory. The file is closed on every path.
+template <class Write>
+inline Status write_file_atomic_with(const std::string& path, Write&& write,
+                                     Durability durability = Durability::kProcess) {
   const std::string tmp = temp_path_for(path);
   std::FILE* f = std::fopen(tmp.c_str(), "wb");
   if (!f) return io_error("cannot create " + tmp + ": " + std::strerror(errno));
-  bool wrote = std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size();
+  bool wrote = write(f);
   if (wrote && durability == Durability::kSynced)
     wrote = std::fflush(f) == 0 && ::fsync(::fileno(f)) == 0;
   const int write_errno = errno;
@@ -96,6 +99,15 @@ inline Status write_file_atomic(const std::string& path, const std::string& byte
   }
   if (durability == Durability::kSynced) sync_folder_of(path);
   return Status::ok();
+}
+
+// Writes `bytes` to `path` through a temporary name; the file is closed on every path.
+inline Status write_file_atomic(const std::string& path, const std::string& bytes,
+                                Durability durability = Durability::kProcess) {
+  return write_file_atomic_with(
+      path,
+      [&](std::FILE* f) { return std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size(); },
+      durability);
 }
 
 }  // namespace collido

@@ -1,8 +1,9 @@
 #include "job/checkpoint.h"
 
+#include <algorithm>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
-#include <sstream>
 
 #include "common/atomic_file.h"
 
@@ -22,16 +23,40 @@ constexpr uint32_t kMaxMethodName = 64;
 // More than any run holds; a larger count or size means a damaged file.
 constexpr uint32_t kMaxArrays = 64;
 
-uint64_t fnv1a(const std::string& bytes) {
-  uint64_t h = 1469598103934665603ull;
-  for (unsigned char c : bytes) h = (h ^ c) * 1099511628211ull;
+constexpr uint64_t kFnvOffset = 1469598103934665603ull, kFnvPrime = 1099511628211ull;
+
+uint64_t fnv1a(const char* bytes, size_t n, uint64_t h = kFnvOffset) {
+  for (size_t i = 0; i < n; ++i) h = (h ^ static_cast<unsigned char>(bytes[i])) * kFnvPrime;
   return h;
 }
 
-template <class T>
-void put(std::string* out, const T& v) {
-  out->append(reinterpret_cast<const char*>(&v), sizeof v);
-}
+// Writes a checkpoint's parts to the file as they come, hashing them on the way:
+// the file is the same as one assembled in memory first, without that copy of the
+// state (as large as the engine's arrays: 2.3 MiB for a pour of 6,000 particles).
+class HashedWriter {
+ public:
+  explicit HashedWriter(std::FILE* f) : f_(f) {}
+  void bytes(const void* p, size_t n) {
+    if (!ok_ || n == 0) return;
+    hash_ = fnv1a(static_cast<const char*>(p), n, hash_);
+    ok_ = std::fwrite(p, 1, n, f_) == n;
+  }
+  template <class T>
+  void put(const T& v) {
+    bytes(&v, sizeof v);
+  }
+  // The hash of everything before it, then nothing more.
+  bool finish() {
+    const uint64_t h = hash_;
+    bytes(&h, sizeof h);
+    return ok_;
+  }
+
+ private:
+  std::FILE* f_;
+  uint64_t hash_ = kFnvOffset;
+  bool ok_ = true;
+};
 
 class Reader {
  public:
@@ -59,33 +84,41 @@ class Reader {
 }  // namespace
 
 Status write_checkpoint(const std::string& path, const Checkpoint& c) {
-  std::string b(kMagic, sizeof kMagic);
-  put(&b, c.frame);
-  put(&b, c.state.particles);
-  put(&b, c.state.time);
-  put(&b, c.state.steps);
-  put(&b, uint8_t(c.state.all_released));
-  for (const auto* arrays : {&c.state.arrays, &c.state.lists}) {
-    put(&b, uint32_t(arrays->size()));
-    for (const auto& a : *arrays) {
-      put(&b, uint64_t(a.size()));
-      b.append(reinterpret_cast<const char*>(a.data()), a.size());
-    }
-  }
-  put(&b, uint32_t(c.method.size()));
-  b.append(c.method);
-  put(&b, c.grid_length);
-  put(&b, fnv1a(b));
   // On the disk when this returns (the files it speaks for went first, job.cpp).
-  return write_file_atomic(path, b, Durability::kSynced);
+  return write_file_atomic_with(
+      path,
+      [&](std::FILE* f) {
+        HashedWriter w(f);
+        w.bytes(kMagic, sizeof kMagic);
+        w.put(c.frame);
+        w.put(c.state.particles);
+        w.put(c.state.time);
+        w.put(c.state.steps);
+        w.put(uint8_t(c.state.all_released));
+        for (const auto* arrays : {&c.state.arrays, &c.state.lists}) {
+          w.put(uint32_t(arrays->size()));
+          for (const auto& a : *arrays) {
+            w.put(uint64_t(a.size()));
+            w.bytes(a.data(), a.size());
+          }
+        }
+        w.put(uint32_t(c.method.size()));
+        w.bytes(c.method.data(), c.method.size());
+        w.put(c.grid_length);
+        return w.finish();
+      },
+      Durability::kSynced);
 }
 
 Expected<Checkpoint> read_checkpoint(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
   if (!in) return not_found(path + ": no checkpoint");
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  const std::string b = ss.str();
+  // Read straight into one buffer of the file's size: a resumed job's peak holds
+  // the file once beside the state it becomes, not three times.
+  std::string b(size_t(std::max<std::streamoff>(in.tellg(), 0)), '\0');
+  in.seekg(0);
+  if (!in.read(b.data(), std::streamsize(b.size())))
+    return io_error(path + ": cannot read the checkpoint");
   auto damaged = [&](const char* why) { return parse_error(path + ": damaged checkpoint (" + why + ")"); };
   auto is = [&](const char* magic) {
     return b.size() >= sizeof kMagic && std::memcmp(b.data(), magic, sizeof kMagic) == 0;
@@ -101,7 +134,7 @@ Expected<Checkpoint> read_checkpoint(const std::string& path) {
     return damaged("not a checkpoint");
   uint64_t stored = 0;
   std::memcpy(&stored, b.data() + b.size() - 8, 8);
-  if (fnv1a(b.substr(0, b.size() - 8)) != stored) return damaged("checksum");
+  if (fnv1a(b.data(), b.size() - 8) != stored) return damaged("checksum");
   Reader r(b);
   char magic[8];
   r.get(&magic);

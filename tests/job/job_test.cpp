@@ -7,7 +7,9 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <chrono>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -245,6 +247,34 @@ TEST(Job, CheckpointsRoundTripAndDamageIsDetected) {
   ASSERT_TRUE(without_method) << without_method.status().message();
   EXPECT_EQ(without_method->state.lists, ck->state.lists);
   EXPECT_TRUE(without_method->method.empty());
+  // The file written in parts as they come (no copy of it in memory) is the one
+  // these rules give for the current format (04): the method and grid length last.
+  put(&body, uint32_t(ck->method.size()));
+  body += ck->method;
+  put(&body, ck->grid_length);
+  EXPECT_EQ(read_file(dir + "/checkpoint.bin"), hashed("CLCKPT04" + body));
+}
+
+// A writer that fails leaves neither the file nor its temporary behind, and the
+// file that was there stays as it was.
+TEST(Job, AFailedWriteInPartsLeavesTheOldFile) {
+  const std::string dir = fresh_dir("atomic_parts");
+  fs::create_directories(dir);
+  const std::string path = dir + "/file.bin";
+  ASSERT_TRUE(write_file_atomic(path, "old"));
+  const Status s = write_file_atomic_with(path, [](std::FILE* f) {
+    std::fputs("half of the new", f);
+    errno = ENOSPC;
+    return false;
+  });
+  EXPECT_FALSE(s);
+  EXPECT_NE(s.message().find("cannot write"), std::string::npos) << s.message();
+  EXPECT_EQ(read_file(path), "old");
+  size_t files = 0;
+  for (const auto& e : fs::directory_iterator(dir)) files += e.is_regular_file();
+  EXPECT_EQ(files, 1u);
+  ASSERT_TRUE(write_file_atomic_with(path, [](std::FILE* f) { return std::fputs("new", f) >= 0; }));
+  EXPECT_EQ(read_file(path), "new");
 }
 
 // Runs the spec in a job-exec child and kills it with SIGKILL once it has
