@@ -34,12 +34,12 @@ namespace {
 
 constexpr const char* kKind = "collidoscope-job-cost-model";
 constexpr const char* kDetectionKind = "collidoscope-resource-predictor";
-constexpr int kVersion = 7;  // 2: each member has its prior; 3: the wall footprint in the memory
+constexpr int kVersion = 8;  // 2: each member has its prior; 3: the wall footprint in the memory
                              // priors; 4: a divided wall's lookups charged to the particles near
                              // it; 5: the lookups priced by the pieces within reach, GPU load
                              // learnt as a log; 6: no lookups on the GPU (its divided
                              // walls listed); 7: terms for friction and a fill's
-                             // layer
+                             // layer; 8: the CPU's grids in its host memory
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // Memory: the share of out-of-fold jobs whose peak may exceed the point by more than
 // 5 %: the issue allows 5 % of held-out runs, and 4 % of the out-of-fold ones leaves a
@@ -266,28 +266,32 @@ size_t prior_terms(size_t k, const JobInputs& in, double* t) {
   // particle's arrays, so a term of its own.
   const double entries = std::isnan(in.bin_entries) ? in.wall_cells : in.bin_entries;
   const double spins = in.friction > 0 ? double(in.particles) : 0;
+  // The engine's grids span the wall's box in cells of 2 r_max (the particle grid
+  // only with particle contacts): on the GPU they are most of a small job's memory.
+  // The wall grid's buckets are counted before the run too (logs before: the box's cells).
+  const double cell = 2 * in.r_max;
+  double grid = 1;
+  for (double side : in.box) grid *= (side + 2 * in.r_max) / cell + 2;
+  const double buckets = std::isnan(in.wall_buckets) ? grid : in.wall_buckets;
   size_t n = 0;
   switch (k) {
     case kHost: {
       // On the CPU the engine's arrays and the wall's index live in host memory.
       // Measured (stop 39): the CPU log's host memory 3.0 % with or without the
       // footprint and spins, the H200 log's 2.1 -> 1.9 % (held-out jobs more than
-      // 5 % under 4.8 -> 3.4 %).
+      // 5 % under 4.8 -> 3.4 %). The engine's grids too, on the CPU only (the
+      // GPU's are on the device): the CPU log's 2.2 -> 2.0 %, held-out jobs more
+      // than 5 % under 3.2 -> 2.7 % (stop 56; counted for the H200's jobs too, its
+      // host memory went 1.3 -> 1.5 %).
+      const double grids = is_cuda(in) ? 0 : 1;
       for (double v : {1.0, double(in.particles), double(in.particles) * in.particle_contacts,
                        spins, spins * in.particle_contacts, entries, in.pieces,
-                       double(in.triangles), render, pixels, mp4, pixels * mp4, webm,
-                       pixels * webm, gif, pixels * gif})
+                       double(in.triangles), render, pixels, mp4, pixels * mp4, webm, pixels * webm,
+                       gif, pixels * gif, grids * buckets, grids * grid * in.particle_contacts})
         t[n++] = v;
       return n;
     }
     case kDevice: {
-      // The engine's grids span the wall's box in cells of 2 r_max (the particle grid
-      // only with particle contacts): on the GPU they are most of a small job's memory.
-      // The wall grid's buckets are counted before the run too (logs before: the box's cells).
-      const double cell = 2 * in.r_max;
-      double grid = 1;
-      for (double side : in.box) grid *= (side + 2 * in.r_max) / cell + 2;
-      const double buckets = std::isnan(in.wall_buckets) ? grid : in.wall_buckets;
       for (double v : {1.0, double(in.particles), double(in.particles) * in.particle_contacts,
                        spins, spins * in.particle_contacts, entries, in.pieces,
                        double(in.triangles), buckets, grid * in.particle_contacts})

@@ -506,6 +506,35 @@ TEST(JobCostModelPrior, DeviceMemoryFollowsTheWallsFootprint) {
   }
 }
 
+// On the CPU the engine's grids live in host memory: the wall grid's buckets (and the
+// particle grid with particle contacts), priced there as on the GPU's device. A CPU
+// job on a wall whose grid holds far more buckets than any trained one is priced by
+// them (without the terms it missed by 77 %, checked).
+TEST(JobCostModelPrior, TheCpusHostMemoryHoldsTheGrids) {
+  auto host_bytes = [](const JobInputs& in) {
+    return 8e7 + 300.0 * double(in.particles) + 36.0 * in.bin_entries + 40.0 * in.wall_buckets;
+  };
+  auto row = [&](int i) {
+    JobRecord r = sample_record(uint64_t(500 + 97 * i));
+    JobInputs& in = r.inputs;
+    in.wall_cells = 1e5 * (1 + i % 7);
+    in.bin_entries = in.wall_cells * (0.05 + 0.15 * std::fmod(0.37 * i, 1.0));
+    in.wall_buckets = 1e5 * (1 + (i * 5) % 11);
+    r.measure.peak_host_bytes = host_bytes(in);
+    return r;
+  };
+  std::vector<JobRecord> rows;
+  for (int i = 0; i < 60; ++i) rows.push_back(row(i));
+  auto m = JobCostModel::train(rows, small_options(), nullptr);
+  ASSERT_TRUE(m) << m.status().message();
+  JobRecord far = row(61);
+  far.inputs.wall_buckets = 1e7;  // 8 times the most buckets trained
+  far.measure.peak_host_bytes = host_bytes(far.inputs);
+  auto p = m->predict(far.inputs);
+  ASSERT_TRUE(p) << p.status().message();
+  EXPECT_NEAR(p->peak_host_bytes.p50 / far.measure.peak_host_bytes, 1.0, 0.05);
+}
+
 // The pair contacts expected count the particles that have landed: a free fall after
 // each release (half the wall's height in a fill, all of it from an inlet), averaged
 // over the run, in closed form.
