@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <string>
+#include <vector>
 
 #include "job/cost_model.h"
 #include "job/job_log.h"
@@ -23,11 +24,12 @@ void job_log(const std::string& text) {
   auto back = parse_job_log(written);
   check(bool(back));
   check(format_job_log(*back) == written);
-  for (const JobRecord& r : merge_job_repeats(*rows)) {
+  const std::vector<JobRecord> merged = merge_job_repeats(*rows);
+  for (const JobRecord& r : merged) {
     check(bool(validate(r.inputs)));
     check(bool(validate(r.measure)));
   }
-  check(bool(parse_job_log(format_job_log(merge_job_repeats(*rows)))));
+  check(bool(parse_job_log(format_job_log(merged))));
 }
 
 }  // namespace

@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "common/atomic_file.h"
+#include "common/median.h"
 #include "common/process_memory.h"
 #include "common/stopwatch.h"
 #include "gvm/rng.h"
@@ -233,9 +234,7 @@ Expected<RunResult> run_config(const std::string& wall_spec, const Plan& p,
     timed.push_back(took);
     timed_s += took;
   }
-  std::sort(timed.begin(), timed.end());
-  const size_t n = timed.size();
-  r.frame_s = n % 2 ? timed[n / 2] : 0.5 * (timed[n / 2 - 1] + timed[n / 2]);
+  r.frame_s = median_of(std::move(timed));
   r.triangles = static_cast<int64_t>((*det)->info().triangles_used);
   r.triangles_original = static_cast<int64_t>((*det)->info().triangles_original);
   r.device_bytes = (*det)->info().device_bytes;

@@ -18,6 +18,7 @@
 #include <thread>
 
 #include "common/atomic_file.h"
+#include "common/median.h"
 #include "common/stopwatch.h"
 #include "gvm/baselines.h"
 #include "gvm/linalg.h"
@@ -192,6 +193,22 @@ double fill_layer_sites(const JobInputs& in) {
   return sim::fill_sites_along(in.box[0], in.r_max) * sim::fill_sites_along(in.box[1], in.r_max);
 }
 
+// The cells of the engine's grids: the wall's box in cells of 2 r_max (the particle
+// grid spans it too, with particle contacts). On the GPU they are most of a small
+// job's memory, and on the CPU they are in its host memory.
+double grid_cells(const JobInputs& in) {
+  const double cell = 2 * in.r_max;
+  double cells = 1;
+  for (double side : in.box) cells *= (side + 2 * in.r_max) / cell + 2;
+  return cells;
+}
+
+// The wall grid's buckets, counted before the run (sim::wall_footprint); logs before
+// that count give the box's cells.
+double wall_grid_buckets(const JobInputs& in) {
+  return std::isnan(in.wall_buckets) ? grid_cells(in) : in.wall_buckets;
+}
+
 // The time terms of a job (see above); the set-up's are zero when per_frame, and the
 // others divided by the frames written. Written into t[0, kTimeTerms).
 void time_terms(const JobInputs& in, const CostDrivers& d, bool per_frame, double* t) {
@@ -266,13 +283,6 @@ size_t prior_terms(size_t k, const JobInputs& in, double* t) {
   // particle's arrays, so a term of its own.
   const double entries = std::isnan(in.bin_entries) ? in.wall_cells : in.bin_entries;
   const double spins = in.friction > 0 ? double(in.particles) : 0;
-  // The engine's grids span the wall's box in cells of 2 r_max (the particle grid
-  // only with particle contacts): on the GPU they are most of a small job's memory.
-  // The wall grid's buckets are counted before the run too (logs before: the box's cells).
-  const double cell = 2 * in.r_max;
-  double grid = 1;
-  for (double side : in.box) grid *= (side + 2 * in.r_max) / cell + 2;
-  const double buckets = std::isnan(in.wall_buckets) ? grid : in.wall_buckets;
   size_t n = 0;
   switch (k) {
     case kHost: {
@@ -283,18 +293,20 @@ size_t prior_terms(size_t k, const JobInputs& in, double* t) {
       // GPU's are on the device): the CPU log's 2.2 -> 2.0 %, held-out jobs more
       // than 5 % under 3.2 -> 2.7 % (stop 56; counted for the H200's jobs too, its
       // host memory went 1.3 -> 1.5 %).
-      const double grids = is_cuda(in) ? 0 : 1;
-      for (double v : {1.0, double(in.particles), double(in.particles) * in.particle_contacts,
-                       spins, spins * in.particle_contacts, entries, in.pieces,
-                       double(in.triangles), render, pixels, mp4, pixels * mp4, webm, pixels * webm,
-                       gif, pixels * gif, grids * buckets, grids * grid * in.particle_contacts})
+      const double on_host = is_cuda(in) ? 0 : 1;  // the GPU's grids are on the device
+      for (double v :
+           {1.0, double(in.particles), double(in.particles) * in.particle_contacts, spins,
+            spins * in.particle_contacts, entries, in.pieces, double(in.triangles), render, pixels,
+            mp4, pixels * mp4, webm, pixels * webm, gif, pixels * gif,
+            on_host * wall_grid_buckets(in), on_host * grid_cells(in) * in.particle_contacts})
         t[n++] = v;
       return n;
     }
     case kDevice: {
-      for (double v : {1.0, double(in.particles), double(in.particles) * in.particle_contacts,
-                       spins, spins * in.particle_contacts, entries, in.pieces,
-                       double(in.triangles), buckets, grid * in.particle_contacts})
+      for (double v :
+           {1.0, double(in.particles), double(in.particles) * in.particle_contacts, spins,
+            spins * in.particle_contacts, entries, in.pieces, double(in.triangles),
+            wall_grid_buckets(in), grid_cells(in) * in.particle_contacts})
         t[n++] = v;
       return n;
     }
@@ -1403,9 +1415,7 @@ Pace pace_of(const std::vector<double>& ratios) {
   }
   if (slower <= k && slower >= n - k) return {1.0, n};
   // The median: one job slowed by a neighbour, or a model's odd miss, moves it little.
-  std::sort(r.begin(), r.end());
-  const double median = n % 2 ? r[n / 2] : 0.5 * (r[n / 2 - 1] + r[n / 2]);
-  return {std::clamp(median, kPaceFastest, kPaceSlowest), n};
+  return {std::clamp(median_of(std::move(r)), kPaceFastest, kPaceSlowest), n};
 }
 
 Pace pace_of(const JobCostModel& model, const std::vector<JobRecord>& newest_first) {

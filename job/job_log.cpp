@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "common/atomic_file.h"
+#include "common/median.h"
 #include "gvm/csv.h"
 #include "job/assess.h"
 #include "sim/parallel.h"
@@ -491,18 +492,6 @@ Expected<std::vector<JobRecord>> read_job_log(const std::string& path) {
 Status write_job_log(const std::string& path, const std::vector<JobRecord>& rows) {
   return write_file_atomic(path, format_job_log(rows));
 }
-
-namespace {
-
-// The median of a job's repeats of one time: the middle one, or the mean of the
-// middle two.
-double median_of(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-}  // namespace
 
 std::vector<JobRecord> merge_job_repeats(const std::vector<JobRecord>& rows) {
   std::vector<JobRecord> out;

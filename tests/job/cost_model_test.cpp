@@ -475,6 +475,18 @@ TEST(JobCostModelPrior, MemoryExtrapolatesAsTheJobHoldsMore) {
   EXPECT_GE(p->peak_host_bytes.p90, 0.97 * host_bytes(200'000));
 }
 
+// The i-th of a set of CPU jobs on walls whose indexes vary apart from the particles:
+// the cells the bin preparation visits, the (cell, triangle) pairs it keeps of them
+// (5-20 %, no fixed share) and the wall grid's buckets, in steps of `bucket_step`.
+JobRecord wall_index_row(int i, double bucket_step) {
+  JobRecord r = sample_record(uint64_t(500 + 97 * i));
+  JobInputs& in = r.inputs;
+  in.wall_cells = 1e5 * (1 + i % 7);
+  in.bin_entries = in.wall_cells * (0.05 + 0.15 * std::fmod(0.37 * i, 1.0));
+  in.wall_buckets = bucket_step * (1 + (i * 5) % 11);
+  return r;
+}
+
 // Device memory holds the wall's index: its grid's buckets and, for bin, the (cell,
 // triangle) pairs it stores, which are no fixed share of the cells visited.
 TEST(JobCostModelPrior, DeviceMemoryFollowsTheWallsFootprint) {
@@ -482,14 +494,11 @@ TEST(JobCostModelPrior, DeviceMemoryFollowsTheWallsFootprint) {
     return 2e6 + 300.0 * double(in.particles) + 36.0 * in.bin_entries + 20.0 * in.wall_buckets;
   };
   auto row = [&](int i) {
-    JobRecord r = sample_record(uint64_t(500 + 97 * i));
+    JobRecord r = wall_index_row(i, 2e4);
     JobInputs& in = r.inputs;
     in.backend = "cuda";
     in.device = "Some GPU";
     in.threads = 1;
-    in.wall_cells = 1e5 * (1 + i % 7);
-    in.bin_entries = in.wall_cells * (0.05 + 0.15 * std::fmod(0.37 * i, 1.0));  // 5-20 %
-    in.wall_buckets = 2e4 * (1 + (i * 5) % 11);
     r.measure.peak_device_bytes = device_bytes(in);
     r.measure.gpu_load = 0.5;
     return r;
@@ -515,12 +524,8 @@ TEST(JobCostModelPrior, TheCpusHostMemoryHoldsTheGrids) {
     return 8e7 + 300.0 * double(in.particles) + 36.0 * in.bin_entries + 40.0 * in.wall_buckets;
   };
   auto row = [&](int i) {
-    JobRecord r = sample_record(uint64_t(500 + 97 * i));
-    JobInputs& in = r.inputs;
-    in.wall_cells = 1e5 * (1 + i % 7);
-    in.bin_entries = in.wall_cells * (0.05 + 0.15 * std::fmod(0.37 * i, 1.0));
-    in.wall_buckets = 1e5 * (1 + (i * 5) % 11);
-    r.measure.peak_host_bytes = host_bytes(in);
+    JobRecord r = wall_index_row(i, 1e5);
+    r.measure.peak_host_bytes = host_bytes(r.inputs);
     return r;
   };
   std::vector<JobRecord> rows;
