@@ -1760,34 +1760,30 @@ class DynamicsPipeline final : public Simulation {
   }
 
   // pair_records_in_batches' first step: particles [first, last) file their
-  // touching pairs into b's input columns (and mark them touched), and their
-  // springs' keys into this step's slots, in pair_records' order.
+  // touching pairs (owner, partner, where the spring goes, the spring as last
+  // step left it) into b, mark them touched, and file their springs' keys into
+  // this step's slots, in pair_records' order. The particles' own values
+  // pair_batch_forces reads from their arrays (b.src): filing them too, 34
+  // doubles a pair, made this the step's costliest pass (docs/benchmarks.md).
   template <bool kMarks = true>
   static void batch_touching_pairs(const RecordPass& R, uint32_t first, uint32_t last,
                                    PairBatch& b) {
     using C = PairBatch;
-    double* col = b.data.data();
+    double* spring = b.col(C::kSx);
     const size_t st = b.stride;
     size_t c = 0;
     for (uint32_t i = first; i < last; ++i)
-      for_each_owned_contact<kMarks>(R, i, [&](const Owner& o, const OwnedContact& p) {
+      for_each_owned_contact<kMarks>(R, i, [&](const Owner&, const OwnedContact& p) {
         if (kMarks) b.record[c] = p.k;  // the records' place (the records path only)
         b.owner[c] = i;
         b.partner[c] = p.j;
         b.slot[c] = p.slot;
-        // As pair_contact reads them (spins only where they are followed).
-        const Vec3d vj = R.P.v[p.j], wj = R.rot ? R.P.w[p.j] : Vec3d{0, 0, 0};
-        const auto put3 = [&](C::Column at, Vec3d v) {
-          col[at * st + c] = v.x, col[(at + 1) * st + c] = v.y, col[(at + 2) * st + c] = v.z;
-        };
-        put3(C::kDx, p.d);
-        col[C::kRi * st + c] = o.r, col[C::kRj * st + c] = R.P.r[p.j];
-        col[C::kMi * st + c] = o.m, col[C::kMj * st + c] = R.P.mass[p.j];
-        put3(C::kVix, o.v), put3(C::kVjx, vj), put3(C::kWix, o.w), put3(C::kWjx, wj);
-        put3(C::kSx, p.spring);
+        spring[c] = p.spring.x, spring[st + c] = p.spring.y, spring[2 * st + c] = p.spring.z;
         ++c;
       });
     b.size = c;
+    // Spins only where they are followed, as pair_contact reads them.
+    b.src = {R.P.x, R.P.v, R.rot ? R.P.w : nullptr, R.P.r, R.P.mass};
   }
 
   // Second pass: each particle sums its pairs' records with gravity, the lower

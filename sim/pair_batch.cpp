@@ -53,14 +53,31 @@ COLLIDO_AVX2 void store3(PairBatch& b, PairBatch::Column c, size_t k, V3 v) {
   store(p, k, v.x), store(p + b.stride, k, v.y), store(p + 2 * b.stride, k, v.z);
 }
 
+// Three doubles at a[idx[0..3]] as columns: x, y and z of four particles (a
+// load that leaves out the fourth double, so that nothing past the array is read).
+COLLIDO_AVX2 V3 rows3(const Vec3d* a, const uint32_t* idx) {
+  const __m256i three = _mm256_setr_epi64x(-1, -1, -1, 0);
+  const __m256d r0 = _mm256_maskload_pd(&a[idx[0]].x, three);
+  const __m256d r1 = _mm256_maskload_pd(&a[idx[1]].x, three);
+  const __m256d r2 = _mm256_maskload_pd(&a[idx[2]].x, three);
+  const __m256d r3 = _mm256_maskload_pd(&a[idx[3]].x, three);
+  const __m256d t0 = _mm256_unpacklo_pd(r0, r1), t1 = _mm256_unpackhi_pd(r0, r1);
+  const __m256d t2 = _mm256_unpacklo_pd(r2, r3), t3 = _mm256_unpackhi_pd(r2, r3);
+  return {V(_mm256_permute2f128_pd(t0, t2, 0x20)), V(_mm256_permute2f128_pd(t1, t3, 0x20)),
+          V(_mm256_permute2f128_pd(t0, t2, 0x31))};
+}
+
 }  // namespace
 
 __attribute__((target("avx2"))) void pair_batch_forces(const ContactLaw& law, bool rot,
                                                         double dt, PairBatch& b) {
   using C = PairBatch;
   if (b.size == 0) return;
-  for (size_t k = b.size; k % 4; ++k)
-    for (int c = 0; c < C::kColumns; ++c) b.col(C::Column(c))[k] = b.col(C::Column(c))[b.size - 1];
+  for (size_t k = b.size; k % 4; ++k) {  // the inputs of the last group's padding
+    for (int c = C::kSx; c <= C::kSz; ++c) b.col(C::Column(c))[k] = b.col(C::Column(c))[b.size - 1];
+    b.owner[k] = b.owner[b.size - 1], b.partner[k] = b.partner[b.size - 1];
+  }
+  const PairBatch::Sources& P = b.src;
   const bool friction = law.mu > 0, hertz = law.model == ContactModel::kHertzMindlin;
   const bool rolling = rot && law.mu_roll > 0;
   const V zero = splat(0), one = splat(1.0), minus_one = splat(-1.0);
@@ -73,17 +90,21 @@ __attribute__((target("avx2"))) void pair_batch_forces(const ContactLaw& law, bo
   for (size_t k = 0; k < b.size; k += 4) {
     // pair_contact: the normal, the surfaces' relative velocity, the reduced
     // mass and, for the laws that read it, the contact's radius.
-    const V3 d = load3(b, C::kDx, k);
+    const uint32_t* oi = b.owner.data() + k;
+    const uint32_t* pj = b.partner.data() + k;
+    const V3 d = sub(rows3(P.x, oi), rows3(P.x, pj));
     const V dist2 = dot(d, d);
-    const V r = load(b.col(C::kRi), k), rj = load(b.col(C::kRj), k);
-    const V m = load(b.col(C::kMi), k), mj = load(b.col(C::kMj), k);
+    const V r{P.r[oi[0]], P.r[oi[1]], P.r[oi[2]], P.r[oi[3]]};
+    const V rj{P.r[pj[0]], P.r[pj[1]], P.r[pj[2]], P.r[pj[3]]};
+    const V m{P.m[oi[0]], P.m[oi[1]], P.m[oi[2]], P.m[oi[3]]};
+    const V mj{P.m[pj[0]], P.m[pj[1]], P.m[pj[2]], P.m[pj[3]]};
     const V rs = r + rj;
     const V dist = vsqrt(dist2);
     const V3 along = mul(d, one / dist);
     const V3 apart{zero, zero, one};  // i < j: pair_contact's +z
     const V3 n = pick(dist > tiny * rs, along, apart);
-    const V3 wi = load3(b, C::kWix, k), wj = load3(b, C::kWjx, k);
-    V3 vrel = sub(load3(b, C::kVix, k), load3(b, C::kVjx, k));
+    const V3 wi = rot ? rows3(P.w, oi) : none, wj = rot ? rows3(P.w, pj) : none;
+    V3 vrel = sub(rows3(P.v, oi), rows3(P.v, pj));
     if (friction) vrel = sub(vrel, add(cross(wi, mul(n, r)), cross(wj, mul(n, rj))));
     const V r_eff = hertz || rolling ? r * rj / rs : zero;
     const V m_eff = m * mj / (m + mj);
@@ -151,6 +172,7 @@ __attribute__((target("avx2"))) void pair_batch_forces(const ContactLaw& law, bo
 #else
 
 bool pair_batch_supported() { return false; }
+void pair_batch_forces(const ContactLaw&, bool, double, PairBatch&) {}
 void pair_batch_forces(const ContactLaw&, bool, double, PairBatch&) {}
 
 #endif

@@ -1,6 +1,7 @@
 // The CPU's pair contacts, four at a time (AVX2): the touching pairs a chunk
-// of particles owns are gathered into columns, their forces computed across
-// the vector's lanes, and the results handed back.
+// of particles owns are filed (owner, partner, spring), their forces computed
+// across the vector's lanes, reading the particles' values from their arrays,
+// and the results handed back.
 //
 // The arithmetic is that of pair_contact (sim/dynamics_pipeline.h),
 // contact_force and rolling_torque (sim/contact_force.h), for both laws,
@@ -20,19 +21,19 @@
 
 namespace collido::sim {
 
-// The touching pairs of a chunk, one column per input and output, in the
-// order they were found. The pair's particles are i (the owner) and j.
+// The touching pairs of a chunk in the order they were found: the pair's
+// particles i (the owner) and j, and a column per input and output. The
+// particles' positions, velocities, spins, radii and masses are read from
+// their arrays (src) through owner and partner: filed into columns as well
+// (34 doubles a pair) they made the filing the step's costliest pass, its
+// stores more than the arithmetic (docs/benchmarks.md, stop 57).
 struct PairBatch {
-  // In: the centres' difference x_i - x_j, the radii and masses, the
-  // velocities and spins, the spring as last step left it. (i < j always: a
-  // pair is its owner's, the particle of lower index, so should the centres
-  // coincide the normal is +z; the squared distance is recomputed from the
-  // difference with the same operations.)
+  // In: the spring as last step left it. (i < j always: a pair is its
+  // owner's, the particle of lower index, so should the centres coincide the
+  // normal is +z; the squared distance is computed from x_i - x_j with
+  // pair_contact's operations.)
   // clang-format off
   enum Column {
-    kDx, kDy, kDz, kRi, kRj, kMi, kMj,
-    kVix, kViy, kViz, kVjx, kVjy, kVjz,
-    kWix, kWiy, kWiz, kWjx, kWjy, kWjz,
     kSx, kSy, kSz,
     // Out: the force on i, the torque per metre of lever on i, the spring,
     // the rolling torque on i.
@@ -46,6 +47,11 @@ struct PairBatch {
   std::vector<uint32_t> record;     // the listed pair's record index
   std::vector<uint32_t> owner, partner;  // the pair's i and j
   std::vector<FrictionSlot*> slot;  // where its spring goes (nullptr: past the slots)
+  // The particles' arrays, which pair_batch_forces reads through owner and partner.
+  struct Sources {
+    const Vec3d *x = nullptr, *v = nullptr, *w = nullptr;  // w null: no spins
+    const double *r = nullptr, *m = nullptr;
+  } src;
 
   // Empties the batch, with room for `pairs` (and the padding of a group of four).
   void reset(size_t pairs) {
@@ -71,8 +77,9 @@ bool pair_batch_supported();
 
 // Fills the batch's output columns for pairs [0, size) under either law
 // (friction when law.mu > 0, rolling resistance when rot and law.mu_roll > 0;
-// spins read only when rot). Pads the last group of four with copies of the
-// last pair, whose results are the same bits.
+// spins read only when rot), the particles' values read through b.src. Pads
+// the last group of four with copies of the last pair, whose results are the
+// same bits.
 void pair_batch_forces(const ContactLaw& law, bool rot, double dt, PairBatch& b);
 
 }  // namespace collido::sim
