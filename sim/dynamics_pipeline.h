@@ -1747,11 +1747,12 @@ class DynamicsPipeline final : public Simulation {
 
   // The end of the batch of particles from `first` (before `limit`): whole
   // particles, at least one, whose listed pairs number at most kBatchPairs.
-  // A batch's columns (34 doubles a pair) stay in the first-level cache: a
-  // whole chunk's did not, and its stores took longer than the scalar path's
-  // arithmetic. Batches of 64 particles, as before, held about 190 pairs in
-  // the settled block; 48 pairs against 192 made a step 7 % faster on one
-  // thread and 4 % on two (32 and 96 slower than 48; docs/benchmarks.md).
+  // A batch's columns stay in the first-level cache: a whole chunk's did
+  // not, and its stores took longer than the scalar path's arithmetic. With
+  // 34 doubles a pair, 48 pairs against 192 made a step 7 % faster on one
+  // thread and 4 % on two (32 and 96 slower than 48); with 15 (stop 57: the
+  // particles read from their arrays), 32, 96 and 192 pairs made no
+  // difference (docs/benchmarks.md).
   static uint32_t batch_end(const RecordPass& R, uint32_t first, uint32_t limit) {
     const uint32_t most = R.nl_start[first] + kBatchPairs;
     uint32_t last = first + 1;
