@@ -53,6 +53,10 @@ COLLIDO_AVX2 void store3(PairBatch& b, PairBatch::Column c, size_t k, V3 v) {
   store(p, k, v.x), store(p + b.stride, k, v.y), store(p + 2 * b.stride, k, v.z);
 }
 
+// a[idx[0..3]].
+COLLIDO_AVX2 V at4(const double* a, const uint32_t* idx) {
+  return V{a[idx[0]], a[idx[1]], a[idx[2]], a[idx[3]]};
+}
 // Three doubles at a[idx[0..3]] as columns: x, y and z of four particles (a
 // load that leaves out the fourth double, so that nothing past the array is read).
 COLLIDO_AVX2 V3 rows3(const Vec3d* a, const uint32_t* idx) {
@@ -90,21 +94,19 @@ __attribute__((target("avx2"))) void pair_batch_forces(const ContactLaw& law, bo
   for (size_t k = 0; k < b.size; k += 4) {
     // pair_contact: the normal, the surfaces' relative velocity, the reduced
     // mass and, for the laws that read it, the contact's radius.
-    const uint32_t* oi = b.owner.data() + k;
-    const uint32_t* pj = b.partner.data() + k;
-    const V3 d = sub(rows3(P.x, oi), rows3(P.x, pj));
+    const uint32_t* owners = b.owner.data() + k;  // the group's four
+    const uint32_t* partners = b.partner.data() + k;
+    const V3 d = sub(rows3(P.x, owners), rows3(P.x, partners));
     const V dist2 = dot(d, d);
-    const V r{P.r[oi[0]], P.r[oi[1]], P.r[oi[2]], P.r[oi[3]]};
-    const V rj{P.r[pj[0]], P.r[pj[1]], P.r[pj[2]], P.r[pj[3]]};
-    const V m{P.m[oi[0]], P.m[oi[1]], P.m[oi[2]], P.m[oi[3]]};
-    const V mj{P.m[pj[0]], P.m[pj[1]], P.m[pj[2]], P.m[pj[3]]};
+    const V r = at4(P.r, owners), rj = at4(P.r, partners);
+    const V m = at4(P.m, owners), mj = at4(P.m, partners);
     const V rs = r + rj;
     const V dist = vsqrt(dist2);
     const V3 along = mul(d, one / dist);
     const V3 apart{zero, zero, one};  // i < j: pair_contact's +z
     const V3 n = pick(dist > tiny * rs, along, apart);
-    const V3 wi = rot ? rows3(P.w, oi) : none, wj = rot ? rows3(P.w, pj) : none;
-    V3 vrel = sub(rows3(P.v, oi), rows3(P.v, pj));
+    const V3 wi = rot ? rows3(P.w, owners) : none, wj = rot ? rows3(P.w, partners) : none;
+    V3 vrel = sub(rows3(P.v, owners), rows3(P.v, partners));
     if (friction) vrel = sub(vrel, add(cross(wi, mul(n, r)), cross(wj, mul(n, rj))));
     const V r_eff = hertz || rolling ? r * rj / rs : zero;
     const V m_eff = m * mj / (m + mj);
@@ -172,7 +174,6 @@ __attribute__((target("avx2"))) void pair_batch_forces(const ContactLaw& law, bo
 #else
 
 bool pair_batch_supported() { return false; }
-void pair_batch_forces(const ContactLaw&, bool, double, PairBatch&) {}
 void pair_batch_forces(const ContactLaw&, bool, double, PairBatch&) {}
 
 #endif
