@@ -178,6 +178,9 @@ class JobService {
     std::string name, password, job_id, state;
   };
   Expected<Demo> start_demo();
+  // The demo job's request (POST /api/v1/jobs body): a pour into the paper's
+  // wall1 that lands and piles within its duration, rendered to video.
+  static json demo_request();
 
   // Administration.
   Reply admin_logs(const User& u, size_t limit, int64_t before_id);
