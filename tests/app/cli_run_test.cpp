@@ -1,8 +1,10 @@
 // `collidoscope run` end to end: the run directory it writes, and errors.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "app/cli.h"
@@ -77,6 +79,57 @@ TEST(CliRun, ExampleScenesRun) {
               kExitOk)
         << e.path();
     EXPECT_TRUE(fs::exists(sim::snapshot_path(dir, 1))) << e.path();
+  }
+  EXPECT_GE(seen, 3);
+}
+
+// Every example scene that pours or jets its particles shows them reach the
+// wall within its duration: wall2's pour fell for 3 s from the top of the
+// hopper and touched nothing (its cone is 4.7 s down). Twenty particles
+// without particle contacts stand in for the scene's count (the first ones
+// released land when the scene's would). A contact is told by the energy it
+// takes: in free fall the total stays put (releases only add to it), and a
+// bounce off the wall loses some. Frame ends alone can miss it: twenty
+// particles off wall2's cone bounced into its outlet between two frames.
+// Escaped particles leave the sums, so only the frames before any escapes count.
+TEST(CliRun, ExamplePoursReachTheWallWithinTheirDuration) {
+  int seen = 0;
+  for (const auto& e : fs::directory_iterator(COLLIDO_SCENES)) {
+    if (e.path().extension() != ".json") continue;
+    std::ifstream in(e.path());
+    nlohmann::json scene = nlohmann::json::parse(in);
+    const std::string kind = scene["placement"].value("kind", "fill");
+    if (kind != "pour" && kind != "jet") continue;
+    ++seen;
+    scene["particles"]["count"] = 20;
+    scene["particle_contacts"] = false;
+    job::JobSpec spec;
+    spec.scene_json = scene.dump();
+    spec.scene_dir = COLLIDO_SCENES;
+    spec.out_dir = test::scratch_path("reach_" + e.path().stem().string());
+    spec.dir_policy = job::DirPolicy::kReplace;
+    const job::JobResult r = job::run_job(spec, {});
+    ASSERT_TRUE(r.status) << e.path() << ": " << r.status.message();
+    std::ifstream stats(spec.out_dir + "/stats.csv");
+    std::string line;
+    std::getline(stats, line);
+    std::vector<std::string> names;
+    for (std::stringstream h(line); std::getline(h, line, ',');) names.push_back(line);
+    const auto at = [&](const std::string& name) {
+      return size_t(std::find(names.begin(), names.end(), name) - names.begin());
+    };
+    const size_t escaped = at("escaped"), total = at("total_J");
+    ASSERT_LT(std::max(escaped, total), names.size());
+    double most = 0, lost = 0;  // the largest total so far, and the largest share lost since
+    while (std::getline(stats, line)) {
+      std::vector<double> v;
+      for (std::stringstream row(line); std::getline(row, line, ',');) v.push_back(std::stod(line));
+      if (v[escaped] > 0) break;
+      most = std::max(most, v[total]);
+      if (most > 0) lost = std::max(lost, (most - v[total]) / most);
+    }
+    EXPECT_GT(lost, 0.01) << e.path() << ": nothing touched the wall in "
+                          << scene["duration"].get<double>() << " s";
   }
   EXPECT_GE(seen, 3);
 }
