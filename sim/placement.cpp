@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <utility>
 
@@ -754,6 +755,55 @@ Expected<ParticleSet> place_particles(const TriangleMesh& wall, const ParticleSp
   return out;
 }
 
+namespace {
+
+// The distance along unit direction d from p to triangle t (Moller-Trumbore),
+// or infinity where the ray misses it.
+double ray_distance(Vec3d p, Vec3d d, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+  const Vec3d e1 = b - a, e2 = c - a, q = cross(d, e2);
+  const double det = dot(e1, q);
+  const double inf = std::numeric_limits<double>::infinity();
+  if (std::fabs(det) < 1e-300) return inf;  // along the triangle's plane
+  const Vec3d o = p - a;
+  const double u = dot(o, q) / det;
+  if (u < 0 || u > 1) return inf;
+  const Vec3d k = cross(o, e1);
+  const double v = dot(d, k) / det;
+  if (v < 0 || u + v > 1) return inf;
+  const double t = dot(e2, k) / det;
+  return t >= 0 ? t : inf;
+}
+
+// ReleasePlan::first_contact for an inlet laid out as lay: rays along gravity
+// from up to 16 of its slots (fewer on a large wall, so that an assessment stays
+// within about 2e7 triangle tests), the nearest hit less the radius, fallen
+// with the slots' speed along gravity.
+double first_contact_time(const TriangleMesh& wall, const InletLayout& lay, double r,
+                          Vec3d gravity) {
+  const double g = length(gravity);
+  if (!(g > 0) || lay.disc.empty() || wall.triangles.empty()) return -1;
+  const Vec3d down = gravity * (1.0 / g);
+  const double v0 = dot(lay.v, down);
+  // Straight down only: a velocity across gravity bends the path.
+  if (length(lay.v - down * v0) > 1e-9 * std::max(1.0, length(lay.v)) || v0 < 0) return -1;
+  const size_t triangles = wall.triangles.size();
+  const size_t rays = std::clamp<size_t>(size_t(2e7 / double(triangles)), 1, 16);
+  const size_t step = std::max<size_t>(1, lay.disc.size() / rays);
+  double nearest = std::numeric_limits<double>::infinity();
+  for (size_t k = 0; k < lay.disc.size(); k += step) {
+    const Vec3d p = lay.centre + lay.disc[k];
+    for (size_t t = 0; t < triangles; ++t)
+      nearest = std::min(
+          nearest, ray_distance(p, down, wall.corner(t, 0), wall.corner(t, 1), wall.corner(t, 2)));
+  }
+  if (!std::isfinite(nearest)) return -1;
+  const double fall = std::max(0.0, nearest - r);
+  // fall = v0 t + g t^2 / 2, without the difference that loses digits when v0 is large.
+  return 2 * fall / (v0 + std::sqrt(v0 * v0 + 2 * g * fall));
+}
+
+}  // namespace
+
 Expected<ReleasePlan> plan_release(const TriangleMesh& wall, const ParticleSpec& ps,
                                    const PlacementSpec& pl, Vec3d gravity) {
   ReleasePlan plan;
@@ -766,6 +816,7 @@ Expected<ReleasePlan> plan_release(const TriangleMesh& wall, const ParticleSpec&
   plan.slots = lay.disc.size();
   plan.period = lay.tau;
   plan.speed = length(lay.v);
+  plan.first_contact = first_contact_time(wall, lay, ps.r_max, gravity);
   // Particle i leaves at (i + shift) tau / slots, shift uniform in [0, 1).
   plan.last_release = double(ps.count) * lay.tau / double(plan.slots);
   return plan;

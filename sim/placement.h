@@ -62,6 +62,12 @@ struct ReleasePlan {
   double period = 0;        // s between two releases of one slot
   double last_release = 0;  // s: when the last particle leaves (0 for a fill)
   double speed = 0;         // m/s: the initial speed of every particle
+  // s: when the first particles released reach the wall, falling straight down
+  // from the inlet's slots (a pour, or a jet along gravity) to the first
+  // triangle under them; -1 where not known (a fill, a jet across gravity, no
+  // gravity, or nothing under the inlet). A duration shorter than this shows
+  // particles that never touch anything.
+  double first_contact = -1;
   // Mean share of the particles released over a run of `duration` seconds (1 for a fill).
   double mean_active(double duration) const;
 };

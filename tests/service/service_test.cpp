@@ -270,6 +270,29 @@ TEST_F(ServiceTest, PricesJobsWithTheJobCostModel) {
   EXPECT_EQ(after["retrain"]["retrainings"], 1);
 }
 
+// A pour that ends before its first particles land is said so before it runs:
+// its video would show a fall that touches nothing (the web form's default, a
+// 2 s pour from the top of wall1, did).
+TEST_F(ServiceTest, WarnsOfAPourThatEndsBeforeItsParticlesLand) {
+  Client c = client();
+  c.sign_up("ada");
+  // The default inlet 3 r under wall1's top (z = 98.5 for r = 0.5), 1 m/s down:
+  // its particles touch the floor after falling 98 m, 2 x 98 / (1 + sqrt(1 + 2 g 98)) s.
+  const double lands = 2 * 98 / (1 + std::sqrt(1 + 2 * 9.81 * 98));
+  json short_pour = c.call_json("POST", "/api/v1/predict", tiny_job("wall1", 40, 2.0));
+  EXPECT_NEAR(short_pour["first_contact_s"].get<double>(), lands, 1e-3 * lands)
+      << short_pour.dump();
+  ASSERT_EQ(short_pour["warnings"].size(), 1u) << short_pour.dump();
+  EXPECT_NE(short_pour["warnings"][0]["message"].get<std::string>().find("nothing would touch"),
+            std::string::npos);
+  json long_pour = c.call_json("POST", "/api/v1/predict", tiny_job("wall1", 40, 6.0));
+  EXPECT_FALSE(long_pour.contains("warnings")) << long_pour.dump();
+  // A fill starts where it is: no fall to speak of.
+  json fill = tiny_job("wall1", 40, 2.0);
+  fill["scene"]["placement"]["kind"] = "fill";
+  EXPECT_FALSE(c.call_json("POST", "/api/v1/predict", fill).contains("first_contact_s"));
+}
+
 TEST_F(ServiceTest, AModelFileThatIsNotAJobCostModelStopsTheStart) {
   ServiceConfig c;
   c.data_dir = dir_ + "/bad-model";

@@ -31,6 +31,53 @@ double closest_pair(const ParticleSet& p, const std::vector<size_t>& idx) {
   return best;
 }
 
+// When a pour's first particles reach the wall: falling straight from the
+// inlet to the first triangle under it (less their radius), from rest at the
+// inlet's speed along gravity. What has no straight fall to the wall says -1.
+TEST(Placement, APoursFirstContactIsItsFallToTheWall) {
+  const TriangleMesh box = make_box(20, 20, 40);  // floor at z = 0, open top
+  ParticleSpec ps;
+  ps.count = 50;
+  ps.r_min = ps.r_max = 0.5;
+  PlacementSpec pl;
+  pl.kind = PlacementKind::kPour;
+  pl.has_inlet = true;
+  pl.inlet = {0, 0, 30};
+  pl.inlet_radius = 4;
+  pl.velocity = {0, 0, -2};
+  const Vec3d g{0, 0, -9.81};
+  auto plan = plan_release(box, ps, pl, g);
+  ASSERT_TRUE(plan) << plan.status().message();
+  // 29.5 m = 2 t + 9.81 t^2 / 2.
+  const double t = (-2 + std::sqrt(4 + 2 * 9.81 * 29.5)) / 9.81;
+  EXPECT_NEAR(plan->first_contact, t, 1e-9 * t);
+  // A shelf under part of the inlet is met first.
+  TriangleMesh shelved = box;
+  const uint32_t v0 = uint32_t(shelved.vertices.size());
+  for (const Vec3d v :
+       {Vec3d{-10, -10, 10}, Vec3d{0, -10, 10}, Vec3d{0, 10, 10}, Vec3d{-10, 10, 10}})
+    shelved.vertices.push_back(v);
+  shelved.triangles.push_back({v0, v0 + 1, v0 + 2});
+  shelved.triangles.push_back({v0, v0 + 2, v0 + 3});
+  auto shelf = plan_release(shelved, ps, pl, g);
+  ASSERT_TRUE(shelf);
+  const double t_shelf = (-2 + std::sqrt(4 + 2 * 9.81 * 19.5)) / 9.81;
+  EXPECT_NEAR(shelf->first_contact, t_shelf, 1e-9 * t_shelf);
+  // A jet across gravity, no gravity, a fill: not known.
+  PlacementSpec jet = pl;
+  jet.kind = PlacementKind::kJet;
+  jet.velocity = {3, 0, 0};
+  EXPECT_EQ(plan_release(box, ps, jet, g)->first_contact, -1);
+  EXPECT_EQ(plan_release(box, ps, pl, {0, 0, 0})->first_contact, -1);
+  PlacementSpec fill;
+  fill.kind = PlacementKind::kFill;
+  EXPECT_EQ(plan_release(box, ps, fill, g)->first_contact, -1);
+  // Nothing under the inlet (beside the box): never.
+  PlacementSpec beside = pl;
+  beside.inlet = {40, 0, 30};
+  EXPECT_EQ(plan_release(box, ps, beside, g)->first_contact, -1);
+}
+
 TEST(Placement, FillIsInsideClearAndWithoutOverlaps) {
   const TriangleMesh wall = make_cylinder(10, 20, 40);
   ParticleSpec ps;

@@ -385,6 +385,17 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
       assert.ok(tries < 150, `the radius did not follow wall2: ${await radiusField.inputValue()}`);
       await page.waitForTimeout(100);
     }
+    // Until typed, a pour's duration follows the wall: 2 s from wall2's top was a
+    // fall that never touched it; the prediction says when the first land.
+    const durationField = page.getByLabel('Duration (simulated seconds)');
+    for (let tries = 0; Number(await durationField.inputValue()) <= 2; ++tries) {
+      assert.ok(tries < 150, `the duration did not follow the pour into wall2: ${await durationField.inputValue()}`);
+      await page.waitForTimeout(100);
+    }
+    await page.locator('#prediction').getByText('Up to date.').waitFor();
+    assert.equal(await page.locator('#prediction').getByText(/nothing would touch the wall/).count(), 0,
+      'a fitted duration lets the pour land');
+    await shot(page, '04-new-job-fitted-duration');
     await radiusField.fill('0.7');
     await wallPick.selectOption({ label: (await wallPick.locator('option', { hasText: /^wall1 / }).innerText()) });
     // Once wall1 is loaded and shown with the particles, the typed radius is still there.

@@ -127,7 +127,12 @@ export async function render(main, ctx, modelParam) {
     else showParts();
     motionAxisHint.textContent = motion.value === 'rotate' ? 'Through the centre of what turns.' : 'The way it shakes.';
   };
+  // Until the user types one, a pour's duration lets its first particles land
+  // and settle for two seconds (the prediction says when they reach the wall):
+  // 2 s from wall1's top was a fall that never touched it.
   const duration = num({ min: '0.001', step: 'any', value: '2' });
+  let durationTyped = false;
+  duration.addEventListener('input', () => { durationTyped = true; });
   const fps = num({ min: '0.001', step: 'any', value: '24' });
   // "reference" is the engine's test oracle: scenes may not name it.
   // "auto" times the candidates on the job's particles and keeps the fastest (all are exact).
@@ -320,6 +325,13 @@ export async function render(main, ctx, modelParam) {
       const p = await post('/api/v1/predict', b, { signal: me.signal });
       const l = await load;
       if (inflight !== me) return;
+      const lands = Number(p.first_contact_s);
+      const fitting = String(placement[0].checked && lands > 0 ? Math.max(2, Math.ceil(lands + 2)) : 2);
+      if (!durationTyped && fitting !== duration.value) {
+        duration.value = fitting;
+        schedule();
+        return;
+      }
       const i = p.inputs || {};
       const fact = (k, v) => [h('dt', {}, k), h('dd', {}, v ?? '—')];
       const time = estimateText(p.total_time_s, fmtSeconds);
