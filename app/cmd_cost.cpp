@@ -468,6 +468,8 @@ int predict_scene(const ParsedArgs& p, const std::string& path, const std::strin
       std::printf("outside the training data: %s\n", r.c_str());
     if (pred->outside_training)
       std::printf("the figures are an extrapolation beyond the jobs the model was trained on\n");
+    if (const std::string w = job::landing_warning(*a); !w.empty())
+      std::printf("warning: %s\n", w.c_str());
   }
   if (p.has("bench")) {
     const job::JobInputs in = job::job_inputs(*a, backend, pred->device, pred->threads);

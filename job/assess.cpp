@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 #include "job/wall_source.h"
 #include "sim/shapes.h"
@@ -78,6 +79,18 @@ double output_bytes_estimate(const JobAssessment& a) {
          frames * (double(sim::kSnapshotHeaderBytes) +
                    double(sim::kSnapshotBytesPerParticle) * particles) +
          frames * double(a.render_pixels);
+}
+
+std::string landing_warning(const JobAssessment& a) {
+  const double lands = a.release.first_contact, ends = a.resolved.scene.duration;
+  if (!(lands >= 0) || lands < ends) return "";
+  char text[240];
+  std::snprintf(text, sizeof text,
+                "the first particles reach the wall after about %.2g s of falling, and the job "
+                "ends at %.2g s: nothing would touch the wall; make the duration longer or the "
+                "inlet lower",
+                lands, ends);
+  return text;
 }
 
 Expected<JobAssessment> assess_job(const JobSpec& spec) {

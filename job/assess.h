@@ -64,6 +64,11 @@ struct JobAssessment {
 // outside what the model was trained on.
 double output_bytes_estimate(const JobAssessment& a);
 
+// "" where the job's pour lands within its duration (or is no pour); else why
+// nothing would touch the wall (ReleasePlan::first_contact against the
+// duration), for the service's prediction and `collidoscope predict`.
+std::string landing_warning(const JobAssessment& a);
+
 // Resolves, loads and checks the job without running it. The same errors as
 // run_job() gives for the same spec before its first frame, except those of
 // placement (a placement that cannot fit is only found by placing).

@@ -727,18 +727,9 @@ json JobService::price(const job::JobAssessment& a, const json& assessment, uint
             {"inputs", assessment}};
   const scene::Scene& sc = a.resolved.scene;
   // A pour that ends before its first particles land shows nothing collide.
-  if (a.release.first_contact >= 0) {
-    p["first_contact_s"] = a.release.first_contact;
-    if (a.release.first_contact >= sc.duration) {
-      char text[240];
-      std::snprintf(text, sizeof text,
-                    "the first particles reach the wall after about %.2g s of falling, and the "
-                    "job ends at %.2g s: nothing would touch the wall; make the duration longer "
-                    "or the inlet lower",
-                    a.release.first_contact, sc.duration);
-      p["warnings"] = json::array({{{"message", text}}});
-    }
-  }
+  if (a.release.first_contact >= 0) p["first_contact_s"] = a.release.first_contact;
+  if (const std::string w = job::landing_warning(a); !w.empty())
+    p["warnings"] = json::array({{{"message", w}}});
   // The backend a worker runs it on: the scene's, "auto" = the GPU when one is visible.
   // With Slurm, "auto" means the GPU where the cluster's nodes have one.
   const bool gpus = config_.executor == "slurm" ? config_.slurm.gpus : !visible_gpus().empty();

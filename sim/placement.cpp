@@ -776,7 +776,7 @@ double ray_distance(Vec3d p, Vec3d d, const Vec3d& a, const Vec3d& b, const Vec3
 
 // ReleasePlan::first_contact for an inlet laid out as lay: rays along gravity
 // from up to 16 of its slots (fewer on a large wall, so that an assessment stays
-// within about 2e7 triangle tests), the nearest hit less the radius, fallen
+// within about 4e6 triangle tests), the nearest hit less the radius, fallen
 // with the slots' speed along gravity.
 double first_contact_time(const TriangleMesh& wall, const InletLayout& lay, double r,
                           Vec3d gravity) {
@@ -787,7 +787,7 @@ double first_contact_time(const TriangleMesh& wall, const InletLayout& lay, doub
   // Straight down only: a velocity across gravity bends the path.
   if (length(lay.v - down * v0) > 1e-9 * std::max(1.0, length(lay.v)) || v0 < 0) return -1;
   const size_t triangles = wall.triangles.size();
-  const size_t rays = std::clamp<size_t>(size_t(2e7 / double(triangles)), 1, 16);
+  const size_t rays = std::clamp<size_t>(size_t(4e6 / double(triangles)), 1, 16);
   const size_t step = std::max<size_t>(1, lay.disc.size() / rays);
   double nearest = std::numeric_limits<double>::infinity();
   for (size_t k = 0; k < lay.disc.size(); k += step) {
