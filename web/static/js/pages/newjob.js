@@ -132,9 +132,7 @@ export async function render(main, ctx, modelParam) {
   // 2 s from wall1's top was a fall that never touched it.
   const duration = num({ min: '0.001', step: 'any', value: '2' });
   let durationTyped = false;
-  duration.addEventListener('input', () => {
-    durationTyped = true;
-  });
+  duration.addEventListener('input', () => { durationTyped = true; });
   const fps = num({ min: '0.001', step: 'any', value: '24' });
   // "reference" is the engine's test oracle: scenes may not name it.
   // "auto" times the candidates on the job's particles and keeps the fastest (all are exact).
@@ -328,8 +326,7 @@ export async function render(main, ctx, modelParam) {
       const l = await load;
       if (inflight !== me) return;
       const lands = Number(p.first_contact_s);
-      const fitting =
-          String(placement[0].checked && lands > 0 ? Math.max(2, Math.ceil(lands + 2)) : 2);
+      const fitting = String(placement[0].checked && lands > 0 ? Math.max(2, Math.ceil(lands + 2)) : 2);
       if (!durationTyped && fitting !== duration.value) {
         duration.value = fitting;
         schedule();
