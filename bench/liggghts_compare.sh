@@ -6,12 +6,21 @@
 # package, installed here when missing): hooke/stiffness with kt = 2/7 kn and the
 # same damping, tangential history, primitive walls, the same step.
 # Usage: bash bench/liggghts_compare.sh BUILD_DIR [STEPS] [ROUNDS]   (repo root)
+# BASE=OTHER_BUILD_DIR also runs that build's collidoscope in every round (the
+# two taking turns to go first) and gives the median of the rounds' ratios: on
+# a VM whose pace moves by tens of per cent, builds compared within a round
+# follow the same hour. Still rough there: one build against itself gave 0.868
+# over 10 rounds (2026-11-29, a noisy hour), so give it 30 rounds or more; a
+# change of a few per cent wants two engines stepped alternately in one
+# process (docs/benchmarks.md, stop 49 and 57).
 # Each round runs LIGGGHTS and then collidoscope; on a shared machine single
 # runs move by tens of per cent, so the summary gives each one's median and the
 # median of the rounds' ratios.
 set -euo pipefail
 build=${1:?BUILD_DIR}; steps=${2:-200}; rounds=${3:-1}
 app="$build/app/collidoscope"
+base_app=${BASE:+$BASE/app/collidoscope}
+[ -z "$base_app" ] || [ -x "$base_app" ] || { echo "no $base_app"; exit 1; }
 if ! command -v liggghts >/dev/null; then
   if [ "$(id -u)" = 0 ]; then DEBIAN_FRONTEND=noninteractive apt-get install -y liggghts >/dev/null
   else echo "liggghts is not installed (sudo apt-get install liggghts)"; exit 77; fi
@@ -73,14 +82,32 @@ run {steps}
 print(f"# {n} particles, step {dt:.6g} s, {steps} timed steps")
 PY
 echo "## LIGGGHTS $(dpkg-query -W -f='${Version}' liggghts 2>/dev/null), 1 process; collidoscope bench run, 1 thread"
-echo "| round | LIGGGHTS ms/step | collidoscope ms/step | ratio |"
-echo "|---:|---:|---:|---:|"
+# One thread of the block's steps, ms a step, by the collidoscope binary $1.
+block_ms() {
+  "$1" bench run --counts $n --pairs on --steps "$steps" --threads 1 |
+    awk -F'|' -v n=$n '$2 + 0 == n {gsub(/ /, "", $4); print $4}'
+}
+if [ -n "$base_app" ]; then
+  echo "| round | LIGGGHTS ms/step | collidoscope ms/step | ratio | base build ms/step | this / base |"
+  echo "|---:|---:|---:|---:|---:|---:|"
+else
+  echo "| round | LIGGGHTS ms/step | collidoscope ms/step | ratio |"
+  echo "|---:|---:|---:|---:|"
+fi
 for round in $(seq 1 "$rounds"); do
   (cd "$work" && liggghts -in in.block -log "$work/log.liggghts" >/dev/null)
   lig=$(grep "^Loop time" "$work/log.liggghts" | tail -1 | awk -v s="$steps" '{printf "%.4f", 1000 * $4 / s}')
-  ours=$("$app" bench run --counts $n --pairs on --steps "$steps" --threads 1 |
-         awk -F'|' -v n=$n '$2 + 0 == n {gsub(/ /, "", $4); print $4}')
-  echo "| $round | $lig | $ours | $(awk -v a="$ours" -v b="$lig" 'BEGIN {printf "%.3f", a / b}') |"
+  # With a base build, the two take turns going first (the one right after
+  # LIGGGHTS ran 3-10 % differently as the same build, measured).
+  if [ -n "$base_app" ] && [ $((round % 2)) = 0 ]; then based=$(block_ms "$base_app"); fi
+  ours=$(block_ms "$app")
+  row="| $round | $lig | $ours | $(awk -v a="$ours" -v b="$lig" 'BEGIN {printf "%.3f", a / b}') |"
+  if [ -n "$base_app" ]; then
+    [ $((round % 2)) = 1 ] && based=$(block_ms "$base_app")
+    row="$row $based | $(awk -v a="$ours" -v b="$based" 'BEGIN {printf "%.3f", a / b}') |"
+    echo "$ours $based" >>"$work/base_rounds"
+  fi
+  echo "$row"
   echo "$lig $ours" >>"$work/rounds"
 done
 # The median of the numbers on stdin, one a line.
@@ -88,3 +115,8 @@ median() { sort -g | awk '{a[NR] = $1} END {print (NR % 2) ? a[(NR + 1) / 2] : (
 printf "median LIGGGHTS %.4f ms/step; collidoscope %.4f; median ratio %.3f (%d rounds)\n" \
   "$(awk '{print $1}' "$work/rounds" | median)" "$(awk '{print $2}' "$work/rounds" | median)" \
   "$(awk '{print $2 / $1}' "$work/rounds" | median)" "$rounds"
+if [ -n "$base_app" ]; then
+  printf "base build %.4f ms/step; median ratio this / base %.3f (%d rounds)\n" \
+    "$(awk '{print $2}' "$work/base_rounds" | median)" \
+    "$(awk '{print $1 / $2}' "$work/base_rounds" | median)" "$rounds"
+fi
