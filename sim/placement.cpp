@@ -88,21 +88,27 @@ bool some_probe(Vec3d lo, Vec3d hi, Pred&& pred) {
   return false;
 }
 
-// Whether the ray from p along dir crosses triangle t of the wall (Moller and
-// Trumbore, in double).
-bool ray_crosses(const TriangleMesh& wall, size_t t, Vec3d p, Vec3d dir) {
+// Where the line p + s dir meets triangle t of the wall: s (in lengths of dir;
+// negative behind p), or -1 where it misses the triangle or runs along its
+// plane (Moller and Trumbore, in double).
+double ray_distance(const TriangleMesh& wall, size_t t, Vec3d p, Vec3d dir) {
   const Vec3d a = wall.corner(t, 0), e1 = wall.corner(t, 1) - a, e2 = wall.corner(t, 2) - a;
   const Vec3d q = cross(dir, e2);
   const double det = dot(e1, q);
-  if (std::fabs(det) < 1e-300) return false;
+  if (std::fabs(det) < 1e-300) return -1;
   const double inv = 1.0 / det;
   const Vec3d o = p - a;
   const double u = dot(o, q) * inv;
-  if (u < 0 || u > 1) return false;
+  if (u < 0 || u > 1) return -1;
   const Vec3d w = cross(o, e1);
   const double v = dot(dir, w) * inv;
-  if (v < 0 || u + v > 1) return false;
-  return dot(e2, w) * inv > 0;
+  if (v < 0 || u + v > 1) return -1;
+  return dot(e2, w) * inv;
+}
+
+// Whether the ray from p along dir crosses triangle t of the wall.
+bool ray_crosses(const TriangleMesh& wall, size_t t, Vec3d p, Vec3d dir) {
+  return ray_distance(wall, t, p, dir) > 0;
 }
 
 // Where a closed wall holds particles. Inside it, for a shell (a box, a ball, a
@@ -757,23 +763,6 @@ Expected<ParticleSet> place_particles(const TriangleMesh& wall, const ParticleSp
 
 namespace {
 
-// The distance along unit direction d from p to triangle t (Moller-Trumbore),
-// or infinity where the ray misses it.
-double ray_distance(Vec3d p, Vec3d d, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
-  const Vec3d e1 = b - a, e2 = c - a, q = cross(d, e2);
-  const double det = dot(e1, q);
-  const double inf = std::numeric_limits<double>::infinity();
-  if (std::fabs(det) < 1e-300) return inf;  // along the triangle's plane
-  const Vec3d o = p - a;
-  const double u = dot(o, q) / det;
-  if (u < 0 || u > 1) return inf;
-  const Vec3d k = cross(o, e1);
-  const double v = dot(d, k) / det;
-  if (v < 0 || u + v > 1) return inf;
-  const double t = dot(e2, k) / det;
-  return t >= 0 ? t : inf;
-}
-
 // ReleasePlan::first_contact for an inlet laid out as lay: rays along gravity
 // from up to 16 of its slots (fewer on a large wall, so that an assessment stays
 // within about 4e6 triangle tests), the nearest hit less the radius, fallen
@@ -788,14 +777,12 @@ double first_contact_time(const TriangleMesh& wall, const InletLayout& lay, doub
   if (length(lay.v - down * v0) > 1e-9 * std::max(1.0, length(lay.v)) || v0 < 0) return -1;
   const size_t triangles = wall.triangles.size();
   const size_t rays = std::clamp<size_t>(size_t(4e6 / double(triangles)), 1, 16);
-  const size_t step = std::max<size_t>(1, lay.disc.size() / rays);
+  const size_t step = (lay.disc.size() + rays - 1) / rays;  // at most `rays` of them
   double nearest = std::numeric_limits<double>::infinity();
-  for (size_t k = 0; k < lay.disc.size(); k += step) {
-    const Vec3d p = lay.centre + lay.disc[k];
+  for (size_t k = 0; k < lay.disc.size(); k += step)
     for (size_t t = 0; t < triangles; ++t)
-      nearest = std::min(
-          nearest, ray_distance(p, down, wall.corner(t, 0), wall.corner(t, 1), wall.corner(t, 2)));
-  }
+      if (const double s = ray_distance(wall, t, lay.centre + lay.disc[k], down); s >= 0)
+        nearest = std::min(nearest, s);
   if (!std::isfinite(nearest)) return -1;
   const double fall = std::max(0.0, nearest - r);
   // fall = v0 t + g t^2 / 2, without the difference that loses digits when v0 is large.

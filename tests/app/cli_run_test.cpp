@@ -13,6 +13,7 @@
 #include "job/job.h"
 #include "sim/snapshot.h"
 #include "tests/scratch.h"
+#include "tests/stats_csv.h"
 
 namespace collido::app {
 namespace {
@@ -110,23 +111,14 @@ TEST(CliRun, ExamplePoursReachTheWallWithinTheirDuration) {
     spec.dir_policy = job::DirPolicy::kReplace;
     const job::JobResult r = job::run_job(spec, {});
     ASSERT_TRUE(r.status) << e.path() << ": " << r.status.message();
-    std::ifstream stats(spec.out_dir + "/stats.csv");
-    std::string line;
-    std::getline(stats, line);
-    std::vector<std::string> names;
-    for (std::stringstream h(line); std::getline(h, line, ',');) names.push_back(line);
-    const auto at = [&](const std::string& name) {
-      return size_t(std::find(names.begin(), names.end(), name) - names.begin());
-    };
-    const size_t escaped = at("escaped"), total = at("total_J");
-    ASSERT_LT(std::max(escaped, total), names.size());
+    const test::StatsCsv stats = test::read_stats_csv(spec.out_dir);
+    const size_t escaped = stats.column("escaped"), total = stats.column("total_J");
+    ASSERT_LT(std::max(escaped, total), stats.names.size());
     double most = 0, lost = 0;  // the largest total so far, and the largest share lost since
-    while (std::getline(stats, line)) {
-      std::vector<double> v;
-      for (std::stringstream row(line); std::getline(row, line, ',');) v.push_back(std::stod(line));
-      if (v[escaped] > 0) break;
-      most = std::max(most, v[total]);
-      if (most > 0) lost = std::max(lost, (most - v[total]) / most);
+    for (const std::vector<double>& frame : stats.rows) {
+      if (frame[escaped] > 0) break;
+      most = std::max(most, frame[total]);
+      if (most > 0) lost = std::max(lost, (most - frame[total]) / most);
     }
     EXPECT_GT(lost, 0.01) << e.path() << ": nothing touched the wall in "
                           << scene["duration"].get<double>() << " s";

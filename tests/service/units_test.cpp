@@ -8,9 +8,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <filesystem>
-#include <fstream>
 #include <mutex>
-#include <sstream>
 #include <thread>
 
 #include "job/job.h"
@@ -19,6 +17,8 @@
 #include "service/request_pool.h"
 #include "service/store.h"
 #include "service/workers.h"
+#include "tests/scratch.h"
+#include "tests/stats_csv.h"
 
 namespace collido::service {
 namespace {
@@ -28,13 +28,9 @@ namespace {
 // free fall that never touched anything.) The scene as the service submits it,
 // run without its video.
 TEST(Demo, ThePourLandsAndPilesWithinItsDuration) {
-  const std::string dir =
-      (std::filesystem::temp_directory_path() / ("collido_demo_" + std::to_string(::getpid())))
-          .string();
-  std::filesystem::remove_all(dir);
   job::JobSpec spec;
   spec.scene_json = JobService::demo_request().at("scene").dump();
-  spec.out_dir = dir;
+  spec.out_dir = test::scratch_path("demo");
   spec.threads = 2;
   const job::JobResult r = job::run_job(spec, {});
   ASSERT_TRUE(r.status) << r.status.message();
@@ -42,27 +38,12 @@ TEST(Demo, ThePourLandsAndPilesWithinItsDuration) {
   EXPECT_GT(r.cost.pair_contact_steps, 0);
   // The last frame: a pile on the floor (407 of the 1,500 touch it, 716 pairs
   // touch, some still bouncing), none lost.
-  std::ifstream in(dir + "/stats.csv");
-  std::string header, line, last;
-  std::getline(in, header);
-  while (std::getline(in, line)) last = line;
-  const auto column = [](const std::string& row, size_t k) {
-    std::stringstream ss(row);
-    std::string cell;
-    for (size_t i = 0; i <= k && std::getline(ss, cell, ','); ++i) {
-    }
-    return cell;
-  };
-  size_t touching = 0, pairs = 0, k = 0;
-  for (std::stringstream h(header); std::getline(h, line, ','); ++k) {
-    if (line == "touching_wall") touching = k;
-    if (line == "particle_contacts") pairs = k;
-  }
-  ASSERT_TRUE(touching > 0 && pairs > 0) << header;
-  EXPECT_GT(std::stod(column(last, touching)), 300) << last;
-  EXPECT_GT(std::stod(column(last, pairs)), 300) << last;
+  const test::StatsCsv stats = test::read_stats_csv(spec.out_dir);
+  const size_t touching = stats.column("touching_wall"), pairs = stats.column("particle_contacts");
+  ASSERT_TRUE(touching < stats.names.size() && pairs < stats.names.size() && !stats.rows.empty());
+  EXPECT_GT(stats.rows.back()[touching], 300);
+  EXPECT_GT(stats.rows.back()[pairs], 300);
   EXPECT_EQ(r.escaped, 0u);
-  std::filesystem::remove_all(dir);
 }
 
 TEST(HttpParse, RequestHeadsGiveTargetLengthAndChunked) {
