@@ -396,6 +396,10 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     assert.equal(await page.locator('#prediction').getByText(/nothing would touch the wall/).count(), 0,
       'a fitted duration lets the pour land');
     await shot(page, '04-new-job-fitted-duration');
+    // A typed duration stays, and one that ends before the pour lands is said so, as a sentence.
+    await durationField.fill('1');
+    await page.locator('#prediction').getByText(/^The first particles reach the wall after about .+ nothing would touch the wall; .+\.$/).waitFor();
+    assert.equal(await durationField.inputValue(), '1', 'a typed duration stays');
     await radiusField.fill('0.7');
     await wallPick.selectOption({ label: (await wallPick.locator('option', { hasText: /^wall1 / }).innerText()) });
     // Once wall1 is loaded and shown with the particles, the typed radius is still there.

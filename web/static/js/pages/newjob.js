@@ -47,7 +47,11 @@ function warningsOf(p, load) {
     const what = reasons.length ? ` (${reasons.join('; ')})` : '';
     out.push({ level: 'note', text: `This job lies outside what the predictor was trained on${what}. Treat the figures as rough.` });
   }
-  for (const w of Array.isArray(p.warnings) ? p.warnings : []) out.push({ level: 'note', text: String(w.message ?? w) });
+  // The server's warnings are clauses, as its errors are: shown as sentences, as the note is.
+  for (const w of Array.isArray(p.warnings) ? p.warnings : []) {
+    const text = String(w.message ?? w);
+    out.push({ level: 'note', text: `${text[0].toUpperCase()}${text.slice(1)}.` });
+  }
   if (p.would_wait || Number.isFinite(p.wait_s)) {
     out.push({ level: 'note', text: `This job would wait before it starts${Number.isFinite(p.wait_s) ? ` (about ${fmtSeconds(p.wait_s)})` : ''}.` });
   } else if (load && load.workers && load.running !== null && load.running + (load.queued || 0) >= load.workers) {
