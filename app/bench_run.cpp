@@ -31,9 +31,9 @@ const std::vector<FlagSpec> kFlags = {
     {"pairs-once", true,
      "auto | on | off: a listed pair's force evaluated once, or by both particles (default auto: "
      "the backend's choice)"},
-    {"simd-pairs", true,
-     "auto | off: CPU pairs evaluated once four at a time in AVX2 vectors "
-     "(default auto: where the CPU has AVX2)"},
+    {"simd", true,
+     "auto | off: the CPU's AVX2 passes, pairs evaluated once four at a time and Verlet's "
+     "opening pass four particles at a time (default auto: where the CPU has AVX2)"},
     {"method", true,
      "bin | gravity | circumcircle | midpoint4 | bvh: how the box is prepared (default bin)"},
     {"wall-lists", true,
@@ -126,9 +126,8 @@ int bench_run(const Args& args) {
   if (once != "auto" && once != "on" && once != "off")
     return usage_error("bench run", "--pairs-once must be auto, on or off");
   const int pairs_once = once == "auto" ? -1 : once == "on" ? 1 : 0;
-  const std::string simd = p->get("simd-pairs", "auto");
-  if (simd != "auto" && simd != "off")
-    return usage_error("bench run", "--simd-pairs must be auto or off");
+  const std::string simd = p->get("simd", "auto");
+  if (simd != "auto" && simd != "off") return usage_error("bench run", "--simd must be auto or off");
   sim::Method method = sim::Method::kBin;
   if (!sim::parse_method(p->get("method", "bin"), &method) || method == sim::Method::kReference)
     return usage_error("bench run",
@@ -210,7 +209,7 @@ int bench_run(const Args& args) {
       cfg.material.rolling_friction = rolling;
       cfg.neighbour_skin = skin;
       cfg.pairs_once = pairs_once;
-      cfg.simd_pairs = simd == "off" ? 0 : -1;
+      cfg.simd = simd == "off" ? 0 : -1;
       cfg.lanes = lanes;
       cfg.wall_lists = wall_lists == "auto" ? -1 : wall_lists == "on" ? 1 : 0;
       cfg.renumber_every = renumber_every;

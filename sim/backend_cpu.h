@@ -71,12 +71,21 @@ class CpuBackend {
   // when n == 0); f returns doubles >= 0.
   template <class F>
   double parallel_max(size_t n, F f) {
+    return parallel_max_chunks(n, [&f](size_t begin, size_t end) {
+      double local = 0;
+      for (size_t i = begin; i < end; ++i) local = std::max(local, f(static_cast<uint32_t>(i)));
+      return local;
+    });
+  }
+  // The largest of body(begin, end) over chunks of [0, n) (0 when n == 0);
+  // body returns doubles >= 0.
+  template <class F>
+  double parallel_max_chunks(size_t n, F body) {
     if (n == 0) return 0;
     std::mutex m;
     double best = 0;
     pool_->run_chunks(n, kLightGrain, [&](size_t begin, size_t end) {
-      double local = 0;
-      for (size_t i = begin; i < end; ++i) local = std::max(local, f(static_cast<uint32_t>(i)));
+      const double local = body(begin, end);
       std::lock_guard<std::mutex> lock(m);
       best = std::max(best, local);
     });

@@ -287,8 +287,8 @@ Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const Particl
     return invalid_argument("renumber_every must be -1 (when scattered), 0 (never) or a count of builds");
   if (c.pairs_once < -1 || c.pairs_once > 1)
     return invalid_argument("pairs_once must be -1 (the backend's choice), 0 or 1");
-  if (c.simd_pairs < -1 || c.simd_pairs > 0)
-    return invalid_argument("simd_pairs must be -1 (where the CPU has AVX2) or 0");
+  if (c.simd < -1 || c.simd > 0)
+    return invalid_argument("simd must be -1 (where the CPU has AVX2) or 0");
   if (c.wall_lists < -1 || c.wall_lists > 1)
     return invalid_argument("wall_lists must be -1 (the backend's choice), 0 or 1");
   if (c.run_ahead < 0 || c.run_ahead > 1024)

@@ -141,10 +141,10 @@ struct DynamicsConfig {
   // of the two particles for itself. -1: the backend's faster way; 0: each
   // particle; 1: once per pair. The trajectories are the same bit for bit.
   int pairs_once = -1;
-  // Pairs evaluated once on the CPU: four at a time in AVX2 vectors
-  // (sim/pair_batch.h), the same bits as one at a time. -1: where the CPU has
-  // AVX2; 0: one at a time.
-  int simd_pairs = -1;
+  // The CPU's AVX2 vectors (sim/pair_batch.h): pairs evaluated once four at
+  // a time, and Verlet's opening pass four particles at a time; the same
+  // bits as one at a time. -1: where the CPU has AVX2; 0: one at a time.
+  int simd = -1;
   // With neighbour lists on the GPU: the threads that share a particle's
   // candidates (pairs from both sides, the wall's), 1, 2, 4 or 8; 0: the
   // backend's choice (several only where few particles would leave the GPU

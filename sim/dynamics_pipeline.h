@@ -1069,6 +1069,8 @@ class DynamicsPipeline final : public Simulation {
         backend_.parallel_max_halting(
             live_, [=] COLLIDO_HD(uint32_t i) { return op(i); }, 0.25 * (skin_ * skin_),
             steps_ + 1);
+    } else if (open_in_groups()) {
+      if constexpr (B::kPairRecordsInBatches) disp_max_ = open_groups(op);
     } else if (disp) {
       disp_max_ = backend_.parallel_max(live_, [=] COLLIDO_HD(uint32_t i) { return op(i); });
     } else {
@@ -1076,6 +1078,35 @@ class DynamicsPipeline final : public Simulation {
     }
     close_pending_ = false;
     disp_fresh_ = disp && !ahead;  // ahead, the host never holds the number
+  }
+
+  // Whether open_step runs on the CPU's vectors (open_groups).
+  bool open_in_groups() const {
+    if constexpr (B::kPairRecordsInBatches) {
+      return cfg_.simd != 0 && pair_batch_supported();
+    } else {
+      return false;
+    }
+  }
+  // open_step's pass on the CPU: the groups of four plain particles in
+  // vectors (open_plain_groups), the others one at a time, the same bits;
+  // returns the largest squared move (0 without lists).
+  double open_groups(const OpenStep& op) {
+    OpenGroups g;
+    g.x = op.P.x, g.v = op.P.v, g.w = op.P.w, g.acc = op.P.acc, g.alpha = op.P.alpha;
+    g.state = op.P.state, g.ref = op.ref;
+    g.close = op.close, g.rot = op.rot, g.disp = op.disp;
+    g.close_half = 0.5 * op.h, g.half_dt = 0.5 * op.dt, g.dt = op.dt;
+    g.lo = op.dom.lo, g.hi = op.dom.hi, g.next_lo = op.next.lo, g.next_hi = op.next.hi;
+    return backend_.parallel_max_chunks(live_, [&](size_t begin, size_t end) {
+      double most = 0;
+      for (uint32_t i = uint32_t(begin); i < end;) {
+        i = open_plain_groups(g, i, uint32_t(end), &most);
+        for (const uint32_t stop = std::min(i + 4, uint32_t(end)); i < stop; ++i)
+          most = std::max(most, op(i));
+      }
+      return most;
+    });
   }
 
   // Closes a step left pending (see one_step) on its own pass.
@@ -1620,7 +1651,7 @@ class DynamicsPipeline final : public Simulation {
   // torque as the owner sees them; it keeps the pair's spring.
   void pair_records(double dt) {
     if constexpr (B::kPairRecordsInBatches) {
-      if (cfg_.simd_pairs != 0 && pair_batch_supported()) return pair_records_in_batches(dt);
+      if (cfg_.simd != 0 && pair_batch_supported()) return pair_records_in_batches(dt);
     }
     const RecordPass R = record_pass();
     backend_.parallel_for_heavy(live_, [=] COLLIDO_HD(uint32_t i) {
@@ -1671,7 +1702,7 @@ class DynamicsPipeline final : public Simulation {
   // (pair_forces_in_order), with no records and no gathering pass.
   bool sums_in_order() const {
     if constexpr (B::kPairRecordsInBatches && B::kHostThreads) {
-      return cfg_.simd_pairs != 0 && pair_batch_supported() && backend_.threads() == 1;
+      return cfg_.simd != 0 && pair_batch_supported() && backend_.threads() == 1;
     } else {
       return false;
     }

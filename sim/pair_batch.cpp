@@ -1,5 +1,9 @@
 #include "sim/pair_batch.h"
 
+#include <algorithm>
+
+#include "sim/dynamics.h"
+
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
 #define COLLIDO_PAIR_BATCH_AVX2 1
@@ -171,10 +175,85 @@ __attribute__((target("avx2"))) void pair_batch_forces(const ContactLaw& law, bo
   }
 }
 
+namespace {
+
+// Particles i to i + 3 of a Vec3d array: twelve doubles, x0 y0 z0 x1 | y1 z1 x2 y2 | z2 x3 y3 z3.
+struct Quad {
+  V a, b, c;
+};
+COLLIDO_AVX2 Quad load_quad(const Vec3d* p, uint32_t i) {
+  const double* d = &p[i].x;
+  return {load(d, 0), load(d, 4), load(d, 8)};
+}
+COLLIDO_AVX2 void store_quad(Vec3d* p, uint32_t i, Quad q) {
+  double* d = &p[i].x;
+  store(d, 0, q.a), store(d, 4, q.b), store(d, 8, q.c);
+}
+COLLIDO_AVX2 Quad operator+(Quad p, Quad q) { return {p.a + q.a, p.b + q.b, p.c + q.c}; }
+COLLIDO_AVX2 Quad operator-(Quad p, Quad q) { return {p.a - q.a, p.b - q.b, p.c - q.c}; }
+COLLIDO_AVX2 Quad operator*(Quad p, V s) { return {p.a * s, p.b * s, p.c * s}; }
+// A vector's components laid out as a quad's.
+COLLIDO_AVX2 Quad spread(Vec3d u) {
+  return {V{u.x, u.y, u.z, u.x}, V{u.y, u.z, u.x, u.y}, V{u.z, u.x, u.y, u.z}};
+}
+COLLIDO_AVX2 M all_of(M a, M b, M c) { return a & b & c; }
+// Every component within [lo, hi] (false for NaN).
+COLLIDO_AVX2 bool within(Quad q, const Quad& lo, const Quad& hi) {
+  const M m = all_of(q.a >= lo.a, q.b >= lo.b, q.c >= lo.c) & all_of(q.a <= hi.a, q.b <= hi.b, q.c <= hi.c);
+  return _mm256_movemask_pd(__m256d(m)) == 0xf;
+}
+
+}  // namespace
+
+__attribute__((target("avx2"))) uint32_t open_plain_groups(const OpenGroups& g, uint32_t i,
+                                                           uint32_t end, double* most) {
+  // A speed's components under 1e150 square and sum to a finite number, as
+  // the scalar pass's check asks; faster ones (or none finite) go its way.
+  const Quad big = spread(Vec3d{1e150, 1e150, 1e150});
+  const Quad small = spread(Vec3d{-1e150, -1e150, -1e150});
+  const Quad lo = spread(g.lo), hi = spread(g.hi);
+  const Quad next_lo = spread(g.next_lo), next_hi = spread(g.next_hi);
+  const V close_half = splat(g.close_half), half_dt = splat(g.half_dt), dt = splat(g.dt);
+  uint32_t all_active;
+  const uint8_t a = uint8_t(kActive);
+  const uint32_t active4 = uint32_t(a) * 0x01010101u;
+  double m = *most;
+  for (; i + 4 <= end; i += 4) {
+    __builtin_memcpy(&all_active, g.state + i, 4);
+    if (all_active != active4) break;
+    const Quad x = load_quad(g.x, i), acc = load_quad(g.acc, i);
+    Quad v = load_quad(g.v, i), w{};
+    Quad alpha{};
+    if (g.rot) w = load_quad(g.w, i), alpha = load_quad(g.alpha, i);
+    if (g.close) {  // close_particle: the closing kick, the checks
+      v = v + acc * close_half;
+      if (g.rot) w = w + alpha * close_half;
+      if (!within(v, small, big) || !within(x, lo, hi)) break;
+    }
+    v = v + acc * half_dt;
+    const Quad moved = x + v * dt;
+    if (g.rot) w = w + alpha * half_dt;
+    if (!within(moved, next_lo, next_hi)) break;
+    store_quad(g.v, i, v);
+    store_quad(g.x, i, moved);
+    if (g.rot) store_quad(g.w, i, w);
+    if (g.disp) {
+      const Quad d = moved - load_quad(g.ref, i);
+      double sq[12];
+      const Quad s = {d.a * d.a, d.b * d.b, d.c * d.c};
+      store(sq, 0, s.a), store(sq, 4, s.b), store(sq, 8, s.c);
+      for (int k = 0; k < 12; k += 3) m = std::max(m, sq[k] + sq[k + 1] + sq[k + 2]);
+    }
+  }
+  *most = m;
+  return i;
+}
+
 #else
 
 bool pair_batch_supported() { return false; }
 void pair_batch_forces(const ContactLaw&, bool, double, PairBatch&) {}
+uint32_t open_plain_groups(const OpenGroups&, uint32_t i, uint32_t, double*) { return i; }
 
 #endif
 

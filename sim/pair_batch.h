@@ -82,4 +82,29 @@ bool pair_batch_supported();
 // same bits.
 void pair_batch_forces(const ContactLaw& law, bool rot, double dt, PairBatch& b);
 
+// Velocity Verlet's opening pass (OpenStep in sim/dynamics_pipeline.h), four
+// particles at a time, for groups of four whose particles are all active and
+// plain: finite, well short of overflowing a squared speed, and inside the
+// domain before and after the drift. Each value goes through the scalar
+// pass's operations in its order (a Vec3's components are independent, so
+// the vectors work on the arrays as they lie, three components and a
+// quarter a register), so the results are its bits.
+struct OpenGroups {
+  Vec3d *x = nullptr, *v = nullptr, *w = nullptr;  // w: only with rot
+  const Vec3d *acc = nullptr, *alpha = nullptr;
+  const uint8_t* state = nullptr;
+  const Vec3d* ref = nullptr;  // where each particle was at the lists' build (only with disp)
+  bool close = false;          // the pending step's closing kick first
+  bool rot = false, disp = false;
+  double close_half = 0;  // 0.5 x the pending step's length (the closing kick's)
+  double half_dt = 0, dt = 0;
+  Vec3d lo, hi;            // the domain where the pending step ended
+  Vec3d next_lo, next_hi;  // where this step ends
+};
+// Opens the plain groups [i, i + 4), [i + 4, i + 8), .. before `end`, up to
+// the first group that is not plain; returns where it stopped (that group's
+// first particle, or the last whole group's end), having raised *most to the
+// largest squared move since the lists' build (with disp).
+uint32_t open_plain_groups(const OpenGroups& g, uint32_t i, uint32_t end, double* most);
+
 }  // namespace collido::sim
