@@ -127,7 +127,8 @@ int bench_run(const Args& args) {
     return usage_error("bench run", "--pairs-once must be auto, on or off");
   const int pairs_once = once == "auto" ? -1 : once == "on" ? 1 : 0;
   const std::string simd = p->get("simd", "auto");
-  if (simd != "auto" && simd != "off") return usage_error("bench run", "--simd must be auto or off");
+  if (simd != "auto" && simd != "off")
+    return usage_error("bench run", "--simd must be auto or off");
   sim::Method method = sim::Method::kBin;
   if (!sim::parse_method(p->get("method", "bin"), &method) || method == sim::Method::kReference)
     return usage_error("bench run",

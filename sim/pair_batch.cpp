@@ -189,18 +189,24 @@ COLLIDO_AVX2 void store_quad(Vec3d* p, uint32_t i, Quad q) {
   double* d = &p[i].x;
   store(d, 0, q.a), store(d, 4, q.b), store(d, 8, q.c);
 }
-COLLIDO_AVX2 Quad operator+(Quad p, Quad q) { return {p.a + q.a, p.b + q.b, p.c + q.c}; }
-COLLIDO_AVX2 Quad operator-(Quad p, Quad q) { return {p.a - q.a, p.b - q.b, p.c - q.c}; }
-COLLIDO_AVX2 Quad operator*(Quad p, V s) { return {p.a * s, p.b * s, p.c * s}; }
+COLLIDO_AVX2 Quad operator+(Quad p, Quad q) {
+  return {p.a + q.a, p.b + q.b, p.c + q.c};
+}
+COLLIDO_AVX2 Quad operator-(Quad p, Quad q) {
+  return {p.a - q.a, p.b - q.b, p.c - q.c};
+}
+COLLIDO_AVX2 Quad operator*(Quad p, V s) {
+  return {p.a * s, p.b * s, p.c * s};
+}
 // A vector's components laid out as a quad's.
 COLLIDO_AVX2 Quad spread(Vec3d u) {
   return {V{u.x, u.y, u.z, u.x}, V{u.y, u.z, u.x, u.y}, V{u.z, u.x, u.y, u.z}};
 }
-COLLIDO_AVX2 M all_of(M a, M b, M c) { return a & b & c; }
 // Every component within [lo, hi] (false for NaN).
 COLLIDO_AVX2 bool within(Quad q, const Quad& lo, const Quad& hi) {
-  const M m = all_of(q.a >= lo.a, q.b >= lo.b, q.c >= lo.c) & all_of(q.a <= hi.a, q.b <= hi.b, q.c <= hi.c);
-  return _mm256_movemask_pd(__m256d(m)) == 0xf;
+  const M in =
+      (q.a >= lo.a) & (q.b >= lo.b) & (q.c >= lo.c) & (q.a <= hi.a) & (q.b <= hi.b) & (q.c <= hi.c);
+  return _mm256_movemask_pd(__m256d(in)) == 0xf;
 }
 
 }  // namespace
@@ -214,16 +220,16 @@ __attribute__((target("avx2"))) uint32_t open_plain_groups(const OpenGroups& g, 
   const Quad lo = spread(g.lo), hi = spread(g.hi);
   const Quad next_lo = spread(g.next_lo), next_hi = spread(g.next_hi);
   const V close_half = splat(g.close_half), half_dt = splat(g.half_dt), dt = splat(g.dt);
-  uint32_t all_active;
-  const uint8_t a = uint8_t(kActive);
-  const uint32_t active4 = uint32_t(a) * 0x01010101u;
+  const uint32_t four_active = uint32_t(kActive) * 0x01010101u;
   double m = *most;
+  // A group that is not plain stops the loop before any of its stores, so
+  // the scalar pass takes it from the start.
   for (; i + 4 <= end; i += 4) {
-    __builtin_memcpy(&all_active, g.state + i, 4);
-    if (all_active != active4) break;
+    uint32_t states;
+    __builtin_memcpy(&states, g.state + i, 4);
+    if (states != four_active) break;
     const Quad x = load_quad(g.x, i), acc = load_quad(g.acc, i);
-    Quad v = load_quad(g.v, i), w{};
-    Quad alpha{};
+    Quad v = load_quad(g.v, i), w{}, alpha{};
     if (g.rot) w = load_quad(g.w, i), alpha = load_quad(g.alpha, i);
     if (g.close) {  // close_particle: the closing kick, the checks
       v = v + acc * close_half;
@@ -253,7 +259,9 @@ __attribute__((target("avx2"))) uint32_t open_plain_groups(const OpenGroups& g, 
 
 bool pair_batch_supported() { return false; }
 void pair_batch_forces(const ContactLaw&, bool, double, PairBatch&) {}
-uint32_t open_plain_groups(const OpenGroups&, uint32_t i, uint32_t, double*) { return i; }
+uint32_t open_plain_groups(const OpenGroups&, uint32_t i, uint32_t, double*) {
+  return i;
+}
 
 #endif
 

@@ -779,8 +779,9 @@ TEST(Dynamics, TheOpeningPassInVectorsGivesTheScalarBits) {
   for (int scene = 0; scene < 3; ++scene) {
     const bool lid = scene < 2;
     const TriangleMesh wall = lid ? make_box(20, 20, 20) : make_box(10, 10, 10);
-    ParticleSet p = lid ? lattice(scene == 0 ? 4 : 12, 2, 20.2, 0.3 / (scene == 0 ? 1 : 3), 100.0, 17)
-                        : lattice(3, 3, 2, 0.2, 100.0, 5);
+    ParticleSet p =
+        lid ? lattice(scene == 0 ? 4 : 12, 2, 20.2, 0.3 / (scene == 0 ? 1 : 3), 100.0, 17)
+            : lattice(3, 3, 2, 0.2, 100.0, 5);
     DynamicsConfig cfg;
     ThreadPool one(1), two(2);
     cfg.pool = scene == 1 ? &two : &one;
