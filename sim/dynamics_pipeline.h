@@ -1070,7 +1070,10 @@ class DynamicsPipeline final : public Simulation {
             live_, [=] COLLIDO_HD(uint32_t i) { return op(i); }, 0.25 * (skin_ * skin_),
             steps_ + 1);
     } else if (open_in_groups()) {
-      if constexpr (B::kPairRecordsInBatches) disp_max_ = open_groups(op);
+      if constexpr (B::kPairRecordsInBatches) {
+        const double most = open_groups(op);
+        if (disp) disp_max_ = most;
+      }
     } else if (disp) {
       disp_max_ = backend_.parallel_max(live_, [=] COLLIDO_HD(uint32_t i) { return op(i); });
     } else {

@@ -178,6 +178,7 @@ __attribute__((target("avx2"))) void pair_batch_forces(const ContactLaw& law, bo
 namespace {
 
 // Particles i to i + 3 of a Vec3d array: twelve doubles, x0 y0 z0 x1 | y1 z1 x2 y2 | z2 x3 y3 z3.
+static_assert(sizeof(Vec3d) == 3 * sizeof(double), "a Vec3d array is its doubles in a row");
 struct Quad {
   V a, b, c;
 };

@@ -1,7 +1,8 @@
 // The CPU's pair contacts, four at a time (AVX2): the touching pairs a chunk
 // of particles owns are filed (owner, partner, spring), their forces computed
 // across the vector's lanes, reading the particles' values from their arrays,
-// and the results handed back.
+// and the results handed back. And Verlet's opening pass, four particles at a
+// time (open_plain_groups, at the end).
 //
 // The arithmetic is that of pair_contact (sim/dynamics_pipeline.h),
 // contact_force and rolling_torque (sim/contact_force.h), for both laws,
