@@ -1069,7 +1069,7 @@ class DynamicsPipeline final : public Simulation {
         backend_.parallel_max_halting(
             live_, [=] COLLIDO_HD(uint32_t i) { return op(i); }, 0.25 * (skin_ * skin_),
             steps_ + 1);
-    } else if (open_in_groups()) {
+    } else if (cpu_vectors()) {
       if constexpr (B::kPairRecordsInBatches) {
         const double most = open_groups(op);
         if (disp) disp_max_ = most;
@@ -1083,8 +1083,9 @@ class DynamicsPipeline final : public Simulation {
     disp_fresh_ = disp && !ahead;  // ahead, the host never holds the number
   }
 
-  // Whether open_step runs on the CPU's vectors (open_groups).
-  bool open_in_groups() const {
+  // Whether the CPU's AVX2 passes run (cfg simd): the pairs four at a time
+  // (pair_batch_forces) and the opening pass (open_groups).
+  bool cpu_vectors() const {
     if constexpr (B::kPairRecordsInBatches) {
       return cfg_.simd != 0 && pair_batch_supported();
     } else {
@@ -1654,7 +1655,7 @@ class DynamicsPipeline final : public Simulation {
   // torque as the owner sees them; it keeps the pair's spring.
   void pair_records(double dt) {
     if constexpr (B::kPairRecordsInBatches) {
-      if (cfg_.simd != 0 && pair_batch_supported()) return pair_records_in_batches(dt);
+      if (cpu_vectors()) return pair_records_in_batches(dt);
     }
     const RecordPass R = record_pass();
     backend_.parallel_for_heavy(live_, [=] COLLIDO_HD(uint32_t i) {
@@ -1705,7 +1706,7 @@ class DynamicsPipeline final : public Simulation {
   // (pair_forces_in_order), with no records and no gathering pass.
   bool sums_in_order() const {
     if constexpr (B::kPairRecordsInBatches && B::kHostThreads) {
-      return cfg_.simd != 0 && pair_batch_supported() && backend_.threads() == 1;
+      return cpu_vectors() && backend_.threads() == 1;
     } else {
       return false;
     }

@@ -177,27 +177,19 @@ __attribute__((target("avx2"))) void pair_batch_forces(const ContactLaw& law, bo
 
 namespace {
 
-// Particles i to i + 3 of a Vec3d array: twelve doubles, x0 y0 z0 x1 | y1 z1 x2 y2 | z2 x3 y3 z3.
+// Particles i to i + 3 of a Vec3d array as three registers of its twelve
+// doubles in a row (x0 y0 z0 x1 | y1 z1 x2 y2 | z2 x3 y3 z3), held in a V3 whose
+// x, y and z are those registers, not components: add, sub and mul work on
+// them alike, as a Vec3's components all get the same kick.
 static_assert(sizeof(Vec3d) == 3 * sizeof(double), "a Vec3d array is its doubles in a row");
-struct Quad {
-  V a, b, c;
-};
+using Quad = V3;
 COLLIDO_AVX2 Quad load_quad(const Vec3d* p, uint32_t i) {
   const double* d = &p[i].x;
   return {load(d, 0), load(d, 4), load(d, 8)};
 }
 COLLIDO_AVX2 void store_quad(Vec3d* p, uint32_t i, Quad q) {
   double* d = &p[i].x;
-  store(d, 0, q.a), store(d, 4, q.b), store(d, 8, q.c);
-}
-COLLIDO_AVX2 Quad operator+(Quad p, Quad q) {
-  return {p.a + q.a, p.b + q.b, p.c + q.c};
-}
-COLLIDO_AVX2 Quad operator-(Quad p, Quad q) {
-  return {p.a - q.a, p.b - q.b, p.c - q.c};
-}
-COLLIDO_AVX2 Quad operator*(Quad p, V s) {
-  return {p.a * s, p.b * s, p.c * s};
+  store(d, 0, q.x), store(d, 4, q.y), store(d, 8, q.z);
 }
 // A vector's components laid out as a quad's.
 COLLIDO_AVX2 Quad spread(Vec3d u) {
@@ -206,7 +198,7 @@ COLLIDO_AVX2 Quad spread(Vec3d u) {
 // Every component within [lo, hi] (false for NaN).
 COLLIDO_AVX2 bool within(Quad q, const Quad& lo, const Quad& hi) {
   const M in =
-      (q.a >= lo.a) & (q.b >= lo.b) & (q.c >= lo.c) & (q.a <= hi.a) & (q.b <= hi.b) & (q.c <= hi.c);
+      (q.x >= lo.x) & (q.y >= lo.y) & (q.z >= lo.z) & (q.x <= hi.x) & (q.y <= hi.y) & (q.z <= hi.z);
   return _mm256_movemask_pd(__m256d(in)) == 0xf;
 }
 
@@ -233,22 +225,21 @@ __attribute__((target("avx2"))) uint32_t open_plain_groups(const OpenGroups& g, 
     Quad v = load_quad(g.v, i), w{}, alpha{};
     if (g.rot) w = load_quad(g.w, i), alpha = load_quad(g.alpha, i);
     if (g.close) {  // close_particle: the closing kick, the checks
-      v = v + acc * close_half;
-      if (g.rot) w = w + alpha * close_half;
+      v = add(v, mul(acc, close_half));
+      if (g.rot) w = add(w, mul(alpha, close_half));
       if (!within(v, small, big) || !within(x, lo, hi)) break;
     }
-    v = v + acc * half_dt;
-    const Quad moved = x + v * dt;
-    if (g.rot) w = w + alpha * half_dt;
+    v = add(v, mul(acc, half_dt));
+    const Quad moved = add(x, mul(v, dt));
+    if (g.rot) w = add(w, mul(alpha, half_dt));
     if (!within(moved, next_lo, next_hi)) break;
     store_quad(g.v, i, v);
     store_quad(g.x, i, moved);
     if (g.rot) store_quad(g.w, i, w);
     if (g.disp) {
-      const Quad d = moved - load_quad(g.ref, i);
+      const Quad d = sub(moved, load_quad(g.ref, i));
       double sq[12];
-      const Quad s = {d.a * d.a, d.b * d.b, d.c * d.c};
-      store(sq, 0, s.a), store(sq, 4, s.b), store(sq, 8, s.c);
+      store(sq, 0, d.x * d.x), store(sq, 4, d.y * d.y), store(sq, 8, d.z * d.z);
       for (int k = 0; k < 12; k += 3) m = std::max(m, sq[k] + sq[k + 1] + sq[k + 2]);
     }
   }

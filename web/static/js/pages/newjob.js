@@ -50,7 +50,7 @@ function warningsOf(p, load) {
   // The server's warnings are clauses, as its errors are: shown as sentences, as the note is.
   for (const w of Array.isArray(p.warnings) ? p.warnings : []) {
     const text = String(w.message ?? w);
-    out.push({ level: 'note', text: `${text[0].toUpperCase()}${text.slice(1)}.` });
+    if (text) out.push({ level: 'note', text: `${text[0].toUpperCase()}${text.slice(1)}.` });
   }
   if (p.would_wait || Number.isFinite(p.wait_s)) {
     out.push({ level: 'note', text: `This job would wait before it starts${Number.isFinite(p.wait_s) ? ` (about ${fmtSeconds(p.wait_s)})` : ''}.` });
