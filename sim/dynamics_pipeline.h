@@ -1505,7 +1505,16 @@ class DynamicsPipeline final : public Simulation {
       if (once_ && !measure) {
         if (decide) decide_releases(t);
         if (sums_in_order()) {
-          pair_forces_in_order(dt);
+          if (wall_list_) {
+            // A listed wall stands still and has no moving part; its pass
+            // runs within the pair pass, batch by batch, and its time counts
+            // as the pairs'.
+            const WallPass wall = wall_pass(dt, false, wall_pose(t), WallPose{});
+            pair_forces_in_order(dt, &wall);
+            lap(times_.pair_ms);
+            return;
+          }
+          pair_forces_in_order(dt, nullptr);
         } else {
           pair_records(dt);
           pair_gather();
@@ -1726,13 +1735,19 @@ class DynamicsPipeline final : public Simulation {
   // particles have all their pairs (a particle's lower partners come before
   // it), then become accelerations. Gathering read every listed pair's record
   // twice and branched on whether it touched; this reads the touching ones once.
-  void pair_forces_in_order(double dt) {
+  // wall (null: none): the wall's pass, run on each batch's particles once
+  // they have their accelerations, which it adds to as it does after the
+  // pair pass: the same bits, with no second pass over every particle (the
+  // batch's particles still in the cache).
+  struct WallPass;
+  void pair_forces_in_order(double dt, const WallPass* wall) {
     const RecordPass R = record_pass();
     const ParticleArrays P = R.P;
     const Vec3d grav = cfg_.gravity;
     const bool rot = R.rot, rolling = R.rolling;
     const uint32_t live = uint32_t(live_);
     PairBatch& b = ordered_batch_;
+    const GroupSums group_sums{P.acc, P.alpha, P.mass, P.r, P.state, rot};
     uint32_t started = 0;  // the sums of particles [0, started) are begun
     const auto start_sums = [&](uint32_t end) {
       for (; started < end; ++started) {
@@ -1773,10 +1788,17 @@ class DynamicsPipeline final : public Simulation {
         if (FrictionSlot* s = b.slot[c])
           s->sx = float(sx[c]), s->sy = float(sx[c + st]), s->sz = float(sx[c + 2 * st]);
       }
-      // Particles [first, last) have every pair: their sums become accelerations.
-      for (uint32_t i = first; i < last; ++i)
-        if (P.state[i] == kActive)
-          sums_to_accelerations(P, i, P.acc[i], rot ? P.alpha[i] : Vec3d{0, 0, 0}, rot);
+      // Particles [first, last) have every pair: their sums become
+      // accelerations, four at a time where all four are active.
+      for (uint32_t i = first; i < last;) {
+        i = accelerate_active_groups(group_sums, i, last);
+        for (const uint32_t stop = std::min(last, i + 4); i < stop; ++i)
+          if (P.state[i] == kActive)
+            sums_to_accelerations(P, i, P.acc[i], rot ? P.alpha[i] : Vec3d{0, 0, 0}, rot);
+      }
+      if (wall)
+        for (uint32_t i = first; i < last; ++i)
+          if (P.state[i] != kActive || wall->wl_count[i] != 0) (*wall)(i, LaneGroup{});
     }
   }
 
@@ -1998,40 +2020,26 @@ class DynamicsPipeline final : public Simulation {
   // is taken there, and the contact's normal brought back; the contact moves
   // with the wall's velocity at the contact point.
   // part_pose: the moving part's, when one moves (pose is then the identity).
-  void wall_forces(double dt, bool measure, const WallPose pose, const WallPose part_pose) {
-    const bool add = cfg_.particle_contacts;
-    const ParticleArrays P = arrays();
-    const WallView wall = wall_.view();
-    const PlanarTriangleD* tris_d = wall_.tris_d.data();
-    // A moving part's triangles are [pb, pe) of the wall as given; the still
-    // ones are numbered around them, so every contact keeps the wall's own index.
-    const bool part = part_;
-    const WallView mwall = part ? mover_.view() : WallView{};
-    const PlanarTriangleD* mtris_d = part ? mover_.tris_d.data() : nullptr;
-    const Vec3d shift = shift_;
-    const uint32_t pb = uint32_t(cfg_.wall_motion.part_begin);
-    const uint32_t pn = part ? uint32_t(cfg_.wall_motion.part_end) - pb : 0;
-    // The wall's candidates from the neighbour list when it has them.
-    const bool listed = wall_list_;
-    const uint32_t* wl_start = wl_start_.data();
-    const uint32_t* wl_count = wl_count_.data();
-    const uint32_t* wl = wl_list_.data();
-    const ContactLaw law = wall_law_;
-    const bool rot = rotation_;
-    const Vec3d grav = cfg_.gravity;
-    const FrictionSlot* hin = wall_hist_[hist_in_].data();
-    FrictionSlot* hout = wall_hist_[hist_in_ ^ 1].data();
-    double* stats = scratch_.data();
-    double* peak = peak_overlap_.data();
-    const size_t n = n_;
-    const bool friction = law.mu > 0;
-    // With the wall's lists, lanes share a particle's candidates as in
-    // pair_forces; the contacts they find are offered to the set in candidate
-    // order on every lane, so the set, and the forces, are one lane's bit for bit.
-    const uint32_t lanes = listed && !measure ? backend_.lanes_for(live_, wl_per_particle_,
-                                                                   uint32_t(cfg_.lanes))
-                                              : 1u;
-    auto particle = [=] COLLIDO_HD(uint32_t i, LaneGroup g) {
+  // The pass's inputs are gathered once (wall_pass) into a functor, so that
+  // the one-thread pair pass can run it particle by particle too
+  // (pair_forces_in_order).
+  struct WallPass {
+    ParticleArrays P;
+    WallView wall, mwall;
+    const PlanarTriangleD *tris_d, *mtris_d;
+    Vec3d shift;
+    uint32_t pb, pn;  // a moving part's triangles, [pb, pb + pn) of the wall as given
+    const uint32_t *wl_start, *wl_count, *wl;
+    ContactLaw law;
+    Vec3d grav;
+    const FrictionSlot* hin;
+    FrictionSlot* hout;
+    double *stats, *peak;
+    size_t n;
+    double dt;
+    WallPose pose, part_pose;
+    bool add, part, listed, rot, friction, measure;
+    COLLIDO_HD void operator()(uint32_t i, LaneGroup g) const {
       const uint8_t st = P.state[i];
       if (st != kActive) {
         if (g.lane != 0) return;
@@ -2170,12 +2178,60 @@ class DynamicsPipeline final : public Simulation {
         const Vec3d al = torque * (1.0 / (0.4 * m * r * r));
         P.alpha[i] = add ? P.alpha[i] + al : al;
       }
-    };
+    }
+  };
+  WallPass wall_pass(double dt, bool measure, const WallPose pose, const WallPose part_pose) {
+    WallPass w;
+    w.add = cfg_.particle_contacts;
+    w.P = arrays();
+    w.wall = wall_.view();
+    w.tris_d = wall_.tris_d.data();
+    // A moving part's triangles are [pb, pe) of the wall as given; the still
+    // ones are numbered around them, so every contact keeps the wall's own index.
+    w.part = part_;
+    w.mwall = part_ ? mover_.view() : WallView{};
+    w.mtris_d = part_ ? mover_.tris_d.data() : nullptr;
+    w.shift = shift_;
+    w.pb = uint32_t(cfg_.wall_motion.part_begin);
+    w.pn = part_ ? uint32_t(cfg_.wall_motion.part_end) - w.pb : 0;
+    // The wall's candidates from the neighbour list when it has them.
+    w.listed = wall_list_;
+    w.wl_start = wl_start_.data();
+    w.wl_count = wl_count_.data();
+    w.wl = wl_list_.data();
+    w.law = wall_law_;
+    w.rot = rotation_;
+    w.grav = cfg_.gravity;
+    w.hin = wall_hist_[hist_in_].data();
+    w.hout = wall_hist_[hist_in_ ^ 1].data();
+    w.stats = scratch_.data();
+    w.peak = peak_overlap_.data();
+    w.n = n_;
+    w.friction = wall_law_.mu > 0;
+    w.dt = dt;
+    w.measure = measure;
+    w.pose = pose;
+    w.part_pose = part_pose;
+    return w;
+  }
+
+  void wall_forces(double dt, bool measure, const WallPose pose, const WallPose part_pose) {
+    const WallPass particle = wall_pass(dt, measure, pose, part_pose);
+    // With the wall's lists, lanes share a particle's candidates as in
+    // pair_forces; the contacts they find are offered to the set in candidate
+    // order on every lane, so the set, and the forces, are one lane's bit for bit.
+    const uint32_t lanes = particle.listed && !measure
+                               ? backend_.lanes_for(live_, wl_per_particle_, uint32_t(cfg_.lanes))
+                               : 1u;
+    const ParticleArrays P = particle.P;
+    const uint32_t* wl_count = particle.wl_count;
+    const bool add = particle.add, rot = particle.rot;
+    const Vec3d grav = particle.grav;
     // Most particles list no wall candidate: they skip the contact set's
     // set-up (a call and its frame, most of this pass's time on the CPU), and
     // their spring lists, emptied in both generations at the build, stay so.
     // (A listed wall stands still: it has no moving part either.)
-    const bool quick = listed && !measure;
+    const bool quick = particle.listed && !measure;
     backend_.parallel_for_lanes(live_, lanes, [=] COLLIDO_HD(uint32_t i, LaneGroup g) {
       if (quick && wl_count[i] == 0 && P.state[i] == kActive) {
         if (g.lane == 0 && !add) {  // as particle() does for a particle that touches nothing
