@@ -14,7 +14,13 @@ a single run's MAPE against the median of all its runs; |run1 / run2 - 1|
 (mean and median); with four logs or more, |min(1, 2) / min(3, 4) - 1|, what
 keeping the faster of two repeats leaves; and how the stages' deviations go
 together within a run (a pace of the whole job moves them together).
-Usage: job_noise.py LOG.csv LOG.csv [LOG.csv ...]"""
+With --merged, one merged log (`collidoscope gvm merge`, whose rows keep each
+run's total in total_s_runs): the floor a perfect model would show against the
+log's own rows. Each job's four runs split into two pairs (passes 1 and 3, 2
+and 4); the means of two pairs differ by sqrt(2) of a pair's error, twice a
+four-run mean's, so half their mean |difference| estimates what the four-run
+figure carries (the row's median of four a little more), by the jobs' length.
+Usage: job_noise.py LOG.csv LOG.csv [LOG.csv ...] | job_noise.py --merged LOG.csv"""
 import csv
 import math
 import statistics
@@ -26,7 +32,28 @@ KEY = ["wall", "particles", "method", "placement", "steps", "render_width", "for
 TIMES = ["total_s", "prepare_s", "simulate_s", "render_s"]
 
 
+def merged_floor(path):
+    rows = []
+    with open(path, newline="") as f:
+        for r in csv.DictReader(f):
+            runs = [float(x) for x in r.get("total_s_runs", "").split(";") if x]
+            if len(runs) == 4 and min(runs) > 0:
+                a, b = (runs[0] + runs[2]) / 2, (runs[1] + runs[3]) / 2
+                rows.append((float(r["total_s"]), abs(a - b) / ((a + b) / 2)))
+    print(f"{len(rows)} jobs with four runs")
+    if not rows:
+        return
+    for lo, hi in [(0, 0.1), (0.1, 0.3), (0.3, 1), (1, math.inf), (0, math.inf)]:
+        d = [x for t, x in rows if lo <= t < hi]
+        if d:
+            print(f"total {lo:g}-{hi:g} s: {len(d):4d} jobs, two pairs' means differ by"
+                  f" {100 * statistics.fmean(d):5.1f} %; a four-run figure carries about"
+                  f" {50 * statistics.fmean(d):5.1f} % (MAPE a perfect model would show)")
+
+
 def main():
+    if len(sys.argv) == 3 and sys.argv[1] == "--merged":
+        return merged_floor(sys.argv[2])
     paths = sys.argv[1:]
     if len(paths) < 2:
         sys.exit(__doc__.split("Usage: ")[1])
