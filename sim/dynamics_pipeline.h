@@ -1798,7 +1798,7 @@ class DynamicsPipeline final : public Simulation {
       }
       if (wall)
         for (uint32_t i = first; i < last; ++i)
-          if (P.state[i] != kActive || wall->wl_count[i] != 0) (*wall)(i, LaneGroup{});
+          if (!wall->idle(i)) (*wall)(i, LaneGroup{});
     }
   }
 
@@ -2039,6 +2039,14 @@ class DynamicsPipeline final : public Simulation {
     double dt;
     WallPose pose, part_pose;
     bool add, part, listed, rot, friction, measure;
+    // Most particles list no wall candidate: they skip the contact set's
+    // set-up (a call and its frame, most of this pass's time on the CPU), and
+    // their spring lists, emptied in both generations at the build, stay so.
+    // With particle contacts the pass leaves them as the pairs did. (A listed
+    // wall stands still: it has no moving part either.)
+    COLLIDO_HD bool idle(uint32_t i) const {
+      return listed && !measure && wl_count[i] == 0 && P.state[i] == kActive;
+    }
     COLLIDO_HD void operator()(uint32_t i, LaneGroup g) const {
       const uint8_t st = P.state[i];
       if (st != kActive) {
@@ -2224,16 +2232,10 @@ class DynamicsPipeline final : public Simulation {
                                ? backend_.lanes_for(live_, wl_per_particle_, uint32_t(cfg_.lanes))
                                : 1u;
     const ParticleArrays P = particle.P;
-    const uint32_t* wl_count = particle.wl_count;
     const bool add = particle.add, rot = particle.rot;
     const Vec3d grav = particle.grav;
-    // Most particles list no wall candidate: they skip the contact set's
-    // set-up (a call and its frame, most of this pass's time on the CPU), and
-    // their spring lists, emptied in both generations at the build, stay so.
-    // (A listed wall stands still: it has no moving part either.)
-    const bool quick = particle.listed && !measure;
     backend_.parallel_for_lanes(live_, lanes, [=] COLLIDO_HD(uint32_t i, LaneGroup g) {
-      if (quick && wl_count[i] == 0 && P.state[i] == kActive) {
+      if (particle.idle(i)) {
         if (g.lane == 0 && !add) {  // as particle() does for a particle that touches nothing
           P.acc[i] = grav;
           if (rot) P.alpha[i] = Vec3d{0, 0, 0};
