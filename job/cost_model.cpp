@@ -35,12 +35,13 @@ namespace {
 
 constexpr const char* kKind = "collidoscope-job-cost-model";
 constexpr const char* kDetectionKind = "collidoscope-resource-predictor";
-constexpr int kVersion = 8;  // 2: each member has its prior; 3: the wall footprint in the memory
+constexpr int kVersion = 9;  // 2: each member has its prior; 3: the wall footprint in the memory
                              // priors; 4: a divided wall's lookups charged to the particles near
                              // it; 5: the lookups priced by the pieces within reach, GPU load
                              // learnt as a log; 6: no lookups on the GPU (its divided
                              // walls listed); 7: terms for friction and a fill's
-                             // layer; 8: the CPU's grids in its host memory
+                             // layer; 8: the CPU's grids in its host memory; 9: a CPU
+                             // job's steps priced apart on one thread and on its pool
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // Memory: the share of out-of-fold jobs whose peak may exceed the point by more than
 // 5 %: the issue allows 5 % of held-out runs, and 4 % of the out-of-fold ones leaves a
@@ -170,7 +171,8 @@ bool is_cuda(const JobInputs& in) { return in.backend == "cuda"; }
 // and 56 at 60,000 on the H200; the term took its total from 20.9 to 18.3 %), a pass
 // over every particle each (the engine's passes once ran over waiting particles
 // too; on logs since, its weight is near 0), active particle-steps, pair
-// contact-steps, a divided wall's lookups by the particles near it) and the
+// contact-steps, a divided wall's lookups by the particles near it; on the CPU
+// with weights apart for a job that steps on one thread and one on its pool) and the
 // frames (snapshots, rendering per pixel and particle, each encoder per pixel).
 // Three terms came from the stages' residuals (stop 55): friction's state, spins and
 // two generations of contact springs a particle, allocated and cleared in the set-up
@@ -182,7 +184,7 @@ bool is_cuda(const JobInputs& in) { return in.backend == "cuda"; }
 // Each backend has weights of its own. The time per frame is the same sum without the set-up,
 // divided by the frames, with the total's weights (fitted on the per-frame times
 // directly it was worse: 56 against 32 % on the CPU log; docs/gvm.md).
-constexpr size_t kTimeTerms = 31;  // per backend
+constexpr size_t kTimeTerms = 39;  // per backend
 constexpr size_t kMaxPriorTerms = 2 * kTimeTerms;
 
 // A fill's lattice sites in one layer of the wall's box: the placement searches whole
@@ -207,6 +209,13 @@ double grid_cells(const JobInputs& in) {
 // that count give the box's cells.
 double wall_grid_buckets(const JobInputs& in) {
   return std::isnan(in.wall_buckets) ? grid_cells(in) : in.wall_buckets;
+}
+
+// Whether a job's steps run on one thread: the CPU engine steps a scene of fewer
+// particles than DynamicsConfig::one_thread_below on the calling thread alone, as
+// it does any scene given one thread.
+bool steps_on_one_thread(const JobInputs& in) {
+  return !is_cuda(in) && (in.threads <= 1 || in.particles < sim::DynamicsConfig{}.one_thread_below);
 }
 
 // The time terms of a job (see above); the set-up's are zero when per_frame, and the
@@ -246,10 +255,19 @@ void time_terms(const JobInputs& in, const CostDrivers& d, bool per_frame, doubl
   // H200's it made the time per frame worse (46.0 -> 48.4 %), so the GPU goes without.
   const double frame_cost = is_cuda(in) ? 0 : frames;
   const double friction = in.friction > 0 ? 1 : 0;
-  const double v[kTimeTerms] = {
+  // A step's passes cost apart on one thread and on the pool: the pool's passes
+  // wait for each other and move the particles' data between cores, and a job
+  // of fewer than 1,500 particles steps on one thread however many it was given.
+  // With one set of step weights for both, the CPU log's held-out total was
+  // 17.2 % and time per frame 23.5; with a set each, 16.7 and 22.2 (model
+  // version 9, stop 60; docs/gvm.md).
+  const double one = steps_on_one_thread(in) ? 1 : 0, pool = 1 - one;
+  const double v[] = {
       setup,  // set-up: a fixed cost
-      steps, steps * contacts, steps * n, steps * n * contacts, active, active * contacts,
-      d.pair_contacts * steps,  // the steps
+      steps * pool, steps * contacts * pool, steps * n * pool, steps * n * contacts * pool,
+      active * pool, active * contacts * pool, d.pair_contacts * steps * pool,  // the steps
+      steps * one, steps * contacts * one, steps * n * one, steps * n * contacts * one,
+      active * one, active * contacts * one, d.pair_contacts * steps * one,  // on one thread
       near_steps * divided[0], near_steps * divided[1], near_steps * divided[2],
       near_steps * density * divided[0], near_steps * density * divided[1],
       near_steps * density * divided[2], setup * in.pieces * divided[0],
@@ -262,7 +280,9 @@ void time_terms(const JobInputs& in, const CostDrivers& d, bool per_frame, doubl
       frames * pixels * double(in.has_format("gif")),
       frames * n * render,  // rendering
       // friction: its state, its springs' work; a fill's search of its layers
-      setup * n * friction, active * friction, setup * fill_layer_sites(in)};
+      setup * n * friction, active * friction * pool, setup * fill_layer_sites(in),
+      active * friction * one};
+  static_assert(sizeof v / sizeof v[0] == kTimeTerms, "one weight a term");
   for (size_t i = 0; i < kTimeTerms; ++i) t[i] = per_frame ? v[i] / frames : v[i];
 }
 

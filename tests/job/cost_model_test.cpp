@@ -782,6 +782,36 @@ TEST(JobCostModelPrior, AFillPaysForALayerOfItsLattice) {
   EXPECT_GT(pw->total_s.p50, 8 * pn->total_s.p50);  // the law: 14 times
 }
 
+// The CPU engine steps a scene of fewer than 1,500 particles, or one given one
+// thread, on one thread, whose passes cost apart from the pool's. Trained on jobs
+// whose steps follow that rule, the prior prices a large job given one thread and
+// the same job given two apart, beyond any trained job (before model version 9 the
+// step terms had one weight for both: the two were priced alike).
+TEST(JobCostModelPrior, StepsOnOneThreadArePricedApartFromThePools) {
+  constexpr double kSetup = 0.05, kOneThread = 3e-8, kPool = 1.2e-8;  // s a particle-step
+  auto one_thread = [](const JobInputs& in) {
+    return in.threads <= 1 || in.particles < sim::DynamicsConfig{}.one_thread_below;
+  };
+  auto total = [&](const JobInputs& in) {
+    return kSetup + (one_thread(in) ? kOneThread : kPool) * double(in.particles) * double(in.steps);
+  };
+  const auto rows = jobs_by_law("bin", kSetup, total, [](int q, JobInputs* in) {
+    in->threads = q < 2 ? 1 : 2;  // 100 .. 10,000 particles each: either side of 1,500
+  });
+  auto m = JobCostModel::train(rows, small_options(), nullptr);
+  ASSERT_TRUE(m) << m.status().message();
+  JobInputs two = divided_wall_job("bin", 20'000).inputs;
+  two.steps = 20'000, two.threads = 2;
+  JobInputs one = two;
+  one.threads = 1;
+  auto p2 = m->predict(two), p1 = m->predict(one);
+  ASSERT_TRUE(p2 && p1);
+  EXPECT_TRUE(p2->outside_training);
+  EXPECT_NEAR(p2->total_s.p50, total(two), 0.2 * total(two));
+  EXPECT_NEAR(p1->total_s.p50, total(one), 0.2 * total(one));
+  EXPECT_GT(p1->total_s.p50, 2 * p2->total_s.p50);  // the law: 2.5 times
+}
+
 TEST_F(TrainedModel, PricesAnAssessedScene) {
   JobSpec spec;
   spec.scene_json = R"({"wall": "wall1", "particles": {"count": 2000, "radius": 1},
