@@ -1797,8 +1797,7 @@ class DynamicsPipeline final : public Simulation {
             sums_to_accelerations(P, i, P.acc[i], rot ? P.alpha[i] : Vec3d{0, 0, 0}, rot);
       }
       if (wall)
-        for (uint32_t i = first; i < last; ++i)
-          if (!wall->idle(i)) (*wall)(i, LaneGroup{});
+        for (uint32_t i = first; i < last; ++i) wall->step(i, LaneGroup{});
     }
   }
 
@@ -2047,6 +2046,16 @@ class DynamicsPipeline final : public Simulation {
     COLLIDO_HD bool idle(uint32_t i) const {
       return listed && !measure && wl_count[i] == 0 && P.state[i] == kActive;
     }
+    // Particle i's pass, idle or not: an idle one gets only what a particle
+    // touching nothing gets (without particle contacts, gravity alone), on one lane.
+    COLLIDO_HD void step(uint32_t i, LaneGroup g) const {
+      if (!idle(i)) return (*this)(i, g);
+      if (g.lane == 0 && !add) {
+        P.acc[i] = grav;
+        if (rot) P.alpha[i] = Vec3d{0, 0, 0};
+        P.flags[i] = uint8_t(kActive);
+      }
+    }
     COLLIDO_HD void operator()(uint32_t i, LaneGroup g) const {
       const uint8_t st = P.state[i];
       if (st != kActive) {
@@ -2224,27 +2233,15 @@ class DynamicsPipeline final : public Simulation {
   }
 
   void wall_forces(double dt, bool measure, const WallPose pose, const WallPose part_pose) {
-    const WallPass particle = wall_pass(dt, measure, pose, part_pose);
+    const WallPass pass = wall_pass(dt, measure, pose, part_pose);
     // With the wall's lists, lanes share a particle's candidates as in
     // pair_forces; the contacts they find are offered to the set in candidate
     // order on every lane, so the set, and the forces, are one lane's bit for bit.
-    const uint32_t lanes = particle.listed && !measure
+    const uint32_t lanes = pass.listed && !measure
                                ? backend_.lanes_for(live_, wl_per_particle_, uint32_t(cfg_.lanes))
                                : 1u;
-    const ParticleArrays P = particle.P;
-    const bool add = particle.add, rot = particle.rot;
-    const Vec3d grav = particle.grav;
-    backend_.parallel_for_lanes(live_, lanes, [=] COLLIDO_HD(uint32_t i, LaneGroup g) {
-      if (particle.idle(i)) {
-        if (g.lane == 0 && !add) {  // as particle() does for a particle that touches nothing
-          P.acc[i] = grav;
-          if (rot) P.alpha[i] = Vec3d{0, 0, 0};
-          P.flags[i] = uint8_t(kActive);
-        }
-        return;
-      }
-      particle(i, g);
-    });
+    backend_.parallel_for_lanes(live_, lanes,
+                                [=] COLLIDO_HD(uint32_t i, LaneGroup g) { pass.step(i, g); });
   }
 
   // Kinetic and potential energy, speed and state counts for the measuring pass.
