@@ -215,7 +215,8 @@ double wall_grid_buckets(const JobInputs& in) {
 // particles than DynamicsConfig::one_thread_below on the calling thread alone, as
 // it does any scene given one thread.
 bool steps_on_one_thread(const JobInputs& in) {
-  return !is_cuda(in) && (in.threads <= 1 || in.particles < sim::DynamicsConfig{}.one_thread_below);
+  static const uint64_t below = sim::DynamicsConfig{}.one_thread_below;
+  return !is_cuda(in) && (in.threads <= 1 || in.particles < below);
 }
 
 // The time terms of a job (see above); the set-up's are zero when per_frame, and the

@@ -11,7 +11,9 @@
 #include <fstream>
 #include <functional>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
+#include <utility>
 
 #include "gvm/csv.h"
 #include "gvm/run_log.h"
@@ -697,6 +699,28 @@ std::vector<JobRecord> jobs_by_law(const std::string& method, double setup,
   return rows;
 }
 
+// Trained on `rows`, the model prices `dear` and `cheap` each within 20 % of the
+// law `total`, and `dear` at more than `least` times `cheap`. Answers both
+// prices (none where training or pricing failed, a failure of the caller's test).
+std::optional<std::pair<JobCostPrediction, JobCostPrediction>> expect_priced_by_law(
+    const std::vector<JobRecord>& rows, const std::function<double(const JobInputs&)>& total,
+    const JobInputs& dear, const JobInputs& cheap, double least) {
+  auto m = JobCostModel::train(rows, small_options(), nullptr);
+  if (!m) {
+    ADD_FAILURE() << m.status().message();
+    return std::nullopt;
+  }
+  auto pd = m->predict(dear), pc = m->predict(cheap);
+  if (!pd || !pc) {
+    ADD_FAILURE() << "a job was not priced";
+    return std::nullopt;
+  }
+  EXPECT_NEAR(pd->total_s.p50, total(dear), 0.2 * total(dear));
+  EXPECT_NEAR(pc->total_s.p50, total(cheap), 0.2 * total(cheap));
+  EXPECT_GT(pd->total_s.p50, least * pc->total_s.p50);
+  return std::make_pair(*pd, *pc);
+}
+
 // Trained on jobs of a divided wall whose time is the lookups by the particles
 // near it, the prior prices two jobs that differ only in that share apart (it
 // priced them alike, by every released particle, before model version 4).
@@ -709,19 +733,14 @@ TEST(JobCostModelPrior, ADividedWallsTimeFollowsTheParticlesNearIt) {
   const auto rows = jobs_by_law("gravity", kSetup, total, [](int q, JobInputs* in) {
     in->wall_area *= std::pow(0.02, q / 3.0);  // near share 0.18 .. 0.004
   });
-  auto m = JobCostModel::train(rows, small_options(), nullptr);
-  ASSERT_TRUE(m) << m.status().message();
   // Ten times the particle-steps of any trained job: the prior carries the
   // price there (the GVM's correction saturates), near the wall or not.
   JobInputs crowded = divided_wall_job("gravity", 20'000).inputs, sparse = crowded;
   crowded.steps = sparse.steps = 20'000;
   sparse.wall_area *= 0.02;  // the fewest near the wall that any trained job had
-  auto pc = m->predict(crowded), ps = m->predict(sparse);
-  ASSERT_TRUE(pc && ps);
-  EXPECT_TRUE(pc->outside_training);
-  EXPECT_NEAR(pc->total_s.p50, total(crowded), 0.2 * total(crowded));
-  EXPECT_NEAR(ps->total_s.p50, total(sparse), 0.2 * total(sparse));
-  EXPECT_GT(pc->total_s.p50, 20 * ps->total_s.p50);  // the law: 40 times
+  const auto p = expect_priced_by_law(rows, total, crowded, sparse, 20);  // the law: 40 times
+  ASSERT_TRUE(p);
+  EXPECT_TRUE(p->first.outside_training);
 }
 
 // Trained on jobs of a divided wall whose lookups cost in proportion to the pieces
@@ -739,18 +758,14 @@ TEST(JobCostModelPrior, ADividedWallsLookupsCostByThePiecesWithinReach) {
   const auto rows = jobs_by_law("midpoint4", kSetup, total, [](int q, JobInputs* in) {
     in->pieces = in->triangles * std::pow(50.0, q / 3.0);  // 1 .. 50 a triangle
   });
-  auto m = JobCostModel::train(rows, small_options(), nullptr);
-  ASSERT_TRUE(m) << m.status().message();
   JobInputs fine = divided_wall_job("midpoint4", 20'000).inputs, coarse = fine;
   fine.steps = coarse.steps = 20'000;
   fine.pieces = 50 * fine.triangles;
   coarse.pieces = coarse.triangles;
-  auto pf = m->predict(fine), pc = m->predict(coarse);
-  ASSERT_TRUE(pf && pc);
-  EXPECT_TRUE(pf->outside_training);
-  EXPECT_NEAR(pf->total_s.p50, total(fine), 0.2 * total(fine));
-  EXPECT_NEAR(pc->total_s.p50, total(coarse), 0.2 * total(coarse));
-  EXPECT_GT(pf->total_s.p50, 20 * pc->total_s.p50);  // the law: 39 times, set-up included
+  // The law: 39 times, set-up included.
+  const auto p = expect_priced_by_law(rows, total, fine, coarse, 20);
+  ASSERT_TRUE(p);
+  EXPECT_TRUE(p->first.outside_training);
 }
 
 // A fill searches its lattice a whole layer at a time from the bottom, so a few
@@ -770,16 +785,10 @@ TEST(JobCostModelPrior, AFillPaysForALayerOfItsLattice) {
   const auto rows = jobs_by_law("bin", kSetup, total, [](int q, JobInputs* in) {
     in->box[0] *= std::pow(2.0, q), in->box[1] *= std::pow(2.0, q);  // 361 .. 25,600 sites
   });
-  auto m = JobCostModel::train(rows, small_options(), nullptr);
-  ASSERT_TRUE(m) << m.status().message();
   JobInputs wide = divided_wall_job("bin", 1000).inputs, narrow = wide;
   wide.steps = narrow.steps = 1000;
   wide.box[0] *= 16, wide.box[1] *= 16;  // twice the widest trained box: 102,400 sites
-  auto pw = m->predict(wide), pn = m->predict(narrow);
-  ASSERT_TRUE(pw && pn);
-  EXPECT_NEAR(pw->total_s.p50, total(wide), 0.2 * total(wide));
-  EXPECT_NEAR(pn->total_s.p50, total(narrow), 0.2 * total(narrow));
-  EXPECT_GT(pw->total_s.p50, 8 * pn->total_s.p50);  // the law: 14 times
+  EXPECT_TRUE(expect_priced_by_law(rows, total, wide, narrow, 8));  // the law: 14 times
 }
 
 // The CPU engine steps a scene of fewer than 1,500 particles, or one given one
@@ -798,18 +807,13 @@ TEST(JobCostModelPrior, StepsOnOneThreadArePricedApartFromThePools) {
   const auto rows = jobs_by_law("bin", kSetup, total, [](int q, JobInputs* in) {
     in->threads = q < 2 ? 1 : 2;  // 100 .. 10,000 particles each: either side of 1,500
   });
-  auto m = JobCostModel::train(rows, small_options(), nullptr);
-  ASSERT_TRUE(m) << m.status().message();
   JobInputs two = divided_wall_job("bin", 20'000).inputs;
   two.steps = 20'000, two.threads = 2;
   JobInputs one = two;
   one.threads = 1;
-  auto p2 = m->predict(two), p1 = m->predict(one);
-  ASSERT_TRUE(p2 && p1);
-  EXPECT_TRUE(p2->outside_training);
-  EXPECT_NEAR(p2->total_s.p50, total(two), 0.2 * total(two));
-  EXPECT_NEAR(p1->total_s.p50, total(one), 0.2 * total(one));
-  EXPECT_GT(p1->total_s.p50, 2 * p2->total_s.p50);  // the law: 2.5 times
+  const auto p = expect_priced_by_law(rows, total, one, two, 2);  // the law: 2.5 times
+  ASSERT_TRUE(p);
+  EXPECT_TRUE(p->second.outside_training);
 }
 
 TEST_F(TrainedModel, PricesAnAssessedScene) {
