@@ -145,6 +145,9 @@ class JobCostModel {
   Expected<JobCostPrediction> predict(const JobInputs& in) const;
   // Point predictions only, no checks (evaluation and benchmarks): out[kJobOutputs].
   void predict_point(const JobInputs& in, double* out) const;
+  // The same from the members' priors alone, without their GVMs' corrections (0 for a
+  // cost without a prior): what the sums of the cost drivers say.
+  void prior_point(const JobInputs& in, double* out) const;
 
   const std::vector<std::string>& backends() const { return backends_; }
   const std::vector<std::string>& devices() const { return devices_; }
