@@ -146,7 +146,8 @@ json manifest(const JobResult& r, const scene::Scene* scene) {
                {"gpu_busy_fraction", c.gpu_busy_fraction},
                {"active_steps", c.active_steps},
                {"wall_contact_steps", c.wall_contact_steps},
-               {"pair_contact_steps", c.pair_contact_steps}};
+               {"pair_contact_steps", c.pair_contact_steps},
+               {"list_builds", c.list_builds}};
   j["notes"] = r.notes;
   json arts = json::array();
   for (const Artifact& a : r.artifacts)
@@ -219,6 +220,7 @@ class JobRunner {
       result_.cost.active_steps = c.value("active_steps", 0.0);
       result_.cost.wall_contact_steps = c.value("wall_contact_steps", 0.0);
       result_.cost.pair_contact_steps = c.value("pair_contact_steps", 0.0);
+      result_.cost.list_builds = c.value("list_builds", 0.0);
     } catch (const json::exception&) {
       return false;  // a field of the wrong type: not a manifest we wrote
     }
@@ -465,6 +467,7 @@ class JobRunner {
       result_.cost.active_steps += double(last_.active) * substeps;
       result_.cost.wall_contact_steps += double(last_.wall_contacts) * substeps;
       result_.cost.pair_contact_steps += double(last_.particle_contacts) * substeps;
+      result_.cost.list_builds = double(sim_->stage_times().neighbour_builds);  // this process's
       if (last_.escaped + last_.invalid > lost_) {
         note("frame " + std::to_string(f) + ": " + std::to_string(last_.escaped) +
              " particles escaped, " + std::to_string(last_.invalid) +

@@ -112,6 +112,9 @@ struct Cost {
   // What the steps did (each frame's end counts weighted by its steps; the frames this
   // process ran): what a job's time turns on besides its sizes, kept for the cost model.
   double active_steps = 0, wall_contact_steps = 0, pair_contact_steps = 0;
+  // The neighbour lists' builds (each a pass over the particles and the wall's
+  // candidates), which particles that move far between steps make often.
+  double list_builds = 0;
 };
 
 struct JobResult {

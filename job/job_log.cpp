@@ -81,8 +81,8 @@ JobInputs job_inputs(const JobAssessment& a, const std::string& backend, const s
 
 const std::vector<std::string>& job_log_optional_columns() {
   static const std::vector<std::string> cols = {
-      "active_steps", "wall_contact_steps", "pair_contact_steps", "bin_entries",
-      "wall_buckets", "total_s_runs",       "per_frame_s_runs",   "restitution"};
+      "active_steps", "wall_contact_steps", "pair_contact_steps", "bin_entries", "wall_buckets",
+      "total_s_runs", "per_frame_s_runs",   "restitution",        "list_builds"};
   return cols;
 }
 
@@ -170,7 +170,8 @@ Status validate(const JobMeasure& m) {
                               " must be > 0 (a job that ran took time and memory)");
   const std::pair<const char*, double> notes[] = {{"active_steps", m.active_steps},
                                                   {"wall_contact_steps", m.wall_contact_steps},
-                                                  {"pair_contact_steps", m.pair_contact_steps}};
+                                                  {"pair_contact_steps", m.pair_contact_steps},
+                                                  {"list_builds", m.list_builds}};
   for (const auto& [name, v] : notes)  // NaN: not recorded
     if (std::isinf(v) || v < 0) return invalid_argument(std::string(name) + " must be >= 0 or empty");
   if (m.gpu_load > 1) return invalid_argument("gpu_load must be <= 1");
@@ -236,6 +237,7 @@ std::string cell(const JobRecord& r, const std::string& c) {
   if (c == "active_steps") return note(m.active_steps);
   if (c == "wall_contact_steps") return note(m.wall_contact_steps);
   if (c == "pair_contact_steps") return note(m.pair_contact_steps);
+  if (c == "list_builds") return note(m.list_builds);
   if (c == "bin_entries") return note(i.bin_entries);
   if (c == "wall_buckets") return note(i.wall_buckets);
   if (c == "restitution") return note(i.restitution);
@@ -323,6 +325,7 @@ bool read_cell(JobRecord* r, const std::string& c, const std::string& v, std::st
   if (c == "active_steps") return note(&m.active_steps);
   if (c == "wall_contact_steps") return note(&m.wall_contact_steps);
   if (c == "pair_contact_steps") return note(&m.pair_contact_steps);
+  if (c == "list_builds") return note(&m.list_builds);
   if (c == "bin_entries") return note(&i.bin_entries);
   if (c == "wall_buckets") return note(&i.wall_buckets);
   if (c == "restitution") return note(&i.restitution);
@@ -397,6 +400,7 @@ Expected<JobMeasure> job_measure_from_manifest(const std::string& result_json,
     m.active_steps = c.value("active_steps", JobMeasure::kNotRecorded);
     m.wall_contact_steps = c.value("wall_contact_steps", JobMeasure::kNotRecorded);
     m.pair_contact_steps = c.value("pair_contact_steps", JobMeasure::kNotRecorded);
+    m.list_builds = c.value("list_builds", JobMeasure::kNotRecorded);
     double bytes = 0;
     for (const json& a : r.at("artifacts")) bytes += a.at("bytes").get<double>();
     m.output_bytes = bytes;

@@ -74,6 +74,7 @@ struct JobMeasure {
   // contact at each frame's end times its steps. NaN where a log predates them.
   double active_steps = kNotRecorded, wall_contact_steps = kNotRecorded,
          pair_contact_steps = kNotRecorded;
+  double list_builds = kNotRecorded;  // the neighbour lists' builds (NaN before stop 61)
   static constexpr double kNotRecorded = __builtin_nan("");
   // Each run's total time and time per frame where the row merges repeats of one job
   // (merge_job_repeats; the row's own times are their medians), in run order; empty

@@ -73,6 +73,7 @@ JobRecord sample_record(uint64_t particles) {
   m.steps_taken = 6000;
   m.load_avg = 0.5;
   m.active_steps = 4.5e5, m.wall_contact_steps = 1.25e5, m.pair_contact_steps = 3e5;
+  m.list_builds = 412;
   return r;
 }
 
@@ -103,6 +104,7 @@ TEST(JobLog, RoundTripsEveryColumnExactly) {
   EXPECT_TRUE((*back)[0].inputs.has_format("gif"));
   EXPECT_FALSE((*back)[0].inputs.has_format("webm"));
   EXPECT_EQ((*back)[0].measure.wall_contact_steps, 1.25e5);
+  EXPECT_EQ((*back)[0].measure.list_builds, 412);
   EXPECT_TRUE(std::isnan((*back)[1].measure.pair_contact_steps));
 
   const std::string path = tmp("log.csv");
@@ -1045,6 +1047,9 @@ TEST(JobSweep, QuickSweepWritesJobRows) {
     EXPECT_GE(r.measure.active_steps, 0.0);
     active_steps += r.measure.active_steps;
     EXPECT_LE(r.measure.active_steps, double(r.inputs.particles) * double(r.measure.steps_taken));
+    // The lists' builds, recorded: at least one, at most one a step.
+    EXPECT_GE(r.measure.list_builds, 1.0);
+    EXPECT_LE(r.measure.list_builds, double(r.measure.steps_taken));
     EXPECT_GE(r.measure.wall_contact_steps, 0.0);
     EXPECT_GE(r.measure.pair_contact_steps, 0.0);
   }

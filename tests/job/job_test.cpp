@@ -91,6 +91,9 @@ TEST(Job, RunWritesEveryFrameAndAManifest) {
   EXPECT_EQ(r.cost.frames, 13u);
   EXPECT_GT(r.cost.steps, 0u);
   EXPECT_GT(r.cost.peak_host_bytes, 0u);
+  // The lists are built at least once, and not more often than the steps.
+  EXPECT_GE(r.cost.list_builds, 1.0);
+  EXPECT_LE(r.cost.list_builds, double(r.cost.steps));
   const auto rows = stats_rows(dir);
   ASSERT_EQ(rows.size(), 14u);  // header and frames 0..12
   for (size_t f = 0; f <= 12; ++f) EXPECT_EQ(rows[f + 1].substr(0, rows[f + 1].find(',')), std::to_string(f));
@@ -99,6 +102,7 @@ TEST(Job, RunWritesEveryFrameAndAManifest) {
   EXPECT_EQ(m["status"], "done");
   EXPECT_EQ(m["frames"], 13);
   EXPECT_EQ(m["cost"]["steps"], r.cost.steps);
+  EXPECT_EQ(m["cost"]["list_builds"], r.cost.list_builds);
   bool has_stats = false, has_frames = false;
   for (const auto& a : m["artifacts"]) {
     const std::string path = a["path"];
