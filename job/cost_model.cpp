@@ -187,8 +187,8 @@ bool is_cuda(const JobInputs& in) { return in.backend == "cuda"; }
 // Stop 61 found three kinds of fixed cost in the stages' residuals that no term
 // carried: the grids' set-up (the wall grid's buckets, and the particles' cells with
 // particle contacts), each encoder's set-up (its buffers in proportion to a frame's
-// pixels, whatever the frames: a WebM's first frame costs 0.4 µs a pixel more than
-// the next), and the run's own start (the engine and its arrays, a fixed cost and one
+// pixels, whatever the frames: a WebM's set-up is 0.44 µs a pixel on the CPU log),
+// and the run's own start (the engine and its arrays, a fixed cost and one
 // a particle). On the CPU log they took the held-out total from 16.7 to 12.9 % and
 // the time per frame from 22.2 to 18.1 (docs/gvm.md).
 // Each backend has weights of its own. The time per frame is the same sum without the
@@ -241,6 +241,7 @@ void time_terms(const JobInputs& in, const CostDrivers& d, bool per_frame, doubl
   const double frames = double(in.frames + 1);
   const double pixels = in.renders() ? double(in.render_width) * double(in.render_height) : 0;
   const double render = in.renders() ? 1 : 0;
+  const double mp4 = in.has_format("mp4"), webm = in.has_format("webm"), gif = in.has_format("gif");
   const double divided[3] = {double(in.method == "gravity"), double(in.method == "circumcircle"),
                              double(in.method == "midpoint4")};
   const double setup = per_frame ? 0 : 1;
@@ -289,9 +290,7 @@ void time_terms(const JobInputs& in, const CostDrivers& d, bool per_frame, doubl
       setup * in.pieces * divided[2],                                  // set-up: dividing the wall
       setup * in.wall_cells, setup * double(in.triangles), setup * n,  // bins, wall, placement
       frame_cost, frames * n,                                          // frames, snapshots
-      render, frames * pixels, frames * pixels * double(in.has_format("mp4")),
-      frames * pixels * double(in.has_format("webm")),
-      frames * pixels * double(in.has_format("gif")),
+      render, frames * pixels, frames * pixels * mp4, frames * pixels * webm, frames * pixels * gif,
       frames * n * render,  // rendering
       // friction: its state, its springs' work; a fill's search of its layers
       setup * n * friction, active * friction * pool, setup * fill_layer_sites(in),
@@ -299,9 +298,7 @@ void time_terms(const JobInputs& in, const CostDrivers& d, bool per_frame, doubl
       // the grids' set-up: the wall's buckets, the particles' cells (stop 61)
       setup * wall_grid_buckets(in), setup * contacts * grid_cells(in),
       // each encoder's set-up, once a job: its buffers, in proportion to a frame's pixels
-      pixels, pixels * double(in.has_format("mp4")), pixels * double(in.has_format("webm")),
-      pixels * double(in.has_format("gif")), double(in.has_format("mp4")),
-      double(in.has_format("webm")),
+      pixels, pixels * mp4, pixels * webm, pixels * gif, mp4, webm,
       // the run's own start, once a job and in its time per frame: the engine, its arrays
       1, n, n * contacts, n * friction};
   static_assert(sizeof v / sizeof v[0] == kTimeTerms, "one weight a term");
@@ -938,8 +935,11 @@ void JobCostModel::point(const JobInputs& in, const double* x, double* y) const 
     if (members_[k].empty() || (!cuda && (k == kDevice || k == kGpuLoad))) continue;
     double terms[kMaxPriorTerms];
     const size_t n = prior_terms(k, in, terms);  // once: the members differ in weights only
+    if (!x && n == 0) continue;                  // the priors alone, and k has none
     double s = 0;
-    for (size_t m = 0; m < members_[k].size(); ++m) s += member_point(k, m, terms, n, cuda, x);
+    for (size_t m = 0; m < members_[k].size(); ++m)
+      s +=
+          x ? member_point(k, m, terms, n, cuda, x) : prior_value(k, priors_[k][m], terms, n, cuda);
     y[k] = s / double(members_[k].size());
   }
 }
@@ -949,21 +949,18 @@ void JobCostModel::predict_point(const JobInputs& in, double* out) const {
   job_features(in, devices_, x.data());
   double y[kJobOutputs];
   point(in, x.data(), y);
-  for (size_t k = 0; k < kJobOutputs; ++k)
-    out[k] = std::isnan(y[k]) ? 0.0 : decode_cost(k, y[k], is_cuda(in));
+  decode_point(in, y, out);
 }
 
 void JobCostModel::prior_point(const JobInputs& in, double* out) const {
-  const bool cuda = is_cuda(in);
-  for (size_t k = 0; k < kJobOutputs; ++k) {
-    out[k] = 0;
-    double terms[kMaxPriorTerms];
-    const size_t n = prior_terms(k, in, terms);
-    if (members_[k].empty() || n == 0) continue;
-    double s = 0;
-    for (const Prior& p : priors_[k]) s += prior_value(k, p, terms, n, cuda);
-    out[k] = decode_cost(k, s / double(priors_[k].size()), cuda);
-  }
+  double y[kJobOutputs];
+  point(in, nullptr, y);
+  decode_point(in, y, out);
+}
+
+void JobCostModel::decode_point(const JobInputs& in, const double* y, double* out) {
+  for (size_t k = 0; k < kJobOutputs; ++k)
+    out[k] = std::isnan(y[k]) ? 0.0 : decode_cost(k, y[k], is_cuda(in));
 }
 
 std::vector<std::string> JobCostModel::check_range(const JobInputs& in, const double* x) const {

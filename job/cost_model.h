@@ -185,7 +185,10 @@ class JobCostModel {
   // Member m of output k at a job's prior terms and features: its prior plus its GVM.
   double member_point(size_t k, size_t m, const double* terms, size_t n, bool cuda,
                       const double* x) const;
-  void point(const JobInputs& in, const double* x, double* y) const;  // model space
+  // Model space; x null: the members' priors alone (NaN where k has none).
+  void point(const JobInputs& in, const double* x, double* y) const;
+  // Costs from model space (0 where y is NaN).
+  static void decode_point(const JobInputs& in, const double* y, double* out);
   std::vector<std::string> check_range(const JobInputs& in, const double* x) const;
 
   std::vector<std::string> backends_, devices_;

@@ -467,7 +467,6 @@ class JobRunner {
       result_.cost.active_steps += double(last_.active) * substeps;
       result_.cost.wall_contact_steps += double(last_.wall_contacts) * substeps;
       result_.cost.pair_contact_steps += double(last_.particle_contacts) * substeps;
-      result_.cost.list_builds = double(sim_->stage_times().neighbour_builds);  // this process's
       if (last_.escaped + last_.invalid > lost_) {
         note("frame " + std::to_string(f) + ": " + std::to_string(last_.escaped) +
              " particles escaped, " + std::to_string(last_.invalid) +
@@ -510,6 +509,7 @@ class JobRunner {
     if (scene_.vtp)
       if (Status w = sim::write_pvd(paths_.pvd(), pvd); !w) return w;
     result_.cost.simulate_s = seconds_since(t_loop);
+    result_.cost.list_builds = double(sim_->stage_times().neighbour_builds);  // this process's
     result_.cost.frames = frames + 1;
     if (last_.held > 0)
       note("the run ended with releases still waiting at the inlet for their place (" +

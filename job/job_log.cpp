@@ -6,6 +6,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <utility>
 
 #include "common/atomic_file.h"
 #include "common/median.h"
@@ -24,6 +25,14 @@ bool known(const std::string& v, std::initializer_list<const char*> names) {
     if (v == n) return true;
   return false;
 }
+
+// What the steps did, as result.json's cost and the log's optional columns name it:
+// notes read, written and checked alike (NaN where not recorded).
+constexpr std::pair<const char*, double JobMeasure::*> kMeasureNotes[] = {
+    {"active_steps", &JobMeasure::active_steps},
+    {"wall_contact_steps", &JobMeasure::wall_contact_steps},
+    {"pair_contact_steps", &JobMeasure::pair_contact_steps},
+    {"list_builds", &JobMeasure::list_builds}};
 
 }  // namespace
 
@@ -168,12 +177,9 @@ Status validate(const JobMeasure& m) {
     if (!(v > 0))
       return invalid_argument(std::string(name) +
                               " must be > 0 (a job that ran took time and memory)");
-  const std::pair<const char*, double> notes[] = {{"active_steps", m.active_steps},
-                                                  {"wall_contact_steps", m.wall_contact_steps},
-                                                  {"pair_contact_steps", m.pair_contact_steps},
-                                                  {"list_builds", m.list_builds}};
-  for (const auto& [name, v] : notes)  // NaN: not recorded
-    if (std::isinf(v) || v < 0) return invalid_argument(std::string(name) + " must be >= 0 or empty");
+  for (const auto& [name, field] : kMeasureNotes)  // NaN: not recorded
+    if (std::isinf(m.*field) || m.*field < 0)
+      return invalid_argument(std::string(name) + " must be >= 0 or empty");
   if (m.gpu_load > 1) return invalid_argument("gpu_load must be <= 1");
   if (m.total_s_runs.size() != m.per_frame_s_runs.size())
     return invalid_argument("total_s_runs and per_frame_s_runs must list as many runs");
@@ -234,10 +240,8 @@ std::string cell(const JobRecord& r, const std::string& c) {
   if (c == "steps_taken") return u(m.steps_taken);
   if (c == "load_avg") return n(m.load_avg);
   auto note = [&](double v) { return std::isnan(v) ? std::string() : n(v); };
-  if (c == "active_steps") return note(m.active_steps);
-  if (c == "wall_contact_steps") return note(m.wall_contact_steps);
-  if (c == "pair_contact_steps") return note(m.pair_contact_steps);
-  if (c == "list_builds") return note(m.list_builds);
+  for (const auto& [name, field] : kMeasureNotes)
+    if (c == name) return note(m.*field);
   if (c == "bin_entries") return note(i.bin_entries);
   if (c == "wall_buckets") return note(i.wall_buckets);
   if (c == "restitution") return note(i.restitution);
@@ -322,10 +326,8 @@ bool read_cell(JobRecord* r, const std::string& c, const std::string& v, std::st
     if (v.empty()) return *out = JobMeasure::kNotRecorded, true;
     return num(out);
   };
-  if (c == "active_steps") return note(&m.active_steps);
-  if (c == "wall_contact_steps") return note(&m.wall_contact_steps);
-  if (c == "pair_contact_steps") return note(&m.pair_contact_steps);
-  if (c == "list_builds") return note(&m.list_builds);
+  for (const auto& [name, field] : kMeasureNotes)
+    if (c == name) return note(&(m.*field));
   if (c == "bin_entries") return note(&i.bin_entries);
   if (c == "wall_buckets") return note(&i.wall_buckets);
   if (c == "restitution") return note(&i.restitution);
@@ -397,10 +399,8 @@ Expected<JobMeasure> job_measure_from_manifest(const std::string& result_json,
                                                    m.simulate_s / m.total_s)
                                : 0.0;
     m.steps_taken = c.at("steps").get<uint64_t>();
-    m.active_steps = c.value("active_steps", JobMeasure::kNotRecorded);
-    m.wall_contact_steps = c.value("wall_contact_steps", JobMeasure::kNotRecorded);
-    m.pair_contact_steps = c.value("pair_contact_steps", JobMeasure::kNotRecorded);
-    m.list_builds = c.value("list_builds", JobMeasure::kNotRecorded);
+    for (const auto& [name, field] : kMeasureNotes)
+      m.*field = c.value(name, JobMeasure::kNotRecorded);
     double bytes = 0;
     for (const json& a : r.at("artifacts")) bytes += a.at("bytes").get<double>();
     m.output_bytes = bytes;

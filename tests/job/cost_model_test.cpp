@@ -848,9 +848,9 @@ TEST(JobCostModelPrior, StepsOnOneThreadArePricedApartFromThePools) {
 }
 
 // An encoder sets up its buffers once a job, in proportion to a frame's pixels
-// (a WebM's first frame costs about 0.4 µs a pixel more than the next on the CPU
-// log). Trained on jobs whose WebM costs that, at 10 to 120 frames, the prior prices
-// a WebM of more frames and pixels than any trained by its set-up (before model
+// (a WebM's set-up is about 0.44 µs a pixel on the CPU log). Trained on jobs whose
+// WebM costs that, at 10 to 120 frames, the prior prices a WebM of more frames and
+// pixels than any trained by its set-up (before model
 // version 10 the only encoder terms were per pixel-frame: it priced the set-up as
 // if every frame paid it).
 TEST(JobCostModelPrior, AnEncoderSetsUpOnceInProportionToAFramesPixels) {
