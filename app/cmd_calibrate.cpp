@@ -56,6 +56,9 @@ const std::vector<FlagSpec>& calibrate_flags() {
       {"settled", true,
        "with --jobs: share of jobs with gravity drawn long enough for their particles to land, "
        "fewer particles keeping them within ten times the usual work (default 0)"},
+      {"work-spread", true,
+       "with --jobs: each job's bound on particle-steps drawn log-uniformly between the usual "
+       "bound and F times it, so the work of large jobs varies (default 1: the usual bound)"},
       {"meshes", true,
        "with --jobs: folder of the sweep's STL walls (default tests/data/meshes, if there)"},
       {"work", true,
@@ -159,6 +162,7 @@ int calibrate_jobs(const ParsedArgs& parsed) {
   if (!error.empty()) return usage_error(cmd, error);
   spec.render = !parsed.has("no-render");
   spec.settled_share = parsed.get_double("settled", 0.0, &error);
+  spec.work_spread = parsed.get_double("work-spread", 1.0, &error);
   if (!error.empty()) return usage_error(cmd, error);
   spec.out_path = parsed.get("out");
   spec.work_dir = parsed.get("work", spec.out_path + ".work");
@@ -200,7 +204,7 @@ int cmd_calibrate(const Args& args) {
         "       collidoscope calibrate --jobs --out JOBS.csv [--backend cpu|cuda] [--configs N]\n"
         "                              [--seed S] [--job-threads T] [--repeats R] [--budget S]\n"
         "                              [--meshes DIR] [--work DIR] [--no-render] [--quick]\n"
-        "                              [--settled SHARE]\n\n"
+        "                              [--settled SHARE] [--work-spread F]\n\n"
         "Runs a seeded sweep of real configurations (walls, particle counts, methods,\n"
         "traversals, frames) on this machine, each in a process of its own, and writes one\n"
         "run-log row per configuration: time per frame (the steady cost: median of the\n"

@@ -84,6 +84,7 @@ struct Draw {
   std::string formats = "none";
   std::vector<double> velocity{0, 0, 0};  // m/s, a share of the wall's size per second
   double settle_falls = 0;  // > 0: the duration is this many falls across the wall's height
+  double work_bound = 1;    // this job's particle-step bound, in the sweep's usual bounds
 };
 
 // Sweep ranges per backend. Particle-steps bound a job's work: on the CPU about 0.3
@@ -240,13 +241,13 @@ Expected<Planned> size_job(const Draw& d, const Ranges& rg, const JobSweepSpec& 
     return mean_released_share(first->inputs.release_s, steps * step);
   };
   double steps = d.target_steps;
+  const double bound = rg.particle_steps * d.work_bound;
   if (d.settle_falls > 0) {
     // Long enough to land: the steps are set, the particles shrink to the work bound.
     const double fall = std::sqrt(2 * b.extent().z / first->inputs.gravity);
     steps = d.settle_falls * fall / step;
     if (steps > 4e5) return resource_exhausted("settling takes more steps than the sweep's");
-    const double most =
-        kSettledWork * rg.particle_steps / (std::max(active_share(steps), 0.02) * steps);
+    const double most = kSettledWork * bound / (std::max(active_share(steps), 0.02) * steps);
     if (most < 20) return resource_exhausted("too few particles would settle in the sweep's work");
     if (double(particles) > most) {
       particles = int64_t(most);
@@ -257,8 +258,8 @@ Expected<Planned> size_job(const Draw& d, const Ranges& rg, const JobSweepSpec& 
     // The particle-step bound trims the steps.
     for (int k = 0; k < 3; ++k) {
       const double work = double(particles) * std::max(active_share(steps), 0.02) * steps;
-      if (work <= rg.particle_steps) break;
-      steps = std::max(rg.steps_lo * 0.5, steps * rg.particle_steps / work);
+      if (work <= bound) break;
+      steps = std::max(rg.steps_lo * 0.5, steps * bound / work);
     }
   }
   const double duration = steps * step;
@@ -346,6 +347,7 @@ Expected<CalibrateSummary> run_sweep(const JobSweepSpec& sw, const CalibrateHook
   const Ranges rg = ranges_for(sw.backend, sw.quick);
   gvm::Rng rng(sw.seed);
   gvm::Rng settle_rng(sw.seed ^ 0x5E771EDull);  // its own stream: share 0 draws as before
+  gvm::Rng work_rng(sw.seed ^ 0x3D0B0Dull);     // and the work's: spread 1 draws as before
   std::vector<Planned> plans;
   size_t refused = 0;
   const auto t_start = SteadyClock::now();
@@ -354,6 +356,7 @@ Expected<CalibrateSummary> run_sweep(const JobSweepSpec& sw, const CalibrateHook
     Draw d = draw_job(rng, rg, walls, shapes, sw.render, sw.quick);
     if (!d.zero_gravity && settle_rng.uniform01() < sw.settled_share)
       d.settle_falls = settle_rng.uniform(1.5, 3.0);
+    if (sw.work_spread > 1) d.work_bound = log_uniform(work_rng, 1, sw.work_spread);
     auto p = size_job(d, rg, sw, device, sw.seed * 1000003u + plans.size());
     if (!p) {
       ++refused;
@@ -451,6 +454,8 @@ Status validate(const JobSweepSpec& s) {
   if (s.executable.empty()) return invalid_argument("no collidoscope executable to run jobs in");
   if (!(s.settled_share >= 0 && s.settled_share <= 1))
     return invalid_argument("settled share must be in [0, 1]");
+  if (!(s.work_spread >= 1 && s.work_spread <= 1000))
+    return invalid_argument("work spread must be in [1, 1000]");
   return Status::ok();
 }
 

@@ -33,6 +33,12 @@ struct JobSweepSpec {
   // ten times the usual work: the settled piles a user's job of seconds spends most
   // of its steps in. Drawn from a stream of its own, so 0 reproduces the sweeps before it.
   double settled_share = 0;
+  // Each job's bound on particle-steps drawn log-uniformly between the usual bound and
+  // this many times it (1: the usual bound for every job). At one bound, every job of
+  // many particles is trimmed to the same particle-steps, and a model cannot tell a
+  // cost a particle-step from a cost a particle; drawn, the work of a job varies as a
+  // user's does. From a stream of its own, so 1 reproduces the sweeps before it.
+  double work_spread = 1;
   // Folder of STL walls the sweep may draw (teapot, 3ds Max export, sphere with a
   // hole from tests/data/meshes); "" or missing = parametric walls only.
   std::string mesh_dir;

@@ -35,7 +35,7 @@ namespace {
 
 constexpr const char* kKind = "collidoscope-job-cost-model";
 constexpr const char* kDetectionKind = "collidoscope-resource-predictor";
-constexpr int kVersion = 10;  // 2: each member has its prior; 3: the wall footprint in the memory
+constexpr int kVersion = 11;  // 2: each member has its prior; 3: the wall footprint in the memory
                               // priors; 4: a divided wall's lookups charged to the particles near
                               // it; 5: the lookups priced by the pieces within reach, GPU load
                               // learnt as a log; 6: no lookups on the GPU (its divided
@@ -44,7 +44,8 @@ constexpr int kVersion = 10;  // 2: each member has its prior; 3: the wall footp
                               // job's steps priced apart on one thread and on its pool;
                               // 10: the grids', encoders' and run's fixed costs, the time
                               // weights fitted on the totals and times per frame together,
-                              // the output's encoder files and frame images
+                              // the output's encoder files and frame images; 11: the
+                              // neighbour lists' builds
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // Memory: the share of out-of-fold jobs whose peak may exceed the point by more than
 // 5 %: the issue allows 5 % of held-out runs, and 4 % of the out-of-fold ones leaves a
@@ -191,13 +192,19 @@ bool is_cuda(const JobInputs& in) { return in.backend == "cuda"; }
 // and the run's own start (the engine and its arrays, a fixed cost and one
 // a particle). On the CPU log they took the held-out total from 16.7 to 12.9 % and
 // the time per frame from 22.2 to 18.1 (docs/gvm.md).
+// Model version 11 adds the neighbour lists' builds (expected_list_builds): a fixed
+// cost a build, and a binning and search of each released particle, with and without
+// particle contacts. The sweep's short jobs barely build (their particles have hardly
+// begun to fall), but in a pour of seconds the lists are built every 40 steps or so
+// and the builds take a quarter of the steps' time (the unseen cylinder pour: 1,784
+// builds of 6,000 particles, 4.0 of its 16.8 s with the stages timed).
 // Each backend has weights of its own. The time per frame is the same sum without the
 // set-up, divided by the frames, with the total's weights; those weights are fitted on
 // the total and the time per frame of each training row together, since a fixed cost
 // of the set-up and one of the run are the same column in the total alone (fitted on
 // the totals only, the CPU's time per frame was 18.1 %; on both, 16.0. Fitted on the
 // per-frame times alone it was worse: 56 against 32 % on an earlier CPU log).
-constexpr size_t kTimeTerms = 51;  // per backend
+constexpr size_t kTimeTerms = 57;  // per backend
 constexpr size_t kMaxPriorTerms = 2 * kTimeTerms;
 
 // A fill's lattice sites in one layer of the wall's box: the placement searches whole
@@ -277,6 +284,7 @@ void time_terms(const JobInputs& in, const CostDrivers& d, bool per_frame, doubl
   // 17.2 % and time per frame 23.5; with a set each, 16.7 and 22.2 (model
   // version 9, stop 60; docs/gvm.md).
   const double one = steps_on_one_thread(in) ? 1 : 0, pool = 1 - one;
+  const double builds_n = d.list_builds * n * d.mean_active;
   const double v[] = {
       setup,  // set-up: a fixed cost
       steps * pool, steps * contacts * pool, steps * n * pool, steps * n * contacts * pool,
@@ -300,7 +308,10 @@ void time_terms(const JobInputs& in, const CostDrivers& d, bool per_frame, doubl
       // each encoder's set-up, once a job: its buffers, in proportion to a frame's pixels
       pixels, pixels * mp4, pixels * webm, pixels * gif, mp4, webm,
       // the run's own start, once a job and in its time per frame: the engine, its arrays
-      1, n, n * contacts, n * friction};
+      1, n, n * contacts, n * friction,
+      // the lists' builds: a fixed cost, and the released particles' binning and search
+      d.list_builds * pool, d.list_builds * one, builds_n * pool, builds_n * one,
+      builds_n * contacts * pool, builds_n * contacts * one};
   static_assert(sizeof v / sizeof v[0] == kTimeTerms, "one weight a term");
   for (size_t i = 0; i < kTimeTerms; ++i) t[i] = per_frame ? v[i] / frames : v[i];
 }
@@ -493,6 +504,32 @@ double landed_share(const JobInputs& in) {
   return std::min(1.0, area / in.duration);
 }
 
+double expected_list_builds(const JobInputs& in) {
+  // The engine keeps lists with particle contacts, and of a still wall alone on the
+  // CPU and for a divided wall (sim::wall_lists_without_pairs; no input says a wall moves).
+  const bool divided =
+      in.method == "gravity" || in.method == "circumcircle" || in.method == "midpoint4";
+  if (!in.particle_contacts && is_cuda(in) && !divided) return 0;
+  if (!(in.step_s > 0) || !(in.r_min > 0) || !(in.duration > 0)) return 0;
+  // They are built again whenever the fastest particle has moved half their skin.
+  // It starts at v0 (0 where a log predates the start speed) and falls at g t until
+  // it has fallen across the wall's box (v_top, by its energy), then moves at about
+  // that speed, bouncing or falling after it; so the distance it covers in the run is
+  // the integral of min(v0 + g t, v_top). The automatic skin is the time-step plan's:
+  // 20 steps at the fastest speed expected (v0 and the fall's), within [0.1, 0.5]
+  // r_min (sim::contact_time_step).
+  const double g = std::max(in.gravity, 0.0), t = in.duration;
+  const double v0 = std::isnan(in.start_speed) ? 0.0 : in.start_speed;
+  const double fall = std::sqrt(2 * g * in.box[2]);
+  const double v_top = std::sqrt(v0 * v0 + fall * fall);
+  const double skin =
+      std::clamp(20 * std::max(v0 + fall, 1e-3) * in.step_s, 0.1 * in.r_min, 0.5 * in.r_min);
+  const double t_top = g > 0 ? (v_top - v0) / g : t;  // when it reaches v_top
+  const double covered = t <= t_top ? v0 * t + 0.5 * g * t * t
+                                    : v0 * t_top + 0.5 * g * t_top * t_top + v_top * (t - t_top);
+  return std::min(double(in.steps), covered / (0.5 * skin));
+}
+
 CostDrivers cost_drivers(const JobInputs& in) {
   CostDrivers d;
   const double r = in.r_max, r_mean = 0.5 * (in.r_min + in.r_max);
@@ -516,6 +553,7 @@ CostDrivers cost_drivers(const JobInputs& in) {
   const double spread_near = std::min(1.0, 2 * r * in.wall_area / volume);
   d.near_wall = std::max(1.0, active * spread_near);
   d.near_wall_share = std::max(spread_near, landed);
+  d.list_builds = expected_list_builds(in);
   if (in.renders())
     d.pixel_frames = double(in.render_width) * double(in.render_height) * double(in.frames + 1);
   d.snapshot_bytes = double(in.frames + 1) * active * 29;
@@ -636,6 +674,7 @@ json to_json(const JobCostPrediction& p) {
                   {"steps_per_frame", p.steps_per_frame},
                   {"particle_steps", p.particle_steps},
                   {"pair_contacts", p.pair_contacts},
+                  {"list_builds", p.list_builds},
                   {"pixel_frames", p.pixel_frames}};
   return j;
 }
@@ -1035,6 +1074,7 @@ Expected<JobCostPrediction> JobCostModel::predict(const JobInputs& in) const {
   p.steps_per_frame = in.steps_per_frame;
   p.particle_steps = d.particle_steps;
   p.pair_contacts = d.pair_contacts;
+  p.list_builds = d.list_builds;
   p.pixel_frames = d.pixel_frames;
   return p;
 }

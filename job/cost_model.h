@@ -50,6 +50,7 @@ struct JobCostPrediction {
   uint64_t steps = 0, steps_per_frame = 0;
   double particle_steps = 0;  // released particles x steps
   double pair_contacts = 0;   // touching pairs expected, averaged over the run (0 without particle contacts)
+  double list_builds = 0;     // the neighbour lists' builds expected over the run (0: no lists)
   double pixel_frames = 0;    // rendered pixels x frames (0 without rendering)
 };
 
@@ -77,6 +78,7 @@ struct CostDrivers {
   double packing = 0;         // particles' volume over the wall's box volume
   double pixel_frames = 0;    // rendered pixels x frames written
   double snapshot_bytes = 0;  // the frames' snapshots, about 29 bytes a released particle
+  double list_builds = 0;     // the neighbour lists' builds expected over the run (0: no lists)
 };
 CostDrivers cost_drivers(const JobInputs& in);
 // The share of the particles an inlet has released, averaged over a run of `duration`
@@ -86,6 +88,9 @@ double mean_released_share(double release_s, double duration);
 // free fall after its release (from half the wall's height in a fill, from an inlet
 // over its top otherwise); 0 without gravity or before the first lands.
 double landed_share(const JobInputs& in);
+// The neighbour lists' builds expected over a job's run (expected_list_builds in
+// job/cost_model.cpp says how); 0 where the engine keeps no lists.
+double expected_list_builds(const JobInputs& in);
 
 // ---- Outputs -------------------------------------------------------------------
 

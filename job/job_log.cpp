@@ -34,6 +34,14 @@ constexpr std::pair<const char*, double JobMeasure::*> kMeasureNotes[] = {
     {"pair_contact_steps", &JobMeasure::pair_contact_steps},
     {"list_builds", &JobMeasure::list_builds}};
 
+// Inputs recorded after the first logs, in their optional columns alike: NaN (an
+// empty cell) where a log predates them, else >= 0.
+constexpr std::pair<const char*, double JobInputs::*> kInputNotes[] = {
+    {"bin_entries", &JobInputs::bin_entries},
+    {"wall_buckets", &JobInputs::wall_buckets},
+    {"restitution", &JobInputs::restitution},
+    {"start_speed", &JobInputs::start_speed}};
+
 }  // namespace
 
 bool JobInputs::has_format(const std::string& f) const {
@@ -69,6 +77,7 @@ JobInputs job_inputs(const JobAssessment& a, const std::string& backend, const s
   in.restitution =
       (s.dynamics.wall_material_set ? s.dynamics.wall_material : s.dynamics.material).restitution;
   in.gravity = sim::length(s.dynamics.gravity);
+  in.start_speed = a.release.speed;
   in.duration = s.duration;
   in.fps = s.fps;
   in.frames = a.frames;
@@ -91,7 +100,7 @@ JobInputs job_inputs(const JobAssessment& a, const std::string& backend, const s
 const std::vector<std::string>& job_log_optional_columns() {
   static const std::vector<std::string> cols = {
       "active_steps", "wall_contact_steps", "pair_contact_steps", "bin_entries", "wall_buckets",
-      "total_s_runs", "per_frame_s_runs",   "restitution",        "list_builds"};
+      "total_s_runs", "per_frame_s_runs",   "restitution",        "list_builds", "start_speed"};
   return cols;
 }
 
@@ -135,10 +144,9 @@ Status validate(const JobInputs& in) {
                                                    {"gravity", in.gravity}};
   for (const auto& [name, v] : nonneg)
     if (!std::isfinite(v) || v < 0) return invalid_argument(std::string(name) + " must be >= 0");
-  for (const auto& [name, v] : {std::pair<const char*, double>{"bin_entries", in.bin_entries},
-                                {"wall_buckets", in.wall_buckets},
-                                {"restitution", in.restitution}})  // NaN: not recorded
-    if (std::isinf(v) || v < 0) return invalid_argument(std::string(name) + " must be >= 0 or empty");
+  for (const auto& [name, field] : kInputNotes)  // NaN: not recorded
+    if (std::isinf(in.*field) || in.*field < 0)
+      return invalid_argument(std::string(name) + " must be >= 0 or empty");
   if (in.restitution > 1) return invalid_argument("restitution must be <= 1 or empty");
   if (in.r_min > in.r_max) return invalid_argument("r_min must be <= r_max");
   if (!known(in.method, {"bin", "bvh", "gravity", "circumcircle", "midpoint4"}))
@@ -242,9 +250,8 @@ std::string cell(const JobRecord& r, const std::string& c) {
   auto note = [&](double v) { return std::isnan(v) ? std::string() : n(v); };
   for (const auto& [name, field] : kMeasureNotes)
     if (c == name) return note(m.*field);
-  if (c == "bin_entries") return note(i.bin_entries);
-  if (c == "wall_buckets") return note(i.wall_buckets);
-  if (c == "restitution") return note(i.restitution);
+  for (const auto& [name, field] : kInputNotes)
+    if (c == name) return note(i.*field);
   auto runs = [&](const std::vector<double>& v) {
     std::string out;
     for (double t : v) out += (out.empty() ? "" : ";") + n(t);
@@ -328,9 +335,8 @@ bool read_cell(JobRecord* r, const std::string& c, const std::string& v, std::st
   };
   for (const auto& [name, field] : kMeasureNotes)
     if (c == name) return note(&(m.*field));
-  if (c == "bin_entries") return note(&i.bin_entries);
-  if (c == "wall_buckets") return note(&i.wall_buckets);
-  if (c == "restitution") return note(&i.restitution);
+  for (const auto& [name, field] : kInputNotes)
+    if (c == name) return note(&(i.*field));
   auto runs = [&](std::vector<double>* out) {  // empty: the row is one run
     *what = "numbers joined by ';'";
     out->clear();
@@ -355,11 +361,11 @@ bool same_or_both_nan(double a, double b) { return a == b || (std::isnan(a) && s
 bool same_inputs(const JobInputs& a, const JobInputs& b) {
   return a.wall == b.wall && a.particles == b.particles && a.triangles == b.triangles &&
          a.pieces == b.pieces && a.wall_cells == b.wall_cells &&
-         same_or_both_nan(a.bin_entries, b.bin_entries) &&
-         same_or_both_nan(a.wall_buckets, b.wall_buckets) &&
-         same_or_both_nan(a.restitution, b.restitution) && a.wall_area == b.wall_area &&
-         a.box[0] == b.box[0] && a.box[1] == b.box[1] && a.box[2] == b.box[2] &&
-         a.r_min == b.r_min && a.r_max == b.r_max && a.method == b.method &&
+         std::all_of(
+             std::begin(kInputNotes), std::end(kInputNotes),
+             [&](const auto& note) { return same_or_both_nan(a.*note.second, b.*note.second); }) &&
+         a.wall_area == b.wall_area && a.box[0] == b.box[0] && a.box[1] == b.box[1] &&
+         a.box[2] == b.box[2] && a.r_min == b.r_min && a.r_max == b.r_max && a.method == b.method &&
          a.placement == b.placement && a.release_s == b.release_s &&
          a.particle_contacts == b.particle_contacts && a.friction == b.friction &&
          a.gravity == b.gravity && a.duration == b.duration && a.fps == b.fps &&

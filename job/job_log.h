@@ -40,6 +40,10 @@ struct JobInputs {
   // cost model (docs/gvm.md, "Restitution"). NaN: a log written before it was recorded.
   double restitution = __builtin_nan("");
   double gravity = 9.81;         // |g|, m/s^2
+  // m/s: the particles' speed as they start (sim::ReleasePlan::speed: an inlet's or a
+  // fill's velocity); how soon the neighbour lists are built again follows from it.
+  // NaN: a log written before it was recorded (stop 62).
+  double start_speed = __builtin_nan("");
   double duration = 0;           // simulated seconds
   double fps = 0;                // frames per simulated second
   uint64_t frames = 0;           // written after the initial one

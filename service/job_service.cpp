@@ -771,11 +771,7 @@ json JobService::price(const job::JobAssessment& a, const json& assessment, uint
       p["outside_reasons"] = c->outside_reasons;
       p["device"] = c->device;
       p["threads"] = c->threads;
-      p["drivers"] = {{"steps", c->steps},
-                      {"steps_per_frame", c->steps_per_frame},
-                      {"particle_steps", c->particle_steps},
-                      {"pair_contacts", c->pair_contacts},
-                      {"pixel_frames", c->pixel_frames}};
+      p["drivers"] = job::to_json(*c)["drivers"];  // as `collidoscope predict --json` gives them
       return p;
     }
     p["note"] = "the job cost model cannot price this job: " + c.status().message();
