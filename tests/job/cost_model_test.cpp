@@ -611,8 +611,8 @@ TEST(CostDrivers, TheListsAreBuiltAsTheFastestParticleCoversHalfTheirSkin) {
   JobInputs in = sample_record(1000).inputs;
   in.backend = "cpu";
   in.particle_contacts = false;
-  in.start_speed =
-      JobMeasure::kNotRecorded;  // released at rest, as a log before the start speed reckons it
+  // Released at rest, as a log written before the start speed was recorded reckons it.
+  in.start_speed = JobMeasure::kNotRecorded;
   in.gravity = 9.81;
   in.box[2] = 20;  // a fall across it: v_top = 19.81 m/s after 2.019 s
   in.r_min = 1;
