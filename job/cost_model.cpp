@@ -670,13 +670,17 @@ json to_json(const JobCostPrediction& p) {
   j["outside_training"] = p.outside_training;
   j["outside_reason"] = p.outside_reason;
   j["outside_reasons"] = p.outside_reasons;
-  j["drivers"] = {{"steps", p.steps},
-                  {"steps_per_frame", p.steps_per_frame},
-                  {"particle_steps", p.particle_steps},
-                  {"pair_contacts", p.pair_contacts},
-                  {"list_builds", p.list_builds},
-                  {"pixel_frames", p.pixel_frames}};
+  j["drivers"] = drivers_to_json(p);
   return j;
+}
+
+json drivers_to_json(const JobCostPrediction& p) {
+  return {{"steps", p.steps},
+          {"steps_per_frame", p.steps_per_frame},
+          {"particle_steps", p.particle_steps},
+          {"pair_contacts", p.pair_contacts},
+          {"list_builds", p.list_builds},
+          {"pixel_frames", p.pixel_frames}};
 }
 
 // ---- Training -----------------------------------------------------------------------

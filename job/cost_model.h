@@ -57,6 +57,8 @@ struct JobCostPrediction {
 // {"backend", "device", "threads", "total_s": {"p10", "p50", "p90"}, ... each cost,
 //  "outside_training", "outside_reason", "outside_reasons", "drivers": {...}}
 nlohmann::json to_json(const JobCostPrediction& p);
+// The prediction's drivers alone (to_json's "drivers"): what its costs follow from.
+nlohmann::json drivers_to_json(const JobCostPrediction& p);
 
 // ---- Features ------------------------------------------------------------------
 

@@ -771,7 +771,7 @@ json JobService::price(const job::JobAssessment& a, const json& assessment, uint
       p["outside_reasons"] = c->outside_reasons;
       p["device"] = c->device;
       p["threads"] = c->threads;
-      p["drivers"] = job::to_json(*c)["drivers"];  // as `collidoscope predict --json` gives them
+      p["drivers"] = job::drivers_to_json(*c);  // as `collidoscope predict --json` gives them
       return p;
     }
     p["note"] = "the job cost model cannot price this job: " + c.status().message();

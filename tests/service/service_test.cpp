@@ -212,6 +212,7 @@ TEST_F(ServiceTest, PricesJobsWithTheJobCostModel) {
   EXPECT_GE(pred["peak_host_bytes"]["admitted_by"].get<double>(),
             pred["peak_host_bytes"]["high"].get<double>() - 1);
   EXPECT_GT(pred["drivers"]["steps"].get<double>(), 0);
+  EXPECT_GE(pred["drivers"]["list_builds"].get<double>(), 0);  // the builds the costs follow
 
   // Far more particles than any training job: said, and memory admitted by the larger figure.
   json big = tiny_job("wall1", 150000, 1.0);
