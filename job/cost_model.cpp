@@ -24,6 +24,7 @@
 #include "gvm/linalg.h"
 #include "gvm/rng.h"
 #include "job/assess.h"
+#include "sim/parallel.h"
 #include "sim/placement.h"
 
 namespace collido::job {
@@ -35,7 +36,7 @@ namespace {
 
 constexpr const char* kKind = "collidoscope-job-cost-model";
 constexpr const char* kDetectionKind = "collidoscope-resource-predictor";
-constexpr int kVersion = 11;  // 2: each member has its prior; 3: the wall footprint in the memory
+constexpr int kVersion = 12;  // 2: each member has its prior; 3: the wall footprint in the memory
                               // priors; 4: a divided wall's lookups charged to the particles near
                               // it; 5: the lookups priced by the pieces within reach, GPU load
                               // learnt as a log; 6: no lookups on the GPU (its divided
@@ -45,7 +46,8 @@ constexpr int kVersion = 11;  // 2: each member has its prior; 3: the wall footp
                               // 10: the grids', encoders' and run's fixed costs, the time
                               // weights fitted on the totals and times per frame together,
                               // the output's encoder files and frame images; 11: the
-                              // neighbour lists' builds
+                              // neighbour lists' builds; 12: the pool's steps and the
+                              // springs of pairs with friction
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // Memory: the share of out-of-fold jobs whose peak may exceed the point by more than
 // 5 %: the issue allows 5 % of held-out runs, and 4 % of the out-of-fold ones leaves a
@@ -198,13 +200,20 @@ bool is_cuda(const JobInputs& in) { return in.backend == "cuda"; }
 // begun to fall), but in a pour of seconds the lists are built every 40 steps or so
 // and the builds take a quarter of the steps' time (the unseen cylinder pour: 1,784
 // builds of 6,000 particles, 4.0 of its 16.8 s with the stages timed).
+// Model version 12 adds two more of the steps' costs: the pool's hand-offs, paid a step
+// only once an inlet has released more particles than a pool's pass keeps on the
+// calling thread (steps_released_beyond; with a cost a step on the pool alone, the
+// fits put the hand-offs into each particle-step: 9.4 ns on the pool, where a fill of
+// 25,000 runs at 5.7), and the contact springs of touching pairs with friction
+// (the pair contact-steps with friction). On the CPU log the held-out total went
+// from 12.8 to 12.4 % and the time per frame from 15.3 to 14.6 (docs/gvm.md).
 // Each backend has weights of its own. The time per frame is the same sum without the
 // set-up, divided by the frames, with the total's weights; those weights are fitted on
 // the total and the time per frame of each training row together, since a fixed cost
 // of the set-up and one of the run are the same column in the total alone (fitted on
 // the totals only, the CPU's time per frame was 18.1 %; on both, 16.0. Fitted on the
 // per-frame times alone it was worse: 56 against 32 % on an earlier CPU log).
-constexpr size_t kTimeTerms = 57;  // per backend
+constexpr size_t kTimeTerms = 60;  // per backend
 constexpr size_t kMaxPriorTerms = 2 * kTimeTerms;
 
 // A fill's lattice sites in one layer of the wall's box: the placement searches whole
@@ -284,6 +293,7 @@ void time_terms(const JobInputs& in, const CostDrivers& d, bool per_frame, doubl
   // 17.2 % and time per frame 23.5; with a set each, 16.7 and 22.2 (model
   // version 9, stop 60; docs/gvm.md).
   const double one = steps_on_one_thread(in) ? 1 : 0, pool = 1 - one;
+  const double cpu = is_cuda(in) ? 0 : 1;  // a GPU has no pool to hand its passes to
   const double builds_n = d.list_builds * n * d.mean_active;
   const double v[] = {
       setup,  // set-up: a fixed cost
@@ -311,7 +321,11 @@ void time_terms(const JobInputs& in, const CostDrivers& d, bool per_frame, doubl
       1, n, n * contacts, n * friction,
       // the lists' builds: a fixed cost, and the released particles' binning and search
       d.list_builds * pool, d.list_builds * one, builds_n * pool, builds_n * one,
-      builds_n * contacts * pool, builds_n * contacts * one};
+      builds_n * contacts * pool, builds_n * contacts * one,
+      // the pool's hand-offs a step, once its passes have particles to share; the
+      // springs of touching pairs with friction (version 12)
+      cpu * d.pooled_steps * pool, d.pair_contacts * steps * friction * pool,
+      d.pair_contacts * steps * friction * one};
   static_assert(sizeof v / sizeof v[0] == kTimeTerms, "one weight a term");
   for (size_t i = 0; i < kTimeTerms; ++i) t[i] = per_frame ? v[i] / frames : v[i];
 }
@@ -530,6 +544,15 @@ double expected_list_builds(const JobInputs& in) {
   return std::min(double(in.steps), covered / (0.5 * skin));
 }
 
+double steps_released_beyond(const JobInputs& in, double grain) {
+  const double n = double(in.particles), steps = double(in.steps);
+  if (!(n > grain)) return 0;
+  if (!(in.release_s > 0) || !(in.duration > 0)) return steps;
+  // Released at a steady rate over release_s: more than `grain` from grain / n of it on.
+  const double after = grain / n * in.release_s;
+  return after >= in.duration ? 0 : steps * (1 - after / in.duration);
+}
+
 CostDrivers cost_drivers(const JobInputs& in) {
   CostDrivers d;
   const double r = in.r_max, r_mean = 0.5 * (in.r_min + in.r_max);
@@ -554,6 +577,10 @@ CostDrivers cost_drivers(const JobInputs& in) {
   d.near_wall = std::max(1.0, active * spread_near);
   d.near_wall_share = std::max(spread_near, landed);
   d.list_builds = expected_list_builds(in);
+  // The pool's light passes keep up to kLightGrain particles on one thread and its
+  // heavy ones (the contacts) up to kHeavyGrain: past the heavy grain a step pays
+  // the hand-offs.
+  d.pooled_steps = steps_released_beyond(in, double(sim::kHeavyGrain));
   if (in.renders())
     d.pixel_frames = double(in.render_width) * double(in.render_height) * double(in.frames + 1);
   d.snapshot_bytes = double(in.frames + 1) * active * 29;

@@ -81,6 +81,8 @@ struct CostDrivers {
   double pixel_frames = 0;    // rendered pixels x frames written
   double snapshot_bytes = 0;  // the frames' snapshots, about 29 bytes a released particle
   double list_builds = 0;     // the neighbour lists' builds expected over the run (0: no lists)
+  double pooled_steps =
+      0;  // steps with more released particles than a pool's pass keeps on one thread
 };
 CostDrivers cost_drivers(const JobInputs& in);
 // The share of the particles an inlet has released, averaged over a run of `duration`
@@ -93,6 +95,11 @@ double landed_share(const JobInputs& in);
 // The neighbour lists' builds expected over a job's run (expected_list_builds in
 // job/cost_model.cpp says how); 0 where the engine keeps no lists.
 double expected_list_builds(const JobInputs& in);
+// The steps of a job's run during which its inlet has released more than `grain`
+// particles (all of them for a fill of more): a pool's pass over fewer runs on the
+// calling thread (sim::ThreadPool::run_chunks), so only these steps pay the pool's
+// hand-offs.
+double steps_released_beyond(const JobInputs& in, double grain);
 
 // ---- Outputs -------------------------------------------------------------------
 

@@ -23,6 +23,7 @@
 #include "job/job.h"
 #include "job/job_log.h"
 #include "sim/detect.h"
+#include "sim/parallel.h"
 #include "sim/placement.h"
 #include "sim/shapes.h"
 #include "tests/scratch.h"
@@ -603,6 +604,24 @@ TEST(CostDrivers, ParticlesLandAFallAfterTheirRelease) {
   EXPECT_NEAR(cost_drivers(in).pair_contacts, 3 * 1000 * 0.125, 1e-9);
 }
 
+// A pool's pass over a few particles runs on the calling thread: only the steps after
+// an inlet has released more than a heavy pass's grain hand their passes to the pool.
+// In closed form: every step of a fill of more, none of one of fewer, and a pour's
+// steps from grain / particles of its release on.
+TEST(CostDrivers, ThePoolTakesAStepsPassesOnceAnInletHasReleasedMoreThanAGrain) {
+  JobInputs in = sample_record(6400).inputs;
+  in.placement = "fill", in.release_s = 0;
+  in.steps = 1000, in.duration = 1;
+  EXPECT_EQ(steps_released_beyond(in, 64), 1000.0);
+  EXPECT_EQ(cost_drivers(in).pooled_steps, steps_released_beyond(in, double(sim::kHeavyGrain)));
+  in.particles = 64;
+  EXPECT_EQ(steps_released_beyond(in, 64), 0.0);
+  in.particles = 6400, in.placement = "pour", in.release_s = 2;  // 3,200 a second: 64 by 0.02 s
+  EXPECT_NEAR(steps_released_beyond(in, 64), 1000 * (1 - 0.02 / 1), 1e-9);
+  in.duration = 0.01;  // over before the 64th
+  EXPECT_EQ(steps_released_beyond(in, 64), 0.0);
+}
+
 // The neighbour lists are built again each time the fastest particle has moved half
 // their skin; it falls at g t until it has fallen across the wall's box, then keeps
 // about that speed. In closed form, at most one build a step, none where the engine
@@ -1022,6 +1041,70 @@ TEST(JobCostModelPrior, AJobsListBuildsGrowWithTheFallOfItsParticles) {
   double prior[kJobOutputs];
   m->prior_point(long_job, prior);
   EXPECT_NEAR(prior[0], total(long_job), 0.1 * total(long_job));
+}
+
+// A CPU step hands its passes to the pool only once an inlet has released more than
+// a pass keeps on one thread (sim::ThreadPool::run_chunks). Trained on fills and slow
+// pours on the pool whose steps pay a hand-off by that rule, the prior prices a fill
+// and a pour of 20,000 by it (with only a cost a step on the pool, the fill was
+// priced at 1.41 times the law and the pour at 0.49: checked).
+TEST(JobCostModelPrior, APoolsHandOffsArePaidOnceAnInletHasReleasedEnough) {
+  constexpr double kSetup = 0.05, kPerParticleStep = 5e-9, kHandOff = 3e-5;
+  auto total = [&](const JobInputs& in) {
+    return kSetup + kPerParticleStep * cost_drivers(in).particle_steps +
+           kHandOff * steps_released_beyond(in, double(sim::kHeavyGrain));
+  };
+  const auto rows = jobs_by_law("bin", kSetup, total, [](int q, JobInputs* in) {
+    in->threads = 2, in->duration = 1;
+    if (q == 0) return;      // a fill: every step on the pool from 1,500 particles
+    in->placement = "pour";  // 100 .. 10,000 released over 10, 40 or 160 s
+    in->release_s = 10.0 * std::pow(4.0, q - 1);
+  });
+  JobInputs fill = divided_wall_job("bin", 20'000).inputs;
+  fill.steps = 20'000, fill.threads = 2, fill.duration = 1;
+  JobInputs pour = fill;
+  pour.placement = "pour", pour.release_s = 100;  // 64 released by 0.32 s
+  expect_priced_by_law(rows, total, fill, pour, 2);
+}
+
+// Touching pairs with friction keep contact springs, updated each step they touch.
+// Trained on piles of 0.5 to 1.25 s with friction on and off, the prior prices a pile
+// with friction that rests longer than any (without the pairs' friction terms, 0.39
+// of the law: checked).
+TEST(JobCostModelPrior, PairsWithFrictionCostTheirSpringsEachStep) {
+  constexpr double kSetup = 0.05, kPerParticleStep = 1e-8, kPerPairStep = 2e-8,
+                   kPerSpringStep = 6e-8;
+  auto total = [&](const JobInputs& in) {
+    const CostDrivers d = cost_drivers(in);
+    const double pair_steps = d.pair_contacts * double(in.steps);
+    return kSetup + kPerParticleStep * d.particle_steps + kPerPairStep * pair_steps +
+           kPerSpringStep * pair_steps * (in.friction > 0);
+  };
+  auto job = [](uint64_t particles, double duration, bool friction) {
+    JobInputs in = divided_wall_job("bin", particles).inputs;
+    in.gravity = 9.81, in.box[2] = 2 * 4.905;  // a fill's fall: 1 s
+    in.particle_contacts = true, in.friction = friction ? 0.4 : 0;
+    in.duration = duration;
+    in.steps = uint64_t(std::llround(1000 * duration));
+    in.frames = uint64_t(std::llround(10 * duration));
+    return in;
+  };
+  std::vector<JobRecord> rows;
+  for (int i = 0; i < 48; ++i) {
+    JobRecord r = divided_wall_job("bin", 100);  // its measure's memory and output
+    r.inputs = job(uint64_t(100 * std::pow(100.0, (i % 12) / 11.0)), 0.5 + 0.25 * (i / 12), i % 2);
+    r.inputs.steps += 97 * uint64_t(i % 5);  // steps apart from the duration a little
+    const double scatter = 1 + 0.03 * std::sin(5.0 * i);
+    r.measure.total_s = kSetup + (total(r.inputs) - kSetup) * scatter;
+    r.measure.per_frame_s = (r.measure.total_s - kSetup) / double(r.inputs.frames + 1);
+    rows.push_back(r);
+  }
+  auto m = JobCostModel::train(rows, small_options(), nullptr);
+  ASSERT_TRUE(m) << m.status().message();
+  const JobInputs long_pile = job(1000, 6, true);
+  double prior[kJobOutputs];
+  m->prior_point(long_pile, prior);
+  EXPECT_NEAR(prior[0], total(long_pile), 0.1 * total(long_pile));
 }
 
 TEST_F(TrainedModel, PricesAnAssessedScene) {
