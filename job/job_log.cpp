@@ -12,6 +12,7 @@
 #include "common/median.h"
 #include "gvm/csv.h"
 #include "job/assess.h"
+#include "sim/mesh.h"
 #include "sim/parallel.h"
 
 namespace collido::job {
@@ -40,7 +41,8 @@ constexpr std::pair<const char*, double JobInputs::*> kInputNotes[] = {
     {"bin_entries", &JobInputs::bin_entries},
     {"wall_buckets", &JobInputs::wall_buckets},
     {"restitution", &JobInputs::restitution},
-    {"start_speed", &JobInputs::start_speed}};
+    {"start_speed", &JobInputs::start_speed},
+    {"wall_open", &JobInputs::wall_open}};
 
 }  // namespace
 
@@ -78,6 +80,7 @@ JobInputs job_inputs(const JobAssessment& a, const std::string& backend, const s
       (s.dynamics.wall_material_set ? s.dynamics.wall_material : s.dynamics.material).restitution;
   in.gravity = sim::length(s.dynamics.gravity);
   in.start_speed = a.release.speed;
+  in.wall_open = sim::is_closed_manifold(a.wall) ? 0 : 1;
   in.duration = s.duration;
   in.fps = s.fps;
   in.frames = a.frames;
@@ -99,8 +102,9 @@ JobInputs job_inputs(const JobAssessment& a, const std::string& backend, const s
 
 const std::vector<std::string>& job_log_optional_columns() {
   static const std::vector<std::string> cols = {
-      "active_steps", "wall_contact_steps", "pair_contact_steps", "bin_entries", "wall_buckets",
-      "total_s_runs", "per_frame_s_runs",   "restitution",        "list_builds", "start_speed"};
+      "active_steps", "wall_contact_steps", "pair_contact_steps", "bin_entries",
+      "wall_buckets", "total_s_runs",       "per_frame_s_runs",   "restitution",
+      "list_builds",  "start_speed",        "wall_open"};
   return cols;
 }
 
@@ -148,6 +152,8 @@ Status validate(const JobInputs& in) {
     if (std::isinf(in.*field) || in.*field < 0)
       return invalid_argument(std::string(name) + " must be >= 0 or empty");
   if (in.restitution > 1) return invalid_argument("restitution must be <= 1 or empty");
+  if (in.wall_open != 0 && in.wall_open != 1 && !std::isnan(in.wall_open))
+    return invalid_argument("wall_open must be 0, 1 or empty");
   if (in.r_min > in.r_max) return invalid_argument("r_min must be <= r_max");
   if (!known(in.method, {"bin", "bvh", "gravity", "circumcircle", "midpoint4"}))
     return invalid_argument("method must be bin, gravity, circumcircle or midpoint4");

@@ -44,6 +44,12 @@ struct JobInputs {
   // fill's velocity); how soon the neighbour lists are built again follows from it.
   // NaN: a log written before it was recorded (stop 62).
   double start_speed = __builtin_nan("");
+  // 1 where the wall is open (an edge not shared by exactly two triangles of opposite
+  // turns, sim::is_closed_manifold), else 0: a fill tells an open wall's sites in and
+  // out by winding numbers over every triangle, and an inlet's places too, where a
+  // closed wall's need a few rays a group. NaN: a log written before it was recorded
+  // (stop 63).
+  double wall_open = __builtin_nan("");
   double duration = 0;           // simulated seconds
   double fps = 0;                // frames per simulated second
   uint64_t frames = 0;           // written after the initial one
