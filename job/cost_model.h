@@ -81,8 +81,7 @@ struct CostDrivers {
   double pixel_frames = 0;    // rendered pixels x frames written
   double snapshot_bytes = 0;  // the frames' snapshots, about 29 bytes a released particle
   double list_builds = 0;     // the neighbour lists' builds expected over the run (0: no lists)
-  double pooled_steps =
-      0;  // steps with more released particles than a pool's pass keeps on one thread
+  double pooled_steps = 0;    // steps that hand their passes to the pool (steps_released_beyond)
 };
 CostDrivers cost_drivers(const JobInputs& in);
 // The share of the particles an inlet has released, averaged over a run of `duration`
