@@ -106,6 +106,7 @@ Expected<JobAssessment> assess_job(const JobSpec& spec) {
   a.r_max = s.particles.r_max;
   a.triangles = wall->triangles.size();
   a.wall_area = sim::mesh_area(*wall);
+  a.wall_closed = sim::is_closed_manifold(*wall);
   const sim::Vec3d extent = sim::mesh_bounds(*wall).extent();
   a.box[0] = extent.x, a.box[1] = extent.y, a.box[2] = extent.z;
   a.frames = s.frames();

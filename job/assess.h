@@ -42,6 +42,7 @@ struct JobAssessment {
   double r_min = 0, r_max = 0;  // m
   uint64_t triangles = 0;       // of the wall as loaded
   double wall_area = 0;         // m^2
+  bool wall_closed = false;     // sim::is_closed_manifold: how a fill tells its sites in and out
   double box[3] = {0, 0, 0};    // m: the wall's bounding box
   uint64_t frames = 0;          // written after the initial one
   WorkEstimate work;            // engine work and peak host memory, estimated

@@ -12,7 +12,6 @@
 #include "common/median.h"
 #include "gvm/csv.h"
 #include "job/assess.h"
-#include "sim/mesh.h"
 #include "sim/parallel.h"
 
 namespace collido::job {
@@ -80,7 +79,7 @@ JobInputs job_inputs(const JobAssessment& a, const std::string& backend, const s
       (s.dynamics.wall_material_set ? s.dynamics.wall_material : s.dynamics.material).restitution;
   in.gravity = sim::length(s.dynamics.gravity);
   in.start_speed = a.release.speed;
-  in.wall_open = sim::is_closed_manifold(a.wall) ? 0 : 1;
+  in.wall_open = a.wall_closed ? 0 : 1;
   in.duration = s.duration;
   in.fps = s.fps;
   in.frames = a.frames;

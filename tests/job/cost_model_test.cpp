@@ -809,23 +809,60 @@ JobRecord divided_wall_job(const std::string& method, uint64_t particles) {
   return r;
 }
 
-// 48 such jobs, 100 .. 10,000 particles and 1,000 .. 6,982 steps, in four groups that
-// `vary` (given the group, 0 .. 3) sets apart in a third input, each timed by `total`
-// (a set-up of `setup` seconds and the steps') with a 3 % scatter on the steps' part.
-std::vector<JobRecord> jobs_by_law(const std::string& method, double setup,
+// 48 jobs, job(i) for i = 0 .. 47, each timed by `total` (a set-up of `setup` seconds
+// and the rest's) with a 3 % scatter on the rest.
+std::vector<JobRecord> rows_by_law(double setup,
                                    const std::function<double(const JobInputs&)>& total,
-                                   const std::function<void(int, JobInputs*)>& vary) {
+                                   const std::function<JobInputs(int)>& job) {
   std::vector<JobRecord> rows;
   for (int i = 0; i < 48; ++i) {
-    JobRecord r = divided_wall_job(method, uint64_t(100 * std::pow(100.0, (i % 12) / 11.0)));
-    r.inputs.steps = 1000 + 997 * uint64_t(i % 7);
-    vary(i / 12, &r.inputs);
+    JobRecord r = divided_wall_job("bin", 100);  // its measure's memory and output
+    r.inputs = job(i);
     const double scatter = 1 + 0.03 * std::sin(5.0 * i);
     r.measure.total_s = setup + (total(r.inputs) - setup) * scatter;
     r.measure.per_frame_s = (r.measure.total_s - setup) / double(r.inputs.frames + 1);
     rows.push_back(r);
   }
   return rows;
+}
+
+// 48 such jobs, 100 .. 10,000 particles and 1,000 .. 6,982 steps, in four groups that
+// `vary` (given the group, 0 .. 3) sets apart in a third input, each timed by `total`
+// (a set-up of `setup` seconds and the steps') with a 3 % scatter on the steps' part.
+std::vector<JobRecord> jobs_by_law(const std::string& method, double setup,
+                                   const std::function<double(const JobInputs&)>& total,
+                                   const std::function<void(int, JobInputs*)>& vary) {
+  return rows_by_law(setup, total, [&](int i) {
+    JobInputs in =
+        divided_wall_job(method, uint64_t(100 * std::pow(100.0, (i % 12) / 11.0))).inputs;
+    in.steps = 1000 + 997 * uint64_t(i % 7);
+    vary(i / 12, &in);
+    return in;
+  });
+}
+
+// 48 jobs job(particles, duration(i / 12), i) of 100 .. 10,000 particles over four
+// durations, their steps a little apart from the duration's, timed as rows_by_law.
+std::vector<JobRecord> jobs_over_durations(
+    double setup, const std::function<double(const JobInputs&)>& total,
+    const std::function<JobInputs(uint64_t, double, int)>& job,
+    const std::function<double(int)>& duration) {
+  return rows_by_law(setup, total, [&](int i) {
+    JobInputs in = job(uint64_t(100 * std::pow(100.0, (i % 12) / 11.0)), duration(i / 12), i);
+    in.steps += 97 * uint64_t(i % 5);
+    return in;
+  });
+}
+
+// Trained on `rows`, the priors alone price `job` within 10 % of the law `total`.
+void expect_prior_by_law(const std::vector<JobRecord>& rows,
+                         const std::function<double(const JobInputs&)>& total,
+                         const JobInputs& job) {
+  auto m = JobCostModel::train(rows, small_options(), nullptr);
+  ASSERT_TRUE(m) << m.status().message();
+  double prior[kJobOutputs];
+  m->prior_point(job, prior);
+  EXPECT_NEAR(prior[0], total(job), 0.1 * total(job));
 }
 
 // Trained on `rows`, the model prices `dear` and `cheap` each within 20 % of the
@@ -1024,7 +1061,7 @@ TEST(JobCostModelPrior, AJobsListBuildsGrowWithTheFallOfItsParticles) {
     return kSetup + kPerParticleStep * double(in.particles) * double(in.steps) +
            kPerParticleBuild * double(in.particles) * expected_list_builds(in);
   };
-  auto job = [](uint64_t particles, double duration) {
+  auto job = [](uint64_t particles, double duration, int) {
     JobInputs in = divided_wall_job("bin", particles).inputs;
     in.gravity = 9.81, in.box[2] = 20, in.r_min = in.r_max = 1;
     in.step_s = 1e-4;  // the skin 0.1 r_min: a build each 5 cm the fastest particle moves
@@ -1033,22 +1070,9 @@ TEST(JobCostModelPrior, AJobsListBuildsGrowWithTheFallOfItsParticles) {
     in.frames = uint64_t(std::llround(10 * duration));
     return in;
   };
-  std::vector<JobRecord> rows;
-  for (int i = 0; i < 48; ++i) {
-    JobRecord r = divided_wall_job("bin", 100);  // its measure's memory and output
-    r.inputs = job(uint64_t(100 * std::pow(100.0, (i % 12) / 11.0)), 0.25 * std::pow(2.0, i / 12));
-    r.inputs.steps += 97 * uint64_t(i % 5);  // steps apart from the duration a little
-    const double scatter = 1 + 0.03 * std::sin(5.0 * i);
-    r.measure.total_s = kSetup + (total(r.inputs) - kSetup) * scatter;
-    r.measure.per_frame_s = (r.measure.total_s - kSetup) / double(r.inputs.frames + 1);
-    rows.push_back(r);
-  }
-  auto m = JobCostModel::train(rows, small_options(), nullptr);
-  ASSERT_TRUE(m) << m.status().message();
-  const JobInputs long_job = job(1000, 8);
-  double prior[kJobOutputs];
-  m->prior_point(long_job, prior);
-  EXPECT_NEAR(prior[0], total(long_job), 0.1 * total(long_job));
+  const auto rows =  // 0.25 .. 2 s
+      jobs_over_durations(kSetup, total, job, [](int q) { return 0.25 * std::pow(2.0, q); });
+  expect_prior_by_law(rows, total, job(1000, 8, 0));
 }
 
 // A CPU step hands its passes to the pool only once an inlet has released more than
@@ -1088,31 +1112,18 @@ TEST(JobCostModelPrior, PairsWithFrictionCostTheirSpringsEachStep) {
     return kSetup + kPerParticleStep * d.particle_steps + kPerPairStep * pair_steps +
            kPerSpringStep * pair_steps * (in.friction > 0);
   };
-  auto job = [](uint64_t particles, double duration, bool friction) {
+  auto job = [](uint64_t particles, double duration, int i) {
     JobInputs in = divided_wall_job("bin", particles).inputs;
     in.gravity = 9.81, in.box[2] = 2 * 4.905;  // a fill's fall: 1 s
-    in.particle_contacts = true, in.friction = friction ? 0.4 : 0;
+    in.particle_contacts = true, in.friction = i % 2 ? 0.4 : 0;
     in.duration = duration;
     in.steps = uint64_t(std::llround(1000 * duration));
     in.frames = uint64_t(std::llround(10 * duration));
     return in;
   };
-  std::vector<JobRecord> rows;
-  for (int i = 0; i < 48; ++i) {
-    JobRecord r = divided_wall_job("bin", 100);  // its measure's memory and output
-    r.inputs = job(uint64_t(100 * std::pow(100.0, (i % 12) / 11.0)), 0.5 + 0.25 * (i / 12), i % 2);
-    r.inputs.steps += 97 * uint64_t(i % 5);  // steps apart from the duration a little
-    const double scatter = 1 + 0.03 * std::sin(5.0 * i);
-    r.measure.total_s = kSetup + (total(r.inputs) - kSetup) * scatter;
-    r.measure.per_frame_s = (r.measure.total_s - kSetup) / double(r.inputs.frames + 1);
-    rows.push_back(r);
-  }
-  auto m = JobCostModel::train(rows, small_options(), nullptr);
-  ASSERT_TRUE(m) << m.status().message();
-  const JobInputs long_pile = job(1000, 6, true);
-  double prior[kJobOutputs];
-  m->prior_point(long_pile, prior);
-  EXPECT_NEAR(prior[0], total(long_pile), 0.1 * total(long_pile));
+  const auto rows =  // 0.5 .. 1.25 s
+      jobs_over_durations(kSetup, total, job, [](int q) { return 0.5 + 0.25 * q; });
+  expect_prior_by_law(rows, total, job(1000, 6, 1));
 }
 
 // An open wall's set-up tells a fill's sites in and out by winding numbers, each over
