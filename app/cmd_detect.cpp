@@ -17,20 +17,24 @@ namespace collido::app {
 namespace {
 
 const std::vector<FlagSpec> kFlags = {
-    {"wall", true, "FILE.stl | cylinder:r=50,h=100,segments=40 | wall1 | wall2 | box:... (default wall1)"},
+    {"wall", true,
+     "FILE.stl | cylinder:r=50,h=100,segments=40 | wall1 | wall2 | box:... (default wall1)"},
     {"particles", true, "N random particles in the wall's bounding box, or FILE.csv (x,y,z,r)"},
     {"seed", true, "random seed for --particles N (default 1)"},
     {"radius", true, "radius of random particles (default 1)"},
     {"radius-range", true, "A:B radii uniform in [A, B] (overrides --radius)"},
-    {"method", true, "gravity | circumcircle | midpoint4 | bin | bvh | reference (default bin)"},
+    {"method", true,
+     "gravity | circumcircle | midpoint4 | bin | bvh | octree | reference (default bin)"},
     {"traversal", true, "particle | wall (default particle)"},
-    {"precision", true, "exact (float, pairs near touching re-decided in double) | float (default exact)"},
+    {"precision", true,
+     "exact (float, pairs near touching re-decided in double) | float (default exact)"},
     {"backend", true, "cpu | cuda (default cpu; cuda falls back to cpu with a note)"},
     {"grid-length", true, "cell edge in world units (default 2 r_max)"},
     {"threads", true, "CPU threads (default: all cores)"},
     {"out", true, "write contacts to this CSV: particle,triangle,distance"},
     {"json", false, "print a machine-readable summary"},
-    {"snapshot", true, "write DIR/wall.stl and DIR/frames/frame_000000.snap (contact flags) for `render`"},
+    {"snapshot", true,
+     "write DIR/wall.stl and DIR/frames/frame_000000.snap (contact flags) for `render`"},
     {"help", false, "show this help"},
 };
 

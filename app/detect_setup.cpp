@@ -28,8 +28,9 @@ int build_detect_setup(const ParsedArgs& args, const std::string& command, Detec
   sim::DetectConfig& cfg = out->config;
   cfg.pool = out->pool.get();
   if (args.has("method") && !sim::parse_method(args.get("method"), &cfg.method))
-    return usage_error(command, "unknown --method '" + args.get("method") +
-                                    "' (gravity, circumcircle, midpoint4, bin, bvh, reference)");
+    return usage_error(command,
+                       "unknown --method '" + args.get("method") +
+                           "' (gravity, circumcircle, midpoint4, bin, bvh, octree, reference)");
   if (args.has("traversal") && !sim::parse_traversal(args.get("traversal"), &cfg.traversal))
     return usage_error(command, "unknown --traversal '" + args.get("traversal") + "' (particle, wall)");
   if (args.has("precision") && !sim::parse_precision(args.get("precision"), &cfg.precision))
@@ -106,20 +107,21 @@ std::string detect_summary_json(const DetectSetup& s, const sim::PrepareInfo& in
     << "\",\"triangles_in_file\":" << s.wall_report.triangles_in
     << ",\"dropped_zero_area\":" << s.wall_report.dropped_zero_area
     << ",\"triangles_before_division\":" << info.triangles_original
-    << ",\"triangles_after_division\":" << info.triangles_used << ",\"particles\":" << s.particles.size()
-    << ",\"r_max\":" << s.config.r_max << ",\"method\":\"" << sim::to_string(s.config.method)
-    << "\",\"traversal\":\"" << sim::to_string(s.config.traversal) << "\",\"precision\":\""
-    << sim::to_string(s.config.precision) << "\",\"backend\":\""
-    << sim::to_string(s.config.backend) << "\",\"grid_length\":" << info.grid_length
-    << ",\"cells\":" << info.cells << ",\"buckets\":" << info.buckets
-    << ",\"hashed_grid\":" << (info.hashed ? "true" : "false") << ",\"bin_entries\":" << info.bin_entries
-    << ",\"tree_nodes\":" << info.bvh_nodes << ",\"tree_depth\":" << info.bvh_depth
-    << ",\"contacts\":" << r.contact_count << ",\"colliding_particles\":" << r.colliding_particles
-    << ",\"band_pairs\":" << r.band_pairs
+    << ",\"triangles_after_division\":" << info.triangles_used
+    << ",\"particles\":" << s.particles.size() << ",\"r_max\":" << s.config.r_max
+    << ",\"method\":\"" << sim::to_string(s.config.method) << "\",\"traversal\":\""
+    << sim::to_string(s.config.traversal) << "\",\"precision\":\""
+    << sim::to_string(s.config.precision) << "\",\"backend\":\"" << sim::to_string(s.config.backend)
+    << "\",\"grid_length\":" << info.grid_length << ",\"cells\":" << info.cells
+    << ",\"buckets\":" << info.buckets << ",\"hashed_grid\":" << (info.hashed ? "true" : "false")
+    << ",\"bin_entries\":" << info.bin_entries << ",\"tree_nodes\":" << info.bvh_nodes
+    << ",\"tree_depth\":" << info.bvh_depth << ",\"octree_leaves\":" << info.octree_leaves
+    << ",\"octree_entries\":" << info.octree_entries << ",\"contacts\":" << r.contact_count
+    << ",\"colliding_particles\":" << r.colliding_particles << ",\"band_pairs\":" << r.band_pairs
     << ",\"area_error\":" << info.area_error << ",\"time_ms\":{\"prepare\":" << info.prepare_ms
     << ",\"hash\":" << t.hash_ms << ",\"sort\":" << t.sort_ms << ",\"cells\":" << t.cells_ms
-    << ",\"traverse\":" << t.traverse_ms << ",\"finalize\":" << t.finalize_ms << ",\"frame\":" << t.frame_ms
-    << ",\"download\":" << t.download_ms << "}";
+    << ",\"traverse\":" << t.traverse_ms << ",\"finalize\":" << t.finalize_ms
+    << ",\"frame\":" << t.frame_ms << ",\"download\":" << t.download_ms << "}";
   if (!s.backend_note.empty()) o << ",\"note\":\"" << json_escape(s.backend_note) << "\"";
   o << "}";
   return o.str();
@@ -141,6 +143,15 @@ std::string detect_summary_text(const DetectSetup& s, const sim::PrepareInfo& in
     std::snprintf(line, sizeof line, "particles   %zu, r_max %g; a tree of %llu nodes, %d levels deep\n",
                   s.particles.size(), s.config.r_max, static_cast<unsigned long long>(info.bvh_nodes),
                   info.bvh_depth);
+  else if (info.octree_leaves)  // the octree: its cells, and the leaves they split into
+    std::snprintf(line, sizeof line,
+                  "particles   %zu, r_max %g; grid length %g, %llu cells%s, %llu split: %llu "
+                  "leaves listing %llu\n",
+                  s.particles.size(), s.config.r_max, info.grid_length,
+                  static_cast<unsigned long long>(info.cells), info.hashed ? " (hashed)" : "",
+                  static_cast<unsigned long long>(info.octree_splits),
+                  static_cast<unsigned long long>(info.octree_leaves),
+                  static_cast<unsigned long long>(info.octree_entries));
   else
     std::snprintf(line, sizeof line, "particles   %zu, r_max %g; grid length %g, %llu cells%s\n", s.particles.size(),
                   s.config.r_max, info.grid_length, static_cast<unsigned long long>(info.cells),

@@ -67,6 +67,10 @@ class CpuBackend {
   void parallel_for_lanes(size_t n, uint32_t, F f) {
     cpu_parallel_for(*pool_, n, [&f](uint32_t i) { f(i, LaneGroup{}); }, kHeavyGrain);
   }
+  template <class F>
+  void parallel_for_lanes_light(size_t n, uint32_t lanes, F f) {
+    parallel_for_lanes(n, lanes, f);
+  }
   // Runs f(i) for every i < n and returns the largest value it returned (0
   // when n == 0); f returns doubles >= 0.
   template <class F>
@@ -111,6 +115,8 @@ class CpuBackend {
     }
     return sum;
   }
+
+  void exclusive_scan_on_device(uint32_t* d, size_t n) { exclusive_scan(d, n); }
 
   // Sum and maximum of n doubles (0 when n == 0); per-frame statistics and the time step.
   double reduce_sum(const double* d, size_t n) { return std::accumulate(d, d + n, 0.0); }

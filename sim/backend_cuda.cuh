@@ -109,9 +109,7 @@ __global__ void __launch_bounds__(256, 3)
 // f(i, group) for every i < n, `size` consecutive lanes an item (a power of
 // two up to 32, so a group never spans two warps); a group leaves together.
 template <class F>
-__global__ void __launch_bounds__(256, 2)
-    for_each_lanes_kernel(uint32_t n, uint32_t size, F f, const unsigned long long* halt) {
-  if (halted(halt)) return;
+__device__ __forceinline__ void run_lanes(uint32_t n, uint32_t size, F& f) {
   const uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
   const uint32_t i = t / size;
   if (i >= n) return;
@@ -121,6 +119,20 @@ __global__ void __launch_bounds__(256, 2)
   const uint32_t ones = size == 32 ? 0xffffffffu : (1u << size) - 1u;
   g.mask = ones << ((threadIdx.x & 31u) & ~(size - 1u));
   f(i, g);
+}
+template <class F>
+__global__ void __launch_bounds__(256, 2)
+    for_each_lanes_kernel(uint32_t n, uint32_t size, F f, const unsigned long long* halt) {
+  if (!halted(halt)) run_lanes(n, size, f);
+}
+
+// The same with four 256-thread blocks an SM (64 registers), for a loop body
+// that waits on its loads more than it computes: the octree's leaf lists
+// (sim/detect_pipeline.h), whose rare double-precision path may spill.
+template <class F>
+__global__ void __launch_bounds__(256, 4)
+    for_each_lanes_kernel_light(uint32_t n, uint32_t size, F f, const unsigned long long* halt) {
+  if (!halted(halt)) run_lanes(n, size, f);
 }
 
 // Up to kMaxColumns columns of doubles reduced in one launch (see
@@ -263,6 +275,17 @@ class CudaBackend {
                                                         halt_word());
     check(cudaGetLastError(), "kernel launch");
   }
+  // The same with more threads in flight and fewer registers each (see
+  // for_each_lanes_kernel_light); lanes a power of two from 2 to 32.
+  template <class F>
+  void parallel_for_lanes_light(size_t n, uint32_t lanes, F f) {
+    if (n == 0 || !ok_) return;
+    const size_t threads = n * lanes;
+    const uint32_t blocks = static_cast<uint32_t>((threads + 255) / 256);
+    cuda_detail::for_each_lanes_kernel_light<<<blocks, 256>>>(static_cast<uint32_t>(n), lanes, f,
+                                                              halt_word());
+    check(cudaGetLastError(), "kernel launch");
+  }
   template <class T>
   void fill(T* p, size_t n, T v) {
     // In parts a launch can index (the statistics of 2^28 particles are 17 x 2^28 values).
@@ -305,6 +328,18 @@ class CudaBackend {
       return 0;
     copy(d, scan_out_.data(), n * sizeof(uint32_t));
     return sum;
+  }
+
+  // In-place exclusive prefix sum that stays on the device (no total read
+  // back, so nothing waits): for counts whose sum fits 32 bits.
+  void exclusive_scan_on_device(uint32_t* d, size_t n) {
+    if (n == 0) return;
+    resize(scan_out_, n);
+    if (!cub_call("scan", [&](void* t, size_t& bytes) {
+          return cub::DeviceScan::ExclusiveSum(t, bytes, d, scan_out_.data(), static_cast<int>(n));
+        }))
+      return;
+    copy(d, scan_out_.data(), n * sizeof(uint32_t));
   }
 
   // Sum and maximum of n doubles (0 when n == 0); one small read-back each.

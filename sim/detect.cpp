@@ -18,6 +18,8 @@ const char* to_string(Method m) {
     case Method::kBin: return "bin";
     case Method::kReference: return "reference";
     case Method::kBvh: return "bvh";
+    case Method::kOctree:
+      return "octree";
   }
   return "?";
 }
@@ -26,8 +28,8 @@ const char* to_string(Backend b) { return b == Backend::kCuda ? "cuda" : "cpu"; 
 const char* to_string(Precision p) { return p == Precision::kFloat ? "float" : "exact"; }
 
 bool parse_method(const std::string& s, Method* out) {
-  for (Method m : {Method::kGravity, Method::kCircumcircle, Method::kMidpoint4, Method::kBin, Method::kReference,
-                   Method::kBvh})
+  for (Method m : {Method::kGravity, Method::kCircumcircle, Method::kMidpoint4, Method::kBin,
+                   Method::kReference, Method::kBvh, Method::kOctree})
     if (s == to_string(m)) return *out = m, true;
   return false;
 }
@@ -153,6 +155,9 @@ Expected<std::unique_ptr<Detector>> Detector::create(const TriangleMesh& mesh, c
   if (config.method == Method::kBvh && config.traversal == Traversal::kWall)
     return invalid_argument(
         "the bvh method walks its tree from each particle: use the particle traversal");
+  if (config.method == Method::kOctree && config.traversal == Traversal::kWall)
+    return invalid_argument(
+        "the octree method reads each particle's own leaf: use the particle traversal");
   if (config.backend == Backend::kCuda) {
 #if defined(COLLIDO_HAVE_CUDA)
     return make_cuda_detector(mesh, config, max_particles);

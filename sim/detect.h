@@ -23,11 +23,14 @@ enum class Method {
   kBin,           // no division: original triangles binned into every cell they reach
   kReference,     // exact brute force in double precision (the test oracle)
   kBvh,           // no division: a bounding volume hierarchy over the original triangles
+  kOctree,  // no division: grid cells split where triangles crowd, each leaf listing the originals
 };
-// Whether a method lays a grid over the wall (cells of grid_length) and
-// offers both traversals: all but the tree, which walks from each particle,
-// and the reference, which tests every triangle.
-inline bool uses_grid(Method m) { return m != Method::kBvh && m != Method::kReference; }
+// Whether a method lays a uniform grid over the wall (cells of grid_length)
+// and offers both traversals: all but the tree and the octree, which a frame
+// walks from each particle, and the reference, which tests every triangle.
+inline bool uses_grid(Method m) {
+  return m != Method::kBvh && m != Method::kOctree && m != Method::kReference;
+}
 // Whether a method divides the wall into pieces (gravity, circumcircle, midpoint4).
 inline bool divides(Method m) {
   return m == Method::kGravity || m == Method::kCircumcircle || m == Method::kMidpoint4;
@@ -120,6 +123,9 @@ struct PrepareInfo {
   uint64_t bin_entries = 0;  // bin: (cell, triangle) pairs stored
   uint64_t bvh_nodes = 0;    // bvh: nodes of the (four-wide) tree
   int bvh_depth = 0;         // bvh: its levels to the deepest leaf
+  uint64_t octree_leaves = 0;   // octree: leaves (cells or parts of cells that list triangles)
+  uint64_t octree_entries = 0;  // octree: (leaf, triangle) pairs stored
+  uint64_t octree_splits = 0;   // octree: cells split in eight
   double prepare_ms = 0;
   uint64_t device_bytes = 0;  // scratch and prepared data held by the backend
 };

@@ -74,13 +74,17 @@ class GridDetector final : public Detector {
     lap_start_ = t_frame;
     const bool bin = cfg_.method == Method::kBin;
     const bool bvh = cfg_.method == Method::kBvh;
+    const bool octree = cfg_.method == Method::kOctree;
     const bool wall = cfg_.traversal == Traversal::kWall;
-    if (bvh || (bin && !wall)) {
+    if (bvh || octree || (bin && !wall)) {
       // The walks that count per particle themselves (no sort for bin: a particle reads its cell).
       if (bvh) hash_and_sort(out);
+      if (octree) octree_group(out);
       auto walk = [&](bool collect) {
         if (bvh)
           bvh_particle_traversal(collect);
+        else if (octree)
+          octree_traversal(collect);
         else
           bin_particle_traversal(collect);
       };
@@ -115,7 +119,7 @@ class GridDetector final : public Detector {
           "use the bin or bvh method, or fewer or smaller particles");
     }
     // Contacts as (particle, original) pairs, deduplicated with the smallest distance.
-    const bool from_pairs = !(bin && !wall) && !bvh;
+    const bool from_pairs = !(bin && !wall) && !bvh && !octree;
     uint32_t unique = 0;
     if (from_pairs || cfg_.collect_contacts) {
       unique = backend_.dedup_min(pair_key_.data(), pair_dist_.data(), pair_count_host_,
@@ -194,17 +198,20 @@ class GridDetector final : public Detector {
       backend_.resize(p_idx_, capacity_);
       backend_.resize(p_key_sorted_, capacity_);
       backend_.resize(p_idx_sorted_, capacity_);
-      if (cfg_.method != Method::kBvh || B::kWalksReadReorderedCopy)
-        backend_.resize(sorted_particles_, capacity_);
+      const bool walks = cfg_.method == Method::kBvh || cfg_.method == Method::kOctree;
+      if (!walks || B::kWalksReadReorderedCopy) backend_.resize(sorted_particles_, capacity_);
       if (cfg_.traversal == Traversal::kWall) {
         backend_.resize(p_cell_start_, wall_.grid.buckets);
         backend_.resize(p_cell_end_, wall_.grid.buckets);
       }
     }
+    if (cfg_.method == Method::kOctree) backend_.resize(leaf_pos_, size_t(wall_.octree_leaves) + 1);
     if (created_precision_ == Precision::kExact) prepare_exact(mesh);
     // bvh counts without pairs: its buffer grows when a frame first collects them.
-    grow_pairs(std::min<size_t>(
-        cfg_.method == Method::kBvh ? 4096 : std::max<size_t>(capacity_ / 4, 4096), pair_limit()));
+    grow_pairs(std::min<size_t>(cfg_.method == Method::kBvh || cfg_.method == Method::kOctree
+                                    ? 4096
+                                    : std::max<size_t>(capacity_ / 4, 4096),
+                                pair_limit()));
     backend_.resize(pair_counter_, 3);
     backend_.sync();
     if (Status e = backend_.status(); !e) return e;
@@ -431,6 +438,110 @@ class GridDetector final : public Detector {
     });
   }
 
+  // octree, first half of a frame: the particles grouped by leaf (a counting
+  // sort: each particle's leaf and its rank among the leaf's, the leaves'
+  // starts by a scan, then the sorted index), so the threads that test one
+  // leaf's list read it together. The particles in no leaf touch nothing; how
+  // many lie in one stays on the device (the leaves' end, pos[leaves]).
+  void octree_group(DetectResult* out) {
+    const OctreeView ov = wall_.octree_view();
+    const PackedParticle* P = particles_.data();
+    uint32_t* leaf_of = p_key_.data();
+    uint32_t* rank = p_idx_.data();
+    uint32_t* pos = leaf_pos_.data();
+    const size_t leaves = wall_.octree_leaves;
+    backend_.fill(pos, leaves + 1, 0u);
+    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+      const int32_t leaf = ov.leaf_of(position(P[i]));
+      leaf_of[i] = uint32_t(leaf);
+      if (leaf >= 0) rank[i] = atomic_add_u32(&pos[leaf], 1u);
+    });
+    lap(out->times.hash_ms);
+    backend_.exclusive_scan_on_device(pos, leaves + 1);
+    // The walk reads the particles through the sorted index where the backend
+    // hides scattered reads, else from a reordered copy (as the tree's).
+    constexpr bool copy = B::kWalksReadReorderedCopy;
+    PackedParticle* SP = sorted_particles_.data();
+    uint32_t* sid = p_idx_sorted_.data();
+    uint32_t* sleaf = p_key_sorted_.data();
+    backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
+      const uint32_t leaf = leaf_of[i];
+      if (leaf == uint32_t(kOctreeEmpty)) return;
+      const uint32_t at = pos[leaf] + rank[i];
+      if (copy) SP[at] = P[i];
+      sid[at] = i;
+      sleaf[at] = leaf;
+    });
+    lap(out->times.sort_ms);
+  }
+
+  // octree, second half: the grouped particles in runs of 32, a run to a warp
+  // (one thread on the CPU). Within a run, each leaf's particles against its
+  // list: a triangle a lane while the particles pass, or, for a short list,
+  // 32 / T particles at a time a lane a pair, so a warp's lanes stay busy and
+  // read one list. Each pair is met once.
+  void octree_traversal(bool collect) {
+    const OctreeView ov = wall_.octree_view();
+    const PackedParticle* SP = sorted_particles_.data();
+    const uint32_t* sid = p_idx_sorted_.data();
+    const uint32_t* sleaf = p_key_sorted_.data();
+    const uint32_t* pos = leaf_pos_.data();
+    const PlanarTriangle* T = wall_.tris.data();
+    uint32_t* counts = counts_.data();
+    const PairSink out = sink();
+    const Narrow nw = narrow();
+    uint32_t* band_total = band_counter();
+    backend_.fill(counts, n_, 0u);
+    const uint32_t* located = pos + wall_.octree_leaves;
+    const PackedParticle* P = particles_.data();
+    constexpr bool copied = B::kWalksReadReorderedCopy;
+    constexpr uint32_t kRun = 32;
+    const size_t runs = (n_ + kRun - 1) / kRun;  // at most; the particles in no leaf are left out
+    backend_.parallel_for_lanes_light(runs, kRun, [=] COLLIDO_HD(uint32_t u, LaneGroup g) {
+      const uint32_t j1 = hd_min(*located, (u + 1) * kRun);
+      uint32_t band = 0;
+      for (uint32_t j = u * kRun; j < j1;) {
+        const uint32_t leaf = sleaf[j];
+        const uint32_t end = hd_min(j1, pos[leaf + 1]);
+        const uint32_t ts = ov.leaf_start[leaf], nt = ov.leaf_start[leaf + 1] - ts;
+        if (nt >= g.size) {
+          for (uint32_t tb = 0; tb < nt; tb += g.size) {
+            const uint32_t ti = tb + g.lane;
+            const bool have = ti < nt;
+            const uint32_t t = have ? ov.leaf_tri[ts + ti] : 0u;
+            const PlanarTriangle tri = T[t];
+            for (uint32_t k = j; k < end; ++k) {
+              const uint32_t i = sid[k];
+              const PackedParticle p = copied ? SP[k] : P[i];
+              float d = 0;
+              const bool hit = have && nw.decide(p, tri, i, t, &d, &band);
+              if (hit && collect) out.push(i, t, d);
+              const uint32_t hits = g.sum(uint32_t(hit));
+              if (g.lane == 0 && hits) atomic_add_u32(&counts[i], hits);
+            }
+          }
+        } else {
+          const uint32_t per = g.size / nt, group = g.lane / nt, ti = g.lane - group * nt;
+          if (group < per) {
+            const uint32_t t = ov.leaf_tri[ts + ti];
+            const PlanarTriangle tri = T[t];
+            for (uint32_t k = j + group; k < end; k += per) {
+              const uint32_t i = sid[k];
+              const PackedParticle p = copied ? SP[k] : P[i];
+              float d = 0;
+              if (nw.decide(p, tri, i, t, &d, &band)) {
+                atomic_add_u32(&counts[i], 1u);
+                if (collect) out.push(i, t, d);
+              }
+            }
+          }
+        }
+        j = end;
+      }
+      if (band) atomic_add_u32(band_total, band);
+    });
+  }
+
   // bin, wall traversal: a thread per (cell, triangle) entry loops over the
   // particles of that cell. Each pair is met once, so no deduplication is needed.
   void bin_wall_traversal() {
@@ -582,6 +693,7 @@ class GridDetector final : public Detector {
 
   Buf<PackedParticle> particles_, sorted_particles_;
   Buf<uint32_t> p_key_, p_idx_, p_key_sorted_, p_idx_sorted_, p_cell_start_, p_cell_end_, counts_;
+  Buf<uint32_t> leaf_pos_;  // octree: the leaves' particle counts, then their starts (leaves + 1)
 
   Buf<uint64_t> pair_key_, pair_key2_;
   Buf<float> pair_dist_, pair_dist2_;

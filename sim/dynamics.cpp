@@ -259,9 +259,10 @@ namespace {
 
 Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const ParticleSet& p) {
   if (wall.triangles.empty()) return invalid_argument("wall: the wall has no triangles");
-  if (c.method == Method::kReference)
-    return invalid_argument(
-        "method: the dynamics prepares the wall as bin, bvh or a division method, not reference");
+  if (c.method == Method::kReference || c.method == Method::kOctree)
+    return invalid_argument(std::string("method: the dynamics prepares the wall as bin, bvh or a "
+                                        "division method, not ") +
+                            to_string(c.method));
   if (Status s = check_contact_settings(c); !s) return s;
   const WallMotion& w = c.wall_motion;
   if (w.part > 0 && !w.moves_part())

@@ -16,6 +16,7 @@
 #include "sim/exact_distance.h"
 #include "sim/grid.h"
 #include "sim/narrow_phase.h"
+#include "sim/octree.h"
 
 namespace collido::sim {
 
@@ -271,6 +272,7 @@ class WallIndex {
     band_scale = wall_band_scale(mesh, origin);
     info->triangles_original = mesh.triangles.size();
     if (method == Method::kBvh) return prepare_bvh(backend, mesh, box, info);
+    if (method == Method::kOctree) return prepare_octree(backend, mesh, box, cell, info);
     return method == Method::kBin ? prepare_bin(backend, mesh, box, cell, info)
                                   : prepare_pieces(backend, mesh, cell, info);
   }
@@ -414,17 +416,62 @@ class WallIndex {
     return Status::ok();
   }
 
-  Status prepare_bin(B& backend, const TriangleMesh& mesh, const Bounds3d& box, double cell,
-                     PrepareInfo* info) {
-    const size_t m = mesh.triangles.size();
+  // bin's grid over the wall's m triangles (bin and octree), said in *info.
+  BinLayout lay_bin_grid(const Bounds3d& box, double cell, size_t m, PrepareInfo* info) {
     info->triangles_used = m;
     reach = 0;
     const BinLayout layout = bin_layout(box, origin, r_max_, cell, max_dense_cells_, m, particles_);
-    const double grow = layout.grow;
     grid = layout.grid;
     info->cells = layout.cells;
     info->buckets = grid.buckets;
     info->hashed = grid.hashed != 0;
+    return layout;
+  }
+
+  // octree: bin's grid (the same cells and pad for float rounding), its cells
+  // split where triangles crowd (sim/octree.h), built on the host; the
+  // triangles in mesh order, as bin keeps them.
+  Status prepare_octree(B& backend, const TriangleMesh& mesh, const Bounds3d& box, double cell,
+                        PrepareInfo* info) {
+    const size_t m = mesh.triangles.size();
+    const BinLayout layout = lay_bin_grid(box, cell, m, info);
+    std::vector<PlanarTriangle> host_tris(m);
+    std::vector<PlanarTriangleD> host_tris_d(double_ ? m : 0);
+    for (size_t t = 0; t < m; ++t) set_planar(mesh, t, t, host_tris, host_tris_d);
+    upload(backend, tris, host_tris);
+    if (double_) upload(backend, tris_d, host_tris_d);
+    const OctreeBuild built = build_octree(mesh, origin, grid, layout.grow);
+    if (built.leaf_tri.size() >= (1ull << 31))
+      return invalid_argument("the octree method would store " +
+                              std::to_string(built.leaf_tri.size()) +
+                              " (leaf, triangle) pairs; raise --grid-length");
+    info->octree_leaves = built.leaves();
+    info->octree_entries = built.leaf_tri.size();
+    info->octree_splits = built.splits;
+    octree_leaves = static_cast<uint32_t>(built.leaves());
+    upload(backend, oct_cell_start, built.cell_start);
+    upload(backend, oct_cell_key, built.cell_key);
+    upload(backend, oct_cell_node, built.cell_node);
+    upload(backend, oct_inner, built.inner);
+    upload(backend, oct_leaf_start, built.leaf_start);
+    upload(backend, oct_leaf_tri, built.leaf_tri);
+    return Status::ok();
+  }
+
+  OctreeView octree_view() const {
+    OctreeView o;
+    o.grid = grid;
+    o.cell_start = oct_cell_start.data(), o.cell_key = oct_cell_key.data();
+    o.cell_node = oct_cell_node.data(), o.inner = oct_inner.data();
+    o.leaf_start = oct_leaf_start.data(), o.leaf_tri = oct_leaf_tri.data();
+    return o;
+  }
+
+  Status prepare_bin(B& backend, const TriangleMesh& mesh, const Bounds3d& box, double cell,
+                     PrepareInfo* info) {
+    const size_t m = mesh.triangles.size();
+    const BinLayout layout = lay_bin_grid(box, cell, m, info);
+    const double grow = layout.grow;
 
     std::vector<TriangleF> host_corners(m);
     std::vector<PlanarTriangle> host_tris(m);
@@ -504,6 +551,11 @@ class WallIndex {
   Buf<BvhWideNode> bvh_nodes;  // the four-wide tree
   float bvh_reach = 0;
   MortonFrame morton;  // bvh: orders a frame's particles along the wall
+  // octree (sim/octree.h): the top cells by bucket, the inner nodes, the leaves' lists
+  Buf<uint32_t> oct_cell_start, oct_leaf_start, oct_leaf_tri;
+  Buf<uint64_t> oct_cell_key;
+  Buf<int32_t> oct_cell_node, oct_inner;
+  uint32_t octree_leaves = 0;
 
  private:
   Method method_ = Method::kBin;

@@ -150,6 +150,7 @@ TEST(Scene, ErrorsNameTheKey) {
   expect_error(R"({"wall": "wall1", "duration": 1e-9, "fps": 0.001})", "fps");
   expect_error(R"({"wall": "wall1", "method": "magic"})", "method");
   expect_error(R"({"wall": "wall1", "method": "reference"})", "method");
+  expect_error(R"({"wall": "wall1", "method": "octree"})", "method");
   expect_error(R"({"wall": "wall1", "grid_length": "big"})", "grid_length");
   expect_error(R"({"wall": "wall1", "grid_length": -1})", "grid_length");
   expect_error(R"({"wall": "wall1", "backend": "tpu"})", "backend");

@@ -241,7 +241,7 @@ void counter_mesh_matches_the_reference() {
     ASSERT_TRUE((*ref)->set_particles(p));
     ASSERT_TRUE((*ref)->detect(&rr));
     EXPECT_GT(rr.contact_count, 1000u);
-    for (Method m : {Method::kBvh, Method::kBin}) {
+    for (Method m : {Method::kBvh, Method::kBin, Method::kOctree}) {
       cfg.method = m;
       cfg.backend = backend_under_test();
       auto det = Detector::create(*mesh, cfg, p.size());

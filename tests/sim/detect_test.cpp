@@ -22,11 +22,12 @@ struct Combo {
   Method method;
   Traversal traversal;
 };
-const Combo kCombos[] = {{Method::kBin, Traversal::kParticle},          {Method::kBin, Traversal::kWall},
-                         {Method::kGravity, Traversal::kParticle},      {Method::kGravity, Traversal::kWall},
-                         {Method::kCircumcircle, Traversal::kParticle}, {Method::kCircumcircle, Traversal::kWall},
-                         {Method::kMidpoint4, Traversal::kParticle},    {Method::kMidpoint4, Traversal::kWall},
-                         {Method::kBvh, Traversal::kParticle}};
+const Combo kCombos[] = {
+    {Method::kBin, Traversal::kParticle},          {Method::kBin, Traversal::kWall},
+    {Method::kGravity, Traversal::kParticle},      {Method::kGravity, Traversal::kWall},
+    {Method::kCircumcircle, Traversal::kParticle}, {Method::kCircumcircle, Traversal::kWall},
+    {Method::kMidpoint4, Traversal::kParticle},    {Method::kMidpoint4, Traversal::kWall},
+    {Method::kBvh, Traversal::kParticle},          {Method::kOctree, Traversal::kParticle}};
 
 DetectResult run(const TriangleMesh& mesh, const Particles& p, DetectConfig cfg) {
   auto det = Detector::create(mesh, cfg, p.size());
@@ -310,9 +311,9 @@ void float_precision_flags_its_doubts() {
   rc.method = Method::kReference;
   rc.backend = Backend::kCpu;
   const DetectResult ref = run(wall, p, rc);
-  for (const Combo& c : {Combo{Method::kBin, Traversal::kParticle},
-                         Combo{Method::kCircumcircle, Traversal::kWall},
-                         Combo{Method::kBvh, Traversal::kParticle}}) {
+  for (const Combo& c :
+       {Combo{Method::kBin, Traversal::kParticle}, Combo{Method::kCircumcircle, Traversal::kWall},
+        Combo{Method::kBvh, Traversal::kParticle}, Combo{Method::kOctree, Traversal::kParticle}}) {
     DetectConfig mc = cfg;
     mc.method = c.method, mc.traversal = c.traversal, mc.precision = Precision::kFloat;
     const DetectResult fl = run(wall, p, mc);
@@ -329,7 +330,7 @@ void float_precision_flags_its_doubts() {
 }
 
 // A frame whose candidate pairs pass the most a frame may hold fails with a
-// clear error instead of a wrong count; counting alone (bin, bvh) holds no pairs.
+// clear error instead of a wrong count; counting alone (bin, bvh, octree) holds no pairs.
 void more_pairs_than_a_frame_may_hold() {
   const TriangleMesh wall = make_cylinder(50, 100, 40);
   const Particles p = particles_touching(wall, 600, 1, 1, 1e-3, 4);
@@ -347,7 +348,8 @@ void more_pairs_than_a_frame_may_hold() {
     EXPECT_NE(s.message().find("more than 100 candidate"), std::string::npos) << s.message();
     // The detector stays usable: the next frame is judged afresh.
     EXPECT_FALSE((*det)->detect(&r));
-    if ((c.method == Method::kBin || c.method == Method::kBvh) && c.traversal == Traversal::kParticle) {
+    if ((c.method == Method::kBin || c.method == Method::kBvh || c.method == Method::kOctree) &&
+        c.traversal == Traversal::kParticle) {
       (*det)->set_frame_options(/*collect_contacts=*/false, false);
       ASSERT_TRUE((*det)->detect(&r)) << "counting alone holds no pairs";
       EXPECT_GT(r.contact_count, 100u);

@@ -1444,6 +1444,8 @@ TEST(Dynamics, BadSettingsNameTheKey) {
   c = {};
   c.method = Method::kReference;
   expect_error(c, p, "method");
+  c.method = Method::kOctree;  // a detection method: the wall's lists do not read it
+  expect_error(c, p, "octree");
   ParticleSet bad = p;
   bad.r[0] = 0;
   expect_error({}, bad, "radius");

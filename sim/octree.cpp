@@ -1,0 +1,174 @@
+#include "sim/octree.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <mutex>
+#include <utility>
+
+#include "sim/narrow_phase.h"
+#include "sim/parallel.h"
+
+namespace collido::sim {
+
+namespace {
+
+using Corners = std::array<Vec3d, 3>;
+
+// Whether triangle c may come within `grow` of the cube at lo with side s:
+// it meets the cube grown by `grow` on every side (thirteen separating axes),
+// and its distance from the cube's centre is at most grow plus the
+// half-diagonal (the grown cube's corners lie farther than `grow`).
+bool near_cube(const Corners& c, Vec3d lo, double s, double grow) {
+  const double h = 0.5 * s;
+  const Vec3d centre{lo.x + h, lo.y + h, lo.z + h};
+  if (!triangle_box_overlap<double>(c[0], c[1], c[2], centre, Vec3d{h + grow, h + grow, h + grow}))
+    return false;
+  const double reach = grow + h * std::sqrt(3.0);
+  return point_triangle_dist2<double>(centre, c[0], c[1], c[2]) <= reach * reach;
+}
+
+// The nodes of some top cells, numbered from 0 within this part; merged
+// into the whole build in the cells' order, so the result does not depend on
+// how the cells were shared among threads.
+struct Part {
+  std::vector<int32_t> top;  // a node per top cell of the part
+  std::vector<int32_t> inner;
+  std::vector<uint32_t> leaf_start{0};
+  std::vector<uint32_t> leaf_tri;
+  uint64_t splits = 0;
+  uint32_t longest = 0;
+
+  // The node of the cube at lo, side s, `depth` levels below the top, which
+  // lists `mine` (already tested against it).
+  int32_t make(const std::vector<Corners>& tri, const std::vector<uint32_t>& mine, Vec3d lo,
+               double s, int depth, double grow, uint32_t split_above, int max_depth) {
+    if (mine.empty()) return kOctreeEmpty;
+    if (mine.size() > split_above && depth < max_depth) {
+      const uint32_t children = uint32_t(inner.size());
+      inner.resize(inner.size() + 8, kOctreeEmpty);
+      ++splits;
+      const double half = 0.5 * s;
+      std::vector<uint32_t> sub;
+      for (int o = 0; o < 8; ++o) {
+        const Vec3d at{lo.x + (o & 1) * half, lo.y + ((o >> 1) & 1) * half,
+                       lo.z + ((o >> 2) & 1) * half};
+        sub.clear();
+        for (uint32_t t : mine)
+          if (near_cube(tri[t], at, half, grow)) sub.push_back(t);
+        const int32_t child = make(tri, sub, at, half, depth + 1, grow, split_above, max_depth);
+        inner[children + uint32_t(o)] = child;
+      }
+      return octree_inner_node(children);
+    }
+    const int32_t leaf = int32_t(leaf_start.size() - 1);
+    leaf_tri.insert(leaf_tri.end(), mine.begin(), mine.end());
+    leaf_start.push_back(uint32_t(leaf_tri.size()));
+    longest = std::max(longest, uint32_t(mine.size()));
+    return leaf;
+  }
+};
+
+}  // namespace
+
+OctreeBuild build_octree(const TriangleMesh& mesh, Vec3d origin, const GridSpec& grid, double grow,
+                         uint32_t split_above, int max_depth, ThreadPool* pool) {
+  OctreeBuild out;
+  ThreadPool& threads = pool ? *pool : default_pool();
+  max_depth = std::clamp(max_depth, 0, kOctreeDeepest);
+  const size_t m = mesh.triangles.size();
+  std::vector<Corners> tri(m);
+  for (size_t t = 0; t < m; ++t)
+    for (int k = 0; k < 3; ++k) tri[t][k] = mesh.corner(t, k) - origin;
+  // The grid's cells in double, as the float grid places them.
+  const Vec3d o{grid.origin.x, grid.origin.y, grid.origin.z};
+  const double cell = grid.cell;
+  const int n[3] = {grid.nx, grid.ny, grid.nz};
+
+  // (top cell, triangle) for every cell a triangle's box grown by `grow`
+  // reaches and the triangle may come within `grow` of; then in cell order.
+  std::vector<std::pair<uint64_t, uint32_t>> pairs;
+  std::mutex joined;
+  threads.run_chunks(m, 256, [&](size_t begin, size_t end) {
+    std::vector<std::pair<uint64_t, uint32_t>> mine;
+    for (size_t t = begin; t < end; ++t) {
+      int lo[3], hi[3];
+      for (int a = 0; a < 3; ++a) {
+        auto axis = [a](Vec3d v) { return a == 0 ? v.x : (a == 1 ? v.y : v.z); };
+        double mn = axis(tri[t][0]), mx = mn;
+        for (int k = 1; k < 3; ++k)
+          mn = std::min(mn, axis(tri[t][k])), mx = std::max(mx, axis(tri[t][k]));
+        const double oa = axis(o);
+        lo[a] = std::clamp(int(std::floor((mn - grow - oa) / cell)), 0, n[a] - 1);
+        hi[a] = std::clamp(int(std::floor((mx + grow - oa) / cell)), 0, n[a] - 1);
+      }
+      for (int z = lo[2]; z <= hi[2]; ++z)
+        for (int y = lo[1]; y <= hi[1]; ++y)
+          for (int x = lo[0]; x <= hi[0]; ++x)
+            if (near_cube(tri[t], Vec3d{o.x + x * cell, o.y + y * cell, o.z + z * cell}, cell,
+                          grow))
+              mine.push_back({grid.linear(x, y, z), uint32_t(t)});
+    }
+    std::lock_guard lock(joined);
+    pairs.insert(pairs.end(), mine.begin(), mine.end());
+  });
+  std::sort(pairs.begin(), pairs.end());
+
+  // The listed top cells: where each one's run of pairs begins.
+  std::vector<size_t> runs;
+  for (size_t i = 0; i < pairs.size(); ++i)
+    if (i == 0 || pairs[i].first != pairs[i - 1].first) runs.push_back(i);
+  runs.push_back(pairs.size());
+  const size_t cells = runs.size() - 1;
+  // Each top cell's node, built in parts of consecutive cells on the pool.
+  constexpr size_t kCellsAPart = 64;
+  std::vector<Part> parts((cells + kCellsAPart - 1) / kCellsAPart);
+  threads.run_chunks(parts.size(), 1, [&](size_t begin, size_t end) {
+    std::vector<uint32_t> list;
+    for (size_t p = begin; p < end; ++p) {
+      Part& part = parts[p];
+      for (size_t c = p * kCellsAPart; c < std::min(cells, (p + 1) * kCellsAPart); ++c) {
+        list.clear();
+        for (size_t i = runs[c]; i < runs[c + 1]; ++i) list.push_back(pairs[i].second);
+        int x = 0, y = 0, z = 0;
+        grid.unlinear(pairs[runs[c]].first, x, y, z);
+        const Vec3d lo{o.x + x * cell, o.y + y * cell, o.z + z * cell};
+        part.top.push_back(part.make(tri, list, lo, cell, 0, grow, split_above, max_depth));
+      }
+    }
+  });
+  // The parts in order, their nodes renumbered into the whole.
+  std::vector<std::pair<uint64_t, int32_t>> tops;  // (cell, node)
+  tops.reserve(cells);
+  size_t c = 0;
+  for (const Part& part : parts) {
+    const uint32_t inner_at = uint32_t(out.inner.size());
+    const int32_t leaf_at = int32_t(out.leaves());
+    auto renumber = [&](int32_t node) {
+      return node >= 0               ? node + leaf_at
+             : octree_is_inner(node) ? octree_inner_node(octree_children(node) + inner_at)
+                                     : node;
+    };
+    for (int32_t node : part.inner) out.inner.push_back(renumber(node));
+    const uint32_t tri_at = uint32_t(out.leaf_tri.size());
+    out.leaf_tri.insert(out.leaf_tri.end(), part.leaf_tri.begin(), part.leaf_tri.end());
+    for (size_t l = 1; l < part.leaf_start.size(); ++l)
+      out.leaf_start.push_back(part.leaf_start[l] + tri_at);
+    for (int32_t node : part.top) tops.push_back({pairs[runs[c++]].first, renumber(node)});
+    out.splits += part.splits;
+    out.longest = std::max(out.longest, part.longest);
+  }
+  // Grouped by bucket (CSR); a dense grid's bucket is its cell.
+  std::stable_sort(tops.begin(), tops.end(), [&](const auto& a, const auto& b) {
+    return grid.bucket(a.first) < grid.bucket(b.first);
+  });
+  out.cell_start.assign(size_t(grid.buckets) + 1, 0);
+  for (const auto& top : tops) ++out.cell_start[grid.bucket(top.first) + 1];
+  for (size_t k = 1; k < out.cell_start.size(); ++k) out.cell_start[k] += out.cell_start[k - 1];
+  out.cell_key.reserve(tops.size());
+  out.cell_node.reserve(tops.size());
+  for (const auto& [l, node] : tops) out.cell_key.push_back(l), out.cell_node.push_back(node);
+  return out;
+}
+
+}  // namespace collido::sim

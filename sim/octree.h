@@ -1,0 +1,119 @@
+// The `octree` method's wall: a grid of cells (2 r_max by default) over the
+// wall's box, each cell that lists more than kOctreeSplitAbove triangles split
+// into eight, and those again, up to kOctreeMaxDepth levels. Every leaf lists
+// the ORIGINAL triangles that come within r_max of some point of its box, so a
+// particle tests its own leaf's list, once, as `bin` tests its cell's.
+//
+// Why: real CAD exports mix long slivers with tiny facets (areas over five
+// decades). A uniform grid's cell over a patch of tiny facets lists hundreds
+// of them, which every particle there tests; a tree adapts to the mesh but a
+// particle's walk waits on a chain of dependent node reads. Here the cells
+// shrink only where the triangles crowd, and a particle finds its leaf in one
+// to three dependent reads. A detection frame groups the particles by leaf,
+// so the threads of a warp read the same list (sim/detect_pipeline.h). A
+// detection method for now: the dynamics' wall lists do not read it. Measured
+// in docs/benchmarks.md ("The octree method").
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "sim/grid.h"
+#include "sim/hd.h"
+#include "sim/mesh.h"
+
+namespace collido::sim {
+
+class ThreadPool;  // sim/parallel.h
+
+// A node: >= 0 a leaf (an index into the leaves), kOctreeEmpty when nothing
+// lies within reach of its box, <= -2 an inner node whose eight children are
+// inner[octree_children(node) + octant], octant = x + 2 y + 4 z (0: lower half).
+inline constexpr int32_t kOctreeEmpty = -1;
+// A cell is split when it lists more triangles than this and is above the
+// deepest level (docs/benchmarks.md: on the counter mesh, 16 and 2 levels
+// gave the fastest frames of the settings tried).
+inline constexpr uint32_t kOctreeSplitAbove = 16;
+inline constexpr int kOctreeMaxDepth = 2;
+inline constexpr int kOctreeDeepest = 4;  // the most levels any build may have
+
+COLLIDO_HD COLLIDO_FORCEINLINE bool octree_is_inner(int32_t node) {
+  return node <= -2;
+}
+COLLIDO_HD COLLIDO_FORCEINLINE uint32_t octree_children(int32_t node) {
+  return uint32_t(-(node + 2));
+}
+inline int32_t octree_inner_node(uint32_t children) {
+  return -int32_t(children) - 2;
+}
+
+// What a kernel reads; plain pointers, copied by value.
+struct OctreeView {
+  GridSpec grid;                         // the top cells (hashed past the dense limit)
+  const uint32_t* cell_start = nullptr;  // buckets + 1: the listed top cells of each bucket
+  const uint64_t* cell_key = nullptr;    // their cell numbers (a hashed bucket holds several)
+  const int32_t* cell_node = nullptr;    // their nodes
+  const int32_t* inner = nullptr;        // eight children an inner node
+  const uint32_t* leaf_start = nullptr;  // leaves + 1: each leaf's run of leaf_tri
+  const uint32_t* leaf_tri = nullptr;    // mesh triangle indices
+
+  // The node of top cell (x, y, z); kOctreeEmpty when it lists nothing.
+  COLLIDO_HD COLLIDO_FORCEINLINE int32_t top(int x, int y, int z) const {
+    const uint64_t l = grid.linear(x, y, z);
+    const uint32_t b = grid.bucket(l);
+    for (uint32_t k = cell_start[b], e = cell_start[b + 1]; k < e; ++k)
+      if (!grid.hashed || cell_key[k] == l) return cell_node[k];
+    return kOctreeEmpty;
+  }
+
+  // The leaf whose box holds p (as float rounds it), or kOctreeEmpty.
+  COLLIDO_HD COLLIDO_FORCEINLINE int32_t leaf_of(Vec3f p) const {
+    int x = 0, y = 0, z = 0;
+    if (!grid.cell_of(p, x, y, z)) return kOctreeEmpty;
+    int32_t node = top(x, y, z);
+    if (!octree_is_inner(node)) return node;
+    // p's place in its cell, in [0, 1) an axis (cell_of may have clamped it).
+    auto frac = [](float f, int i) {
+      const float u = f - float(i);
+      return u < 0.f ? 0.f : (u < 1.f ? u : 0.99999994f);
+    };
+    float u = frac((p.x - grid.origin.x) * grid.inv_cell, x);
+    float v = frac((p.y - grid.origin.y) * grid.inv_cell, y);
+    float w = frac((p.z - grid.origin.z) * grid.inv_cell, z);
+    do {
+      u += u, v += v, w += w;
+      const int ox = u >= 1.f, oy = v >= 1.f, oz = w >= 1.f;
+      u -= float(ox), v -= float(oy), w -= float(oz);
+      node = inner[octree_children(node) + uint32_t(ox + 2 * oy + 4 * oz)];
+    } while (octree_is_inner(node));
+    return node;
+  }
+};
+
+// The structure as the host builds it (mesh triangle indices, local frame).
+struct OctreeBuild {
+  std::vector<uint32_t> cell_start;  // grid.buckets + 1
+  std::vector<uint64_t> cell_key;
+  std::vector<int32_t> cell_node;
+  std::vector<int32_t> inner;
+  std::vector<uint32_t> leaf_start{0};  // leaves + 1
+  std::vector<uint32_t> leaf_tri;
+  uint64_t splits = 0;   // inner nodes
+  uint32_t longest = 0;  // the longest leaf list
+  size_t leaves() const { return leaf_start.size() - 1; }
+};
+
+// Builds the lists for `grid` (the wall's local frame, origin at `origin`):
+// a leaf lists each triangle of `mesh` that comes within `grow` of its box
+// (tested in double: the triangle against the box grown by `grow` a side,
+// and its distance from the box's centre), so with `grow` at least r_max
+// plus float's rounding of a particle's place (bin_layout's pad) no contact
+// is lost. A cell is split while it lists more than `split_above` and lies
+// above `max_depth` levels (at most kOctreeDeepest). The triangles and the
+// top cells are shared among `pool`'s threads (nullptr: default_pool()); the
+// build does not depend on them.
+OctreeBuild build_octree(const TriangleMesh& mesh, Vec3d origin, const GridSpec& grid, double grow,
+                         uint32_t split_above = kOctreeSplitAbove, int max_depth = kOctreeMaxDepth,
+                         ThreadPool* pool = nullptr);
+
+}  // namespace collido::sim

@@ -1,0 +1,132 @@
+// The octree method's wall (sim/octree.h): a point's leaf lists every triangle
+// within r_max of it, and cells split where the triangles crowd. The contact
+// sets against the reference are detect_test's and bvh_test's.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <set>
+#include <vector>
+
+#include "sim/backend_cpu.h"
+#include "sim/contact_force.h"
+#include "sim/mesh.h"
+#include "sim/octree.h"
+#include "sim/parallel.h"
+#include "sim/wall_index.h"
+#include "tests/sim/wall_shape.h"
+
+namespace collido::sim {
+namespace {
+
+double exact_d2(Vec3d p, const PlanarTriangleD& t) {
+  Vec3d q;
+  double h = 0, aside = 0;
+  return closest_point_planar(p, t, INFINITY, &q, &h, &aside);
+}
+
+// A crowded wall: a fine ball (20,480 triangles of about a tenth of the
+// radius below) inside a box, with a long sliver through both.
+TriangleMesh crowded_wall() {
+  TriangleMesh m = shape("sphere:r=1,subdivisions=5");
+  const TriangleMesh box = shape("box:x=6,y=4,z=4");
+  const uint32_t base = uint32_t(m.vertices.size());
+  m.vertices.insert(m.vertices.end(), box.vertices.begin(), box.vertices.end());
+  for (const auto& t : box.triangles)
+    m.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+  const uint32_t s = uint32_t(m.vertices.size());
+  m.vertices.push_back({-2.9, -1.9, -0.5});
+  m.vertices.push_back({2.9, 1.9, 0.5});
+  m.vertices.push_back({2.9, 1.9002, 0.5});
+  m.triangles.push_back({s, s + 1, s + 2});
+  m.source_ids.resize(m.triangles.size());
+  for (size_t t = 0; t < m.triangles.size(); ++t) m.source_ids[t] = uint32_t(t);
+  return m;
+}
+
+// A point at up to `reach` from a random point of a random triangle.
+Vec3d point_near_wall(const TriangleMesh& m, double reach, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> u01(0, 1);
+  const size_t t = size_t(u01(rng) * double(m.triangles.size())) % m.triangles.size();
+  double s = u01(rng), w = u01(rng);
+  if (s + w > 1) s = 1 - s, w = 1 - w;
+  const Vec3d a = m.corner(t, 0), b = m.corner(t, 1), c = m.corner(t, 2);
+  std::normal_distribution<double> g(0, 1);
+  Vec3d dir{g(rng), g(rng), g(rng)};
+  return a + (b - a) * s + (c - a) * w + dir * (reach * u01(rng) / length(dir));
+}
+
+TEST(Octree, APointsLeafListsEveryTriangleWithinReach) {
+  const TriangleMesh wall = crowded_wall();
+  const double r = 0.3;
+  std::mt19937_64 rng(5);
+  for (uint64_t dense : {uint64_t(1) << 24, uint64_t(64)}) {
+    CpuBackend backend;
+    WallIndex<CpuBackend> index;
+    PrepareInfo info;
+    ASSERT_TRUE(
+        index.prepare(backend, wall, Method::kOctree, r, 2 * r, dense, 1000, &info, true).ok());
+    EXPECT_EQ(info.hashed, dense < 1000);
+    EXPECT_GT(info.octree_splits, 100u) << "the ball's cells are split";
+    const OctreeView view = index.octree_view();
+    const size_t m = wall.triangles.size();
+    size_t touching = 0;
+    for (int k = 0; k < 3000; ++k) {
+      const Vec3d p = point_near_wall(wall, 1.5 * r, rng);
+      const Vec3f local = cast3<float>(p - index.origin);
+      std::set<uint32_t> listed;
+      const int32_t leaf = view.leaf_of(local);
+      if (leaf >= 0)
+        listed.insert(view.leaf_tri + view.leaf_start[leaf],
+                      view.leaf_tri + view.leaf_start[leaf + 1]);
+      for (uint32_t t = 0; t < m; ++t) {
+        const PlanarTriangleD& td = index.tris_d.data()[t];
+        if (!(exact_d2(p - index.origin, td) < r * r)) continue;
+        ++touching;
+        ASSERT_TRUE(listed.count(t))
+            << "triangle " << t << " within reach is not in the leaf of " << p.x << ", " << p.y
+            << ", " << p.z << (dense < 1000 ? " (hashed)" : "");
+      }
+    }
+    EXPECT_GT(touching, 3000u);
+  }
+}
+
+// Splitting is what the method is for: the crowded ball's cells list far
+// fewer triangles once split, and every list stays complete (above).
+TEST(Octree, CrowdedCellsAreSplitUntilTheirListsAreShort) {
+  const TriangleMesh wall = crowded_wall();
+  const double r = 0.3;
+  CpuBackend backend;
+  WallIndex<CpuBackend> index;
+  PrepareInfo info;
+  ASSERT_TRUE(index.prepare(backend, wall, Method::kBin, r, 2 * r, 1ull << 24, 1000, &info).ok());
+  const Vec3d origin = index.origin;
+  const OctreeBuild flat = build_octree(wall, origin, index.grid, r * 1.001, kOctreeSplitAbove, 0);
+  const OctreeBuild split = build_octree(wall, origin, index.grid, r * 1.001);
+  EXPECT_EQ(flat.splits, 0u);
+  EXPECT_GT(split.splits, 100u);
+  EXPECT_GT(flat.longest, 200u);
+  EXPECT_LT(split.longest, flat.longest / 2);
+  EXPECT_GT(split.leaves(), 4 * flat.leaves());
+  // Each leaf's list is sorted (by triangle) and without repeats.
+  for (size_t l = 0; l < split.leaves(); ++l)
+    for (uint32_t k = split.leaf_start[l] + 1; k < split.leaf_start[l + 1]; ++k)
+      ASSERT_LT(split.leaf_tri[k - 1], split.leaf_tri[k]);
+  // The same build on one thread and on two is the same structure.
+  ThreadPool one(1), two(2);
+  const OctreeBuild a =
+      build_octree(wall, origin, index.grid, r * 1.001, kOctreeSplitAbove, kOctreeMaxDepth, &one);
+  const OctreeBuild b =
+      build_octree(wall, origin, index.grid, r * 1.001, kOctreeSplitAbove, kOctreeMaxDepth, &two);
+  EXPECT_EQ(a.leaf_tri, split.leaf_tri);
+  EXPECT_EQ(b.leaf_tri, split.leaf_tri);
+  EXPECT_EQ(b.leaf_start, split.leaf_start);
+  EXPECT_EQ(b.inner, split.inner);
+  EXPECT_EQ(b.cell_node, split.cell_node);
+  EXPECT_EQ(b.cell_key, split.cell_key);
+}
+
+}  // namespace
+}  // namespace collido::sim
