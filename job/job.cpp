@@ -366,7 +366,7 @@ class JobRunner {
       base.method = d.method, base.grid_length = d.grid_length;
       sim::AutoRequest req;
       req.method = scene_.method_auto, req.grid_length = scene_.grid_auto;
-      req.particle_traversal_only = true;
+      req.for_dynamics = true;
       // A candidate is held to the run's budget, as the scene's own setting was.
       req.admit = [&](sim::Method m, double grid_length) {
         sim::DynamicsConfig c = d;

@@ -9,9 +9,12 @@
 
 namespace collido::sim {
 
-std::vector<Method> auto_method_candidates(const TriangleMesh& mesh, double r_max, Backend backend) {
+std::vector<Method> auto_method_candidates(const TriangleMesh& mesh, double r_max, Backend backend,
+                                           bool for_dynamics) {
   std::vector<Method> out{Method::kBin, Method::kBvh};
-  if (backend != Backend::kCuda || mesh.triangles.empty() || !(r_max > 0)) return out;
+  if (backend != Backend::kCuda) return out;
+  if (!for_dynamics) out.push_back(Method::kOctree);
+  if (mesh.triangles.empty() || !(r_max > 0)) return out;
   const double cell = 2 * r_max;
   const double mean_area = mesh_area(mesh) / static_cast<double>(mesh.triangles.size());
   if (mean_area > 16 * cell * cell) out.push_back(Method::kCircumcircle);
@@ -127,7 +130,8 @@ Expected<AutoChoice> choose_detection(const TriangleMesh& mesh, const Particles&
   const int repeats = req.repeats > 0 ? req.repeats : kAutoMinFrames;
   const Particles sample = sample_of(particles, max_sample);
   std::vector<Method> methods =
-      req.method ? auto_method_candidates(mesh, base.r_max, base.backend) : std::vector<Method>{base.method};
+      req.method ? auto_method_candidates(mesh, base.r_max, base.backend, req.for_dynamics)
+                 : std::vector<Method>{base.method};
   std::vector<double> grids;
   if (req.grid_length)
     for (double f : kAutoGridFactors) grids.push_back(f * base.r_max);
@@ -135,13 +139,14 @@ Expected<AutoChoice> choose_detection(const TriangleMesh& mesh, const Particles&
     grids.push_back(base.grid_length);
   AutoChoice choice;
   for (Method m : methods) {
-    if (!uses_grid(m)) {  // the tree: no grid, no wall traversal, one candidate
+    if (!uses_grid(m)) {  // the tree and the octree: no grid length to choose, one candidate
       choice.candidates.push_back(AutoCandidate{m, Traversal::kParticle, 0, 0, 0, {}});
       continue;
     }
     // bin reads its own cell (particle traversal); the paper's pieces are timed both ways.
     std::vector<Traversal> traversals{Traversal::kParticle};
-    if (m != Method::kBin && req.method && !req.particle_traversal_only) traversals.push_back(Traversal::kWall);
+    if (m != Method::kBin && req.method && !req.for_dynamics)
+      traversals.push_back(Traversal::kWall);
     if (!req.method) traversals = {base.traversal};
     for (Traversal t : traversals)
       for (double g : grids) choice.candidates.push_back(AutoCandidate{m, t, g, 0, 0, {}});

@@ -33,8 +33,10 @@ struct AutoRequest {
   // interference (other processes, clocks), which the minimum filters best,
   // given enough frames that one ran undisturbed.
   int repeats = 0;
-  // Dynamics walks the wall per particle: time only the particle traversal.
-  bool particle_traversal_only = false;
+  // Choosing for the dynamics, which walk the wall per particle through bin's,
+  // the tree's or the pieces' lists: time only the particle traversal, and
+  // not the octree (a detection method only).
+  bool for_dynamics = false;
   // When set, a candidate it refuses (a run's memory budget, say: a finer grid
   // or a divided wall holds more) is not prepared; its error is the reason.
   std::function<Status(Method, double grid_length)> admit;
@@ -80,11 +82,15 @@ inline constexpr double kAutoGridFactors[] = {1.0, 1.5, 2.0, 3.0};
 
 // The methods worth timing for `mesh`, r_max and the backend: `bin` and
 // `bvh` always (no division: the wall as it is; the tree wins on large meshes
-// whose triangle sizes span decades); on the GPU also `circumcircle` where
+// whose triangle sizes span decades); on the GPU also the octree, for
+// detection (not `for_dynamics`: the dynamics cannot read it), ahead of the
+// tree on every wall of its benchmark there and behind it on the CPU
+// (docs/benchmarks.md, "The octree method"), and `circumcircle` where
 // binning copies the average triangle into more than 16 cells (triangles large
 // against the radius), the one case where the paper's pieces have been seen to
 // win. On the CPU bin was 30x ahead of every division method in every study scene.
-std::vector<Method> auto_method_candidates(const TriangleMesh& mesh, double r_max, Backend backend);
+std::vector<Method> auto_method_candidates(const TriangleMesh& mesh, double r_max, Backend backend,
+                                           bool for_dynamics = false);
 
 // Times the candidates on `particles` with base's backend, precision and pool
 // and returns the fastest. base.r_max must be set.

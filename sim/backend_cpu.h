@@ -71,6 +71,8 @@ class CpuBackend {
   void parallel_for_lanes_light(size_t n, uint32_t lanes, F f) {
     parallel_for_lanes(n, lanes, f);
   }
+  // Items for a loop that strides over a count the device holds: one each here.
+  uint32_t strided_items(size_t n, uint32_t) const { return static_cast<uint32_t>(n); }
   // Runs f(i) for every i < n and returns the largest value it returned (0
   // when n == 0); f returns doubles >= 0.
   template <class F>

@@ -126,9 +126,9 @@ __global__ void __launch_bounds__(256, 2)
   if (!halted(halt)) run_lanes(n, size, f);
 }
 
-// The same with four 256-thread blocks an SM (64 registers), for a loop body
-// that waits on its loads more than it computes: the octree's leaf lists
-// (sim/detect_pipeline.h), whose rare double-precision path may spill.
+// The same with four 256-thread blocks an SM (64 registers at most), for a
+// loop body that waits on its loads more than it computes and needs a few
+// registers more than 64: the octree's test stage (sim/detect_pipeline.h).
 template <class F>
 __global__ void __launch_bounds__(256, 4)
     for_each_lanes_kernel_light(uint32_t n, uint32_t size, F f, const unsigned long long* halt) {
@@ -285,6 +285,11 @@ class CudaBackend {
     cuda_detail::for_each_lanes_kernel_light<<<blocks, 256>>>(static_cast<uint32_t>(n), lanes, f,
                                                               halt_word());
     check(cudaGetLastError(), "kernel launch");
+  }
+  // How many items of `lanes` threads a loop that strides over a count
+  // known only on the device should launch: as many as the SMs hold at once.
+  uint32_t strided_items(size_t n, uint32_t lanes) {
+    return static_cast<uint32_t>(std::min<size_t>(n, size_t(sm_count()) * (2048 / lanes)));
   }
   template <class T>
   void fill(T* p, size_t n, T v) {

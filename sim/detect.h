@@ -82,6 +82,14 @@ struct DetectConfig {
   // scratch (at most 2^31): a frame that finds more is refused with an error
   // instead of a wrong contact count.
   uint64_t max_frame_pairs = 1ull << 30;
+  // octree: how the test stage deals out its particles. Below this many a
+  // chunk on average (a chunk: up to 32 of one leaf's), runs of 32 that take
+  // their leaves in turn instead. H200, 10^6 particles half near, frame ms
+  // chunks / runs: the counter mesh, 5.4 a chunk, 0.32 / 0.48; the
+  // 81,920-triangle icosphere, 1.7, 0.49 / 0.35; the counter's tiling, 1.4,
+  // 0.70 / 0.62; wall1, 16, 0.14 / 0.18 (docs/benchmarks.md). 0 keeps chunks,
+  // UINT32_MAX runs (the tests take both ways).
+  uint32_t octree_runs_below = 3;
 };
 
 // One contact: particle index, the triangle's id in the input file, centre distance.

@@ -60,6 +60,14 @@ COLLIDO_HD COLLIDO_FORCEINLINE T hd_max(T a, T b) { return a < b ? b : a; }
 template <class T>
 COLLIDO_HD COLLIDO_FORCEINLINE T hd_abs(T a) { return a < T(0) ? -a : a; }
 
+COLLIDO_HD COLLIDO_FORCEINLINE uint32_t hd_popcount(uint32_t bits) {
+#if defined(__CUDA_ARCH__)
+  return uint32_t(__popc(bits));
+#else
+  return uint32_t(__builtin_popcount(bits));
+#endif
+}
+
 // False for NaN and infinities (x - x is 0 only for finite x); works the same in device code.
 COLLIDO_HD COLLIDO_FORCEINLINE bool hd_finite(double v) { return v - v == 0.0; }
 

@@ -36,6 +36,9 @@ inline constexpr int32_t kOctreeEmpty = -1;
 inline constexpr uint32_t kOctreeSplitAbove = 16;
 inline constexpr int kOctreeMaxDepth = 2;
 inline constexpr int kOctreeDeepest = 4;  // the most levels any build may have
+// The pairs in float's error band a detector's first frame has room for
+// (precision exact decides them in double after the float pass).
+inline constexpr uint32_t kOctreeFirstDoubts = 1024;
 
 COLLIDO_HD COLLIDO_FORCEINLINE bool octree_is_inner(int32_t node) {
   return node <= -2;

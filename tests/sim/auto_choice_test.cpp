@@ -163,12 +163,18 @@ TEST(AutoChoice, ARefusedCandidateIsNotTimed) {
 }
 
 // Division is worth timing only on the GPU and for triangles large against
-// the radius; bin and the tree always.
+// the radius; bin and the tree always; the octree on the GPU, for detection.
 TEST(AutoChoice, DivisionIsACandidateOnlyWhereItCanWin) {
   const TriangleMesh wall = make_cylinder(50, 100, 40);
-  EXPECT_EQ(auto_method_candidates(wall, 1, Backend::kCpu).size(), 2u);
-  EXPECT_EQ(auto_method_candidates(wall, 1, Backend::kCuda).size(), 3u);
-  EXPECT_EQ(auto_method_candidates(make_sphere(1, 4), 1, Backend::kCuda).size(), 2u);
+  using M = std::vector<Method>;
+  EXPECT_EQ(auto_method_candidates(wall, 1, Backend::kCpu), (M{Method::kBin, Method::kBvh}));
+  EXPECT_EQ(auto_method_candidates(wall, 1, Backend::kCuda),
+            (M{Method::kBin, Method::kBvh, Method::kOctree, Method::kCircumcircle}));
+  EXPECT_EQ(auto_method_candidates(make_sphere(1, 4), 1, Backend::kCuda),
+            (M{Method::kBin, Method::kBvh, Method::kOctree}));
+  // The dynamics cannot read the octree.
+  EXPECT_EQ(auto_method_candidates(wall, 1, Backend::kCuda, /*for_dynamics=*/true),
+            (M{Method::kBin, Method::kBvh, Method::kCircumcircle}));
 }
 
 }  // namespace
