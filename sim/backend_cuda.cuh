@@ -326,12 +326,11 @@ class CudaBackend {
       return 0;
     uint64_t sum = 0;
     to_host(&sum, total, sizeof sum);
-    resize(scan_out_, n);
+    // In place: CUB's scans take the same sequence in and out.
     if (!cub_call("scan", [&](void* t, size_t& bytes) {
-          return cub::DeviceScan::ExclusiveSum(t, bytes, d, scan_out_.data(), static_cast<int>(n));
+          return cub::DeviceScan::ExclusiveSum(t, bytes, d, d, static_cast<int>(n));
         }))
       return 0;
-    copy(d, scan_out_.data(), n * sizeof(uint32_t));
     return sum;
   }
 
@@ -339,12 +338,9 @@ class CudaBackend {
   // back, so nothing waits): for counts whose sum fits 32 bits.
   void exclusive_scan_on_device(uint32_t* d, size_t n) {
     if (n == 0) return;
-    resize(scan_out_, n);
-    if (!cub_call("scan", [&](void* t, size_t& bytes) {
-          return cub::DeviceScan::ExclusiveSum(t, bytes, d, scan_out_.data(), static_cast<int>(n));
-        }))
-      return;
-    copy(d, scan_out_.data(), n * sizeof(uint32_t));
+    cub_call("scan", [&](void* t, size_t& bytes) {
+      return cub::DeviceScan::ExclusiveSum(t, bytes, d, d, static_cast<int>(n));
+    });
   }
 
   // Sum and maximum of n doubles (0 when n == 0); one small read-back each.
@@ -595,7 +591,7 @@ class CudaBackend {
   uint64_t bytes_ = 0;
   void* temp_ = nullptr;
   size_t temp_bytes_ = 0;
-  Buffer<uint32_t> scan_out_, runs_, seg_tri_;
+  Buffer<uint32_t> runs_, seg_tri_;
   Buffer<uint64_t> seg_cell_;
   Buffer<double> scalar_, partials_;
   Buffer<unsigned long long> max_bits_;  // parallel_max's result, as the bits of a double

@@ -334,7 +334,9 @@ void float_precision_flags_its_doubts() {
     EXPECT_GT(ex.band_pairs, 0u);
     EXPECT_EQ(ex.band_pairs, fl.band_pairs) << "both precisions see the same band";
     // More than the octree's first room for them: its frame grows it and runs again.
-    if (c.method == Method::kOctree) EXPECT_GT(ex.band_pairs, kOctreeFirstDoubts);
+    if (c.method == Method::kOctree) {
+      EXPECT_GT(ex.band_pairs, kOctreeFirstDoubts);
+    }
     const ContactDiff none = compare_contacts(wall, p, ref.contacts, ex.contacts, 0.0);
     EXPECT_EQ(none.missed + none.invented + none.borderline, 0u) << to_string(c.method);
   }
