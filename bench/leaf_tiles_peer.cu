@@ -30,6 +30,7 @@
 
 #include "sim/accuracy.h"
 #include "sim/mesh.h"
+#include "sim/narrow_phase.h"
 
 namespace {
 
@@ -40,76 +41,19 @@ void check(cudaError_t e, const char* call) {
 }
 #define CK(call) check((call), #call)
 
-struct D3 {
-  double x, y, z;
-};
-D3 operator-(D3 a, D3 b) {
-  return {a.x - b.x, a.y - b.y, a.z - b.z};
-}
-D3 operator+(D3 a, D3 b) {
-  return {a.x + b.x, a.y + b.y, a.z + b.z};
-}
-D3 operator*(D3 a, double s) {
-  return {a.x * s, a.y * s, a.z * s};
-}
-double dot(D3 a, D3 b) {
-  return a.x * b.x + a.y * b.y + a.z * b.z;
-}
-D3 cross(D3 a, D3 b) {
-  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
-}
+using D3 = collido::sim::Vec3d;  // with the engine's vector operations (sim/hd.h)
 
-// Ericson's closest point on a triangle (double), squared distance.
+// The engine's closest point on a triangle in double (sim/narrow_phase.h), squared
+// distance, for a triangle given as nine coordinates.
 __host__ __device__ inline double dist2_d(double px, double py, double pz, const double* t) {
-  const double ax = t[0], ay = t[1], az = t[2], bx = t[3], by = t[4], bz = t[5], cx = t[6],
-               cy = t[7], cz = t[8];
-  const double abx = bx - ax, aby = by - ay, abz = bz - az, acx = cx - ax, acy = cy - ay,
-               acz = cz - az;
-  const double apx = px - ax, apy = py - ay, apz = pz - az;
-  const double d1 = abx * apx + aby * apy + abz * apz, d2 = acx * apx + acy * apy + acz * apz;
-  double qx, qy, qz;
-  if (d1 <= 0 && d2 <= 0) {
-    qx = ax, qy = ay, qz = az;
-  } else {
-    const double bpx = px - bx, bpy = py - by, bpz = pz - bz;
-    const double d3 = abx * bpx + aby * bpy + abz * bpz, d4 = acx * bpx + acy * bpy + acz * bpz;
-    if (d3 >= 0 && d4 <= d3) {
-      qx = bx, qy = by, qz = bz;
-    } else {
-      const double vc = d1 * d4 - d3 * d2;
-      if (vc <= 0 && d1 >= 0 && d3 <= 0) {
-        const double v = d1 / (d1 - d3);
-        qx = ax + v * abx, qy = ay + v * aby, qz = az + v * abz;
-      } else {
-        const double cpx = px - cx, cpy = py - cy, cpz = pz - cz;
-        const double d5 = abx * cpx + aby * cpy + abz * cpz, d6 = acx * cpx + acy * cpy + acz * cpz;
-        if (d6 >= 0 && d5 <= d6) {
-          qx = cx, qy = cy, qz = cz;
-        } else {
-          const double vb = d5 * d2 - d1 * d6;
-          if (vb <= 0 && d2 >= 0 && d6 <= 0) {
-            const double w = d2 / (d2 - d6);
-            qx = ax + w * acx, qy = ay + w * acy, qz = az + w * acz;
-          } else {
-            const double va = d3 * d6 - d5 * d4;
-            if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
-              const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-              qx = bx + w * (cx - bx), qy = by + w * (cy - by), qz = bz + w * (cz - bz);
-            } else {
-              const double denom = 1 / (va + vb + vc);
-              const double v = vb * denom, w = vc * denom;
-              qx = ax + abx * v + acx * w, qy = ay + aby * v + acy * w, qz = az + abz * v + acz * w;
-            }
-          }
-        }
-      }
-    }
-  }
-  const double dx = px - qx, dy = py - qy, dz = pz - qz;
-  return dx * dx + dy * dy + dz * dz;
+  using V = collido::sim::Vec3d;
+  return collido::sim::point_triangle_dist2<double>(V{px, py, pz}, V{t[0], t[1], t[2]},
+                                                    V{t[3], t[4], t[5]}, V{t[6], t[7], t[8]});
 }
 
-// The same in float, on a triangle given as a and the edges ab, ac.
+// Ericson's closest point in float, on a triangle given as a and the edges ab, ac: the
+// prototype's own, a bare float distance (what its figures time), unlike the
+// engine's planar form.
 __device__ inline float dist2_f(float px, float py, float pz, float4 A, float4 AB, float4 AC) {
   const float ax = A.x, ay = A.y, az = A.z, abx = AB.x, aby = AB.y, abz = AB.z, acx = AC.x,
               acy = AC.y, acz = AC.z;

@@ -84,8 +84,9 @@ inline constexpr double kAutoGridFactors[] = {1.0, 1.5, 2.0, 3.0};
 // `bvh` always (no division: the wall as it is; the tree wins on large meshes
 // whose triangle sizes span decades); on the GPU also the octree, for
 // detection (not `for_dynamics`: the dynamics cannot read it), ahead of the
-// tree on every wall of its benchmark there and behind it on the CPU
-// (docs/benchmarks.md, "The octree method"), and `circumcircle` where
+// tree on every wall of its benchmark there; not on the CPU, where it only
+// drew level with the tree on the counter mesh, at four times its preparation
+// (docs/benchmarks.md, "The octree's test stage"); and `circumcircle` where
 // binning copies the average triangle into more than 16 cells (triangles large
 // against the radius), the one case where the paper's pieces have been seen to
 // win. On the CPU bin was 30x ahead of every division method in every study scene.

@@ -268,23 +268,13 @@ class CudaBackend {
       parallel_for_heavy(n, [=] __device__(uint32_t i) { f(i, LaneGroup{}); });
       return;
     }
-    if (n == 0 || !ok_) return;
-    const size_t threads = n * lanes;
-    const uint32_t blocks = static_cast<uint32_t>((threads + 255) / 256);
-    cuda_detail::for_each_lanes_kernel<<<blocks, 256>>>(static_cast<uint32_t>(n), lanes, f,
-                                                        halt_word());
-    check(cudaGetLastError(), "kernel launch");
+    launch_lanes(cuda_detail::for_each_lanes_kernel<F>, n, lanes, f);
   }
   // The same with more threads in flight and fewer registers each (see
   // for_each_lanes_kernel_light); lanes a power of two from 2 to 32.
   template <class F>
   void parallel_for_lanes_light(size_t n, uint32_t lanes, F f) {
-    if (n == 0 || !ok_) return;
-    const size_t threads = n * lanes;
-    const uint32_t blocks = static_cast<uint32_t>((threads + 255) / 256);
-    cuda_detail::for_each_lanes_kernel_light<<<blocks, 256>>>(static_cast<uint32_t>(n), lanes, f,
-                                                              halt_word());
-    check(cudaGetLastError(), "kernel launch");
+    launch_lanes(cuda_detail::for_each_lanes_kernel_light<F>, n, lanes, f);
   }
   // How many items of `lanes` threads a loop that strides over a count
   // known only on the device should launch: as many as the SMs hold at once.
@@ -510,6 +500,15 @@ class CudaBackend {
   }
 
  private:
+  // n items of `lanes` threads each, in 256-thread blocks, for either lanes kernel.
+  template <class F>
+  void launch_lanes(void (*kernel)(uint32_t, uint32_t, F, const unsigned long long*), size_t n,
+                    uint32_t lanes, F f) {
+    if (n == 0 || !ok_) return;
+    const uint32_t blocks = static_cast<uint32_t>((n * lanes + 255) / 256);
+    kernel<<<blocks, 256>>>(static_cast<uint32_t>(n), lanes, f, halt_word());
+    check(cudaGetLastError(), "kernel launch");
+  }
   // One thread per index in 256-thread blocks, for either loop kernel.
   template <class F>
   void launch(void (*kernel)(uint32_t, F, const unsigned long long*), size_t n, F f) {

@@ -133,10 +133,10 @@ class GridDetector final : public Detector {
     if (Status e = backend_.status(); !e) return e;
     // Results for the caller: outside the frame's time.
     const auto t = clock();
-    uint32_t band = 0, doubts = 0;
-    backend_.to_host(&band, pair_counter_.data() + 1, sizeof band);
+    uint32_t counters[4] = {0, 0, 0, 0};  // [1] the band's pairs, [3] the octree's doubts
+    backend_.to_host(counters, pair_counter_.data(), sizeof counters);
+    const uint32_t band = counters[1], doubts = counters[3];
     if (octree && exact()) {
-      backend_.to_host(&doubts, pair_counter_.data() + 3, sizeof doubts);
       if (doubts > pair_limit())
         return resource_exhausted("this frame has more than " + std::to_string(pair_limit()) +
                                   " (particle, triangle) pairs in float's error band, the most a "
@@ -218,9 +218,9 @@ class GridDetector final : public Detector {
       }
     }
     if (cfg_.method == Method::kOctree) {
-      backend_.resize(leaf_pos_, size_t(wall_.octree_leaves) + 1);
+      backend_.resize(leaf_pos_, size_t(wall_.octree_leaves()) + 1);
       backend_.resize(octree_chunk_, capacity_);
-      backend_.resize(leaf_chunk_, size_t(wall_.octree_leaves) + 1);
+      backend_.resize(leaf_chunk_, size_t(wall_.octree_leaves()) + 1);
       // The pairs in float's band (about 3 in 10^3 contacts on the counter
       // mesh): room for a few at first; a frame that finds more grows it.
       if (exact()) grow_doubts(kOctreeFirstDoubts);
@@ -502,7 +502,7 @@ class GridDetector final : public Detector {
     uint32_t* leaf_of = p_key_.data();
     uint32_t* rank = p_idx_.data();
     uint32_t* pos = leaf_pos_.data();
-    const size_t leaves = wall_.octree_leaves;
+    const size_t leaves = wall_.octree_leaves();
     backend_.fill(pos, leaves + 1, 0u);
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
       const int32_t leaf = ov.leaf_of(position(P[i]));
@@ -558,7 +558,7 @@ class GridDetector final : public Detector {
     const uint32_t* sleaf = p_key_sorted_.data();
     const uint32_t* pos = leaf_pos_.data();
     const uint32_t* chunk = octree_chunk_.data();
-    const uint32_t* chunks = leaf_chunk_.data() + wall_.octree_leaves;
+    const uint32_t* chunks = leaf_chunk_.data() + wall_.octree_leaves();
     const PlanarTriangle* T = wall_.tris.data();
     uint32_t* counts = counts_.data();
     const PairSink out = sink();
@@ -568,7 +568,7 @@ class GridDetector final : public Detector {
     backend_.fill(counts, n_, 0u);
     constexpr bool copied = B::kWalksReadReorderedCopy;
     const uint32_t stride = backend_.strided_items(n_, kOctreeChunk);
-    const uint32_t* located = pos + wall_.octree_leaves;
+    const uint32_t* located = pos + wall_.octree_leaves();
     const uint64_t runs_below = cfg_.octree_runs_below;
     auto body = [=] COLLIDO_HD(uint32_t u, LaneGroup g) {
       uint32_t band = 0;

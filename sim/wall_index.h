@@ -448,9 +448,8 @@ class WallIndex {
     info->octree_leaves = built.leaves();
     info->octree_entries = built.leaf_tri.size();
     info->octree_splits = built.splits;
-    octree_leaves = static_cast<uint32_t>(built.leaves());
     upload(backend, oct_cell_start, built.cell_start);
-    upload(backend, oct_cell_key, built.cell_key);
+    if (grid.hashed) upload(backend, oct_cell_key, built.cell_key);  // a dense bucket is its cell
     upload(backend, oct_cell_node, built.cell_node);
     upload(backend, oct_inner, built.inner);
     upload(backend, oct_leaf_start, built.leaf_start);
@@ -553,9 +552,11 @@ class WallIndex {
   MortonFrame morton;  // bvh: orders a frame's particles along the wall
   // octree (sim/octree.h): the top cells by bucket, the inner nodes, the leaves' lists
   Buf<uint32_t> oct_cell_start, oct_leaf_start, oct_leaf_tri;
-  Buf<uint64_t> oct_cell_key;
+  Buf<uint64_t> oct_cell_key;  // hashed grids only
   Buf<int32_t> oct_cell_node, oct_inner;
-  uint32_t octree_leaves = 0;
+  uint32_t octree_leaves() const {
+    return oct_leaf_start.size() ? static_cast<uint32_t>(oct_leaf_start.size() - 1) : 0u;
+  }
 
  private:
   Method method_ = Method::kBin;
