@@ -116,12 +116,14 @@ std::string detect_summary_json(const DetectSetup& s, const sim::PrepareInfo& in
     << ",\"buckets\":" << info.buckets << ",\"hashed_grid\":" << (info.hashed ? "true" : "false")
     << ",\"bin_entries\":" << info.bin_entries << ",\"tree_nodes\":" << info.bvh_nodes
     << ",\"tree_depth\":" << info.bvh_depth << ",\"octree_leaves\":" << info.octree_leaves
-    << ",\"octree_entries\":" << info.octree_entries << ",\"contacts\":" << r.contact_count
-    << ",\"colliding_particles\":" << r.colliding_particles << ",\"band_pairs\":" << r.band_pairs
-    << ",\"area_error\":" << info.area_error << ",\"time_ms\":{\"prepare\":" << info.prepare_ms
-    << ",\"hash\":" << t.hash_ms << ",\"sort\":" << t.sort_ms << ",\"cells\":" << t.cells_ms
-    << ",\"traverse\":" << t.traverse_ms << ",\"finalize\":" << t.finalize_ms
-    << ",\"frame\":" << t.frame_ms << ",\"download\":" << t.download_ms << "}";
+    << ",\"octree_entries\":" << info.octree_entries
+    << ",\"octree_wide_entries\":" << info.octree_wide_entries
+    << ",\"contacts\":" << r.contact_count << ",\"colliding_particles\":" << r.colliding_particles
+    << ",\"band_pairs\":" << r.band_pairs << ",\"area_error\":" << info.area_error
+    << ",\"time_ms\":{\"prepare\":" << info.prepare_ms << ",\"hash\":" << t.hash_ms
+    << ",\"sort\":" << t.sort_ms << ",\"cells\":" << t.cells_ms << ",\"traverse\":" << t.traverse_ms
+    << ",\"finalize\":" << t.finalize_ms << ",\"frame\":" << t.frame_ms
+    << ",\"download\":" << t.download_ms << "}";
   if (!s.backend_note.empty()) o << ",\"note\":\"" << json_escape(s.backend_note) << "\"";
   o << "}";
   return o.str();

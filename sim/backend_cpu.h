@@ -120,6 +120,15 @@ class CpuBackend {
 
   void exclusive_scan_on_device(uint32_t* d, size_t n) { exclusive_scan(d, n); }
 
+  // The indices i < n where keep(i), in order, into out; their count into *count.
+  template <class F>
+  void select_indices(size_t n, F keep, uint32_t* out, uint32_t* count) {
+    uint32_t m = 0;
+    for (size_t i = 0; i < n; ++i)
+      if (keep(static_cast<uint32_t>(i))) out[m++] = static_cast<uint32_t>(i);
+    *count = m;
+  }
+
   // Sum and maximum of n doubles (0 when n == 0); per-frame statistics and the time step.
   double reduce_sum(const double* d, size_t n) { return std::accumulate(d, d + n, 0.0); }
   double reduce_max(const double* d, size_t n) { return n ? *std::max_element(d, d + n) : 0.0; }

@@ -6,6 +6,7 @@
 
 #include <cuda_runtime.h>
 
+#include <thrust/iterator/counting_iterator.h>
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -13,6 +14,7 @@
 #include <cub/device/device_reduce.cuh>
 #include <cub/device/device_scan.cuh>
 #include <cub/device/device_segmented_sort.cuh>
+#include <cub/device/device_select.cuh>
 #include <string>
 #include <vector>
 
@@ -455,6 +457,20 @@ class CudaBackend {
     double v = 0;
     to_host(&v, scalar_.data(), sizeof v);
     return v;
+  }
+
+  // The indices i < n where keep(i), in order, into out; their count into
+  // *count, which stays on the device (one pass, CUB's decoupled look-back).
+  template <class F>
+  void select_indices(size_t n, F keep, uint32_t* out, uint32_t* count) {
+    if (n == 0) {
+      fill(count, 1, 0u);
+      return;
+    }
+    cub_call("select", [&](void* t, size_t& bytes) {
+      return cub::DeviceSelect::If(t, bytes, thrust::counting_iterator<uint32_t>(0), out, count,
+                                   static_cast<int>(n), keep);
+    });
   }
 
   // Radix sort of (key, value) pairs over the low key_bits bits of the keys.

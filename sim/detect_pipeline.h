@@ -206,8 +206,10 @@ class GridDetector final : public Detector {
                              capacity_, &info_);
     if (!s) return s;
     if (cfg_.traversal == Traversal::kWall || cfg_.method != Method::kBin) {
-      backend_.resize(p_key_, capacity_);
-      backend_.resize(p_idx_, capacity_);
+      if (cfg_.method != Method::kOctree) {  // the octree groups without them (octree_group)
+        backend_.resize(p_key_, capacity_);
+        backend_.resize(p_idx_, capacity_);
+      }
       backend_.resize(p_key_sorted_, capacity_);
       backend_.resize(p_idx_sorted_, capacity_);
       const bool walks = cfg_.method == Method::kBvh || cfg_.method == Method::kOctree;
@@ -218,9 +220,8 @@ class GridDetector final : public Detector {
       }
     }
     if (cfg_.method == Method::kOctree) {
-      backend_.resize(leaf_pos_, size_t(wall_.octree_leaves()) + 1);
+      backend_.resize(leaf_pos_, size_t(wall_.octree_leaves()) + 2);
       backend_.resize(octree_chunk_, capacity_);
-      backend_.resize(leaf_chunk_, size_t(wall_.octree_leaves()) + 1);
       // The pairs in float's band (about 3 in 10^3 contacts on the counter
       // mesh): room for a few at first; a frame that finds more grows it.
       if (exact()) grow_doubts(kOctreeFirstDoubts);
@@ -492,15 +493,18 @@ class GridDetector final : public Detector {
   // sort: each particle's leaf and its rank among the leaf's, the leaves'
   // starts by a scan, then the sorted index), so the threads that test one
   // leaf's list read it together. A leaf's particles form chunks of up to 32,
-  // the test stage's items: the particle of rank 32 c in its leaf lists the
-  // chunk that starts at its sorted place. The particles in no leaf touch
-  // nothing. How many particles lie in leaves (pos[leaves]) and how many
-  // chunks there are (leaf_chunk_[leaves]) stays on the device.
+  // the test stage's items, listed in leaf order by selecting the sorted
+  // places that start one. The particles in no leaf touch nothing. How many
+  // particles lie in leaves (pos[leaves]) and how many chunks there are
+  // (pos[leaves + 1]) stay on the device. The frame's per-particle scratch is
+  // four words: the leaf and rank live in the chunk list and the counts until
+  // the sorted index and the leaf of each sorted place are written (8 bytes a
+  // particle fewer than two arrays of their own).
   void octree_group(DetectResult* out) {
     const OctreeView ov = wall_.octree_view();
     const PackedParticle* P = particles_.data();
-    uint32_t* leaf_of = p_key_.data();
-    uint32_t* rank = p_idx_.data();
+    uint32_t* leaf_of = octree_chunk_.data();
+    uint32_t* rank = counts_.data();
     uint32_t* pos = leaf_pos_.data();
     const size_t leaves = wall_.octree_leaves();
     backend_.fill(pos, leaves + 1, 0u);
@@ -510,15 +514,6 @@ class GridDetector final : public Detector {
       if (leaf >= 0) rank[i] = atomic_add_u32(&pos[leaf], 1u);
     });
     lap(out->times.hash_ms);
-    // Each leaf's first chunk, so that the chunks are numbered in leaf order
-    // (neighbouring warps then read neighbouring leaves, which share triangles:
-    // the counter mesh's frame 0.32 -> 0.28 ms against numbering them as they
-    // come); their count lands in chunk_start[leaves].
-    uint32_t* chunk_start = leaf_chunk_.data();
-    backend_.parallel_for(leaves + 1, [=] COLLIDO_HD(uint32_t l) {
-      chunk_start[l] = l < leaves ? (pos[l] + kOctreeChunk - 1) / kOctreeChunk : 0u;
-    });
-    backend_.exclusive_scan_on_device(chunk_start, leaves + 1);
     backend_.exclusive_scan_on_device(pos, leaves + 1);
     // The test stage reads the particles through the sorted index where the
     // backend hides scattered reads, else from a reordered copy (as the tree's).
@@ -526,7 +521,6 @@ class GridDetector final : public Detector {
     PackedParticle* SP = sorted_particles_.data();
     uint32_t* sid = p_idx_sorted_.data();
     uint32_t* sleaf = p_key_sorted_.data();
-    uint32_t* chunk = octree_chunk_.data();
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
       const uint32_t leaf = leaf_of[i];
       if (leaf == uint32_t(kOctreeEmpty)) return;
@@ -534,8 +528,17 @@ class GridDetector final : public Detector {
       if (copy) SP[at] = P[i];
       sid[at] = i;
       sleaf[at] = leaf;
-      if (rank[i] % kOctreeChunk == 0) chunk[chunk_start[leaf] + rank[i] / kOctreeChunk] = at;
     });
+    // The chunks in leaf order (neighbouring warps then read neighbouring
+    // leaves, which share triangles: the counter mesh's frame 0.32 -> 0.28 ms
+    // against numbering them as they come).
+    const uint32_t* located = pos + leaves;
+    backend_.select_indices(
+        n_,
+        [=] COLLIDO_HD(uint32_t j) {
+          return j < *located && (j - pos[sleaf[j]]) % kOctreeChunk == 0;
+        },
+        octree_chunk_.data(), pos + leaves + 1);
     lap(out->times.sort_ms);
   }
   static constexpr uint32_t kOctreeChunk = 32;  // a warp's lanes
@@ -558,8 +561,9 @@ class GridDetector final : public Detector {
     const uint32_t* sleaf = p_key_sorted_.data();
     const uint32_t* pos = leaf_pos_.data();
     const uint32_t* chunk = octree_chunk_.data();
-    const uint32_t* chunks = leaf_chunk_.data() + wall_.octree_leaves();
-    const PlanarTriangle* T = wall_.tris.data();
+    const uint32_t* chunks = pos + wall_.octree_leaves() + 1;
+    const PlanarTriangle* T = wall_.tris.data();  // in the lists' slots
+    const uint32_t* orig = wall_.tri_original.data();
     uint32_t* counts = counts_.data();
     const PairSink out = sink();
     const DoubtSink doubts = doubt_sink();
@@ -596,19 +600,20 @@ class GridDetector final : public Detector {
           for (uint32_t k0 = 0; k0 < m;) {
             const uint32_t leaf = sleaf[jb + k0];
             const uint32_t k1 = hd_min(m, pos[leaf + 1] - jb);
-            const uint32_t ts = ov.leaf_start[leaf], nt = ov.leaf_start[leaf + 1] - ts;
+            const OctreeView::List list = ov.list(leaf);
+            const uint32_t nt = list.count;
             if (2 * nt > g.size || nt == 0) {
               for (uint32_t tb = 0; tb < nt; tb += g.size) {
                 const uint32_t ti = tb + g.lane;
                 const bool have = ti < nt;
-                const uint32_t t = have ? ov.leaf_tri[ts + ti] : 0u;
+                const uint32_t t = have ? ov.slot(list, ti) : 0u;
                 const PlanarTriangle tri = T[t];
                 for (uint32_t k = k0; k < k1; ++k) {
                   const PackedParticle p = particle(k);
                   const uint32_t i = g.from(k, mine_i);
                   float d = 0;
                   const auto v = have ? nw.judge(p, tri, &d, &band) : Narrow::kOut;
-                  if (v == Narrow::kIn && collect) out.push(i, t, d);
+                  if (v == Narrow::kIn && collect) out.push(i, orig[t], d);
                   if (v == Narrow::kDoubt) doubts.push(i, t);
                   const uint32_t hits = g.count(v == Narrow::kIn);
                   if (g.lane == k) mine_hits += hits;
@@ -617,7 +622,7 @@ class GridDetector final : public Detector {
             } else {
               const uint32_t per = g.size / nt, group = g.lane / nt, ti = g.lane - group * nt;
               const bool have = group < per;
-              const uint32_t t = have ? ov.leaf_tri[ts + ti] : 0u;
+              const uint32_t t = have ? ov.slot(list, ti) : 0u;
               const PlanarTriangle tri = T[t];
               for (uint32_t kb = k0; kb < k1; kb += per) {
                 const uint32_t k = kb + group;
@@ -626,7 +631,7 @@ class GridDetector final : public Detector {
                 const uint32_t i = g.from(pair ? k : 0u, mine_i);
                 float d = 0;
                 const auto v = pair ? nw.judge(p, tri, &d, &band) : Narrow::kOut;
-                if (v == Narrow::kIn && collect) out.push(i, t, d);
+                if (v == Narrow::kIn && collect) out.push(i, orig[t], d);
                 if (v == Narrow::kDoubt) doubts.push(i, t);
                 // The lane that holds particle kb + q counts group q's hits.
                 const uint32_t bits = g.bits(v == Narrow::kIn);
@@ -651,14 +656,15 @@ class GridDetector final : public Detector {
   // 128 with it, 56 without). Their count stays on the device; a frame whose
   // doubts passed the buffer runs again with a larger one (detect()).
   void octree_doubts(bool collect) {
-    const uint64_t* key = doubt_key_.data();
+    const uint64_t* key = doubt_key_.data();  // particle << 32 | the triangle's slot
+    const uint32_t* orig = wall_.tri_original.data();
     const uint32_t* held = pair_counter_.data() + 3;
     uint32_t* counts = counts_.data();
     const PairSink out = sink();
     const Narrow nw = narrow();
     backend_.parallel_for(doubt_capacity_, [=] COLLIDO_HD(uint32_t j) {
       if (j >= *held) return;
-      const uint32_t i = uint32_t(key[j] >> 32), t = uint32_t(key[j]);
+      const uint32_t i = uint32_t(key[j] >> 32), t = orig[uint32_t(key[j])];
       float d = 0;
       if (!nw.decide_exactly(i, t, &d)) return;
       atomic_add_u32(&counts[i], 1u);
@@ -814,15 +820,15 @@ class GridDetector final : public Detector {
 
   Buf<PackedParticle> particles_, sorted_particles_;
   Buf<uint32_t> p_key_, p_idx_, p_key_sorted_, p_idx_sorted_, p_cell_start_, p_cell_end_, counts_;
-  Buf<uint32_t> leaf_chunk_;    // octree: each leaf's first chunk (leaves + 1: then their count)
-  Buf<uint32_t> octree_chunk_;  // octree: each chunk's first place in the sorted particles
   Buf<uint32_t>
-      leaf_pos_;  // octree: the leaves' particle counts, then their starts (leaves + 1); the chunks
+      octree_chunk_;  // octree: each particle's leaf, then each chunk's first sorted place
+  // octree: the leaves' particle counts, then their starts (leaves + 1); the chunks' count
+  Buf<uint32_t> leaf_pos_;
 
   Buf<uint64_t> pair_key_, pair_key2_;
   Buf<float> pair_dist_, pair_dist2_;
   Buf<uint32_t> pair_counter_;
-  Buf<uint64_t> doubt_key_;  // octree: the pairs in doubt, particle << 32 | triangle
+  Buf<uint64_t> doubt_key_;  // octree: the pairs in doubt, particle << 32 | the triangle's slot
   size_t doubt_capacity_ = 0;
   size_t pair_capacity_ = 0;
   uint32_t pair_count_host_ = 0;

@@ -435,34 +435,48 @@ class WallIndex {
                         PrepareInfo* info) {
     const size_t m = mesh.triangles.size();
     const BinLayout layout = lay_bin_grid(box, cell, m, info);
-    std::vector<PlanarTriangle> host_tris(m);
-    std::vector<PlanarTriangleD> host_tris_d(double_ ? m : 0);
-    for (size_t t = 0; t < m; ++t) set_planar(mesh, t, t, host_tris, host_tris_d);
-    upload(backend, tris, host_tris);
-    if (double_) upload(backend, tris_d, host_tris_d);
     const OctreeBuild built = build_octree(mesh, origin, grid, layout.grow);
-    if (built.leaf_tri.size() >= (1ull << 31))
+    if (built.leaf_tri.size() >= (1ull << 30))
       return invalid_argument("the octree method would store " +
                               std::to_string(built.leaf_tri.size()) +
                               " (leaf, triangle) pairs; raise --grid-length");
+    // The triangles in the lists' slots (along a Morton curve), each slot's
+    // mesh index beside them, as the tree keeps its own order.
+    const OctreeLists lists = pack_octree_lists(mesh, built);
+    std::vector<PlanarTriangle> host_tris(m);
+    std::vector<PlanarTriangleD> host_tris_d(double_ ? m : 0);
+    for (size_t k = 0; k < m; ++k) set_planar(mesh, lists.order[k], k, host_tris, host_tris_d);
+    upload(backend, tris, host_tris);
+    if (double_) upload(backend, tris_d, host_tris_d);
+    upload(backend, tri_original, lists.order);
     info->octree_leaves = built.leaves();
     info->octree_entries = built.leaf_tri.size();
     info->octree_splits = built.splits;
-    upload(backend, oct_cell_start, built.cell_start);
-    if (grid.hashed) upload(backend, oct_cell_key, built.cell_key);  // a dense bucket is its cell
+    info->octree_wide_entries = lists.wide_entries;
+    if (grid.hashed) {
+      grid.buckets = built.buckets;  // the octree's own table (the grid serves no other method)
+      info->buckets = grid.buckets;
+      upload(backend, oct_cell_start, built.cell_start);
+      upload(backend, oct_cell_key, built.cell_key);
+    } else {
+      upload(backend, oct_cell_word, built.cell_word);
+    }
     upload(backend, oct_cell_node, built.cell_node);
     upload(backend, oct_inner, built.inner);
-    upload(backend, oct_leaf_start, built.leaf_start);
-    upload(backend, oct_leaf_tri, built.leaf_tri);
+    upload(backend, oct_leaf_start, lists.leaf_start);
+    upload(backend, oct_leaf_base, lists.leaf_base);
+    upload(backend, oct_leaf_entry, lists.leaf_entry);
     return Status::ok();
   }
 
   OctreeView octree_view() const {
     OctreeView o;
     o.grid = grid;
+    o.cell_word = oct_cell_word.data();
     o.cell_start = oct_cell_start.data(), o.cell_key = oct_cell_key.data();
     o.cell_node = oct_cell_node.data(), o.inner = oct_inner.data();
-    o.leaf_start = oct_leaf_start.data(), o.leaf_tri = oct_leaf_tri.data();
+    o.leaf_start = oct_leaf_start.data(), o.leaf_base = oct_leaf_base.data();
+    o.leaf_entry = oct_leaf_entry.data();
     return o;
   }
 
@@ -550,9 +564,13 @@ class WallIndex {
   Buf<BvhWideNode> bvh_nodes;  // the four-wide tree
   float bvh_reach = 0;
   MortonFrame morton;  // bvh: orders a frame's particles along the wall
-  // octree (sim/octree.h): the top cells by bucket, the inner nodes, the leaves' lists
-  Buf<uint32_t> oct_cell_start, oct_leaf_start, oct_leaf_tri;
-  Buf<uint64_t> oct_cell_key;  // hashed grids only
+  // octree (sim/octree.h): the listed top cells (dense: in words; hashed: by
+  // bucket), the inner nodes, the leaves' lists
+  Buf<OctreeWord> oct_cell_word;  // dense grids only
+  Buf<uint32_t> oct_cell_start;   // hashed grids only
+  Buf<uint64_t> oct_cell_key;     // hashed grids only
+  Buf<uint32_t> oct_leaf_start, oct_leaf_base;
+  Buf<uint16_t> oct_leaf_entry;
   Buf<int32_t> oct_cell_node, oct_inner;
   uint32_t octree_leaves() const {
     return oct_leaf_start.size() ? static_cast<uint32_t>(oct_leaf_start.size() - 1) : 0u;

@@ -13,6 +13,7 @@
 #include "sim/particles.h"
 #include "sim/shapes.h"
 #include "tests/sim/gpu_suite.h"
+#include "tests/sim/wall_shape.h"
 
 namespace collido::sim {
 namespace {
@@ -342,6 +343,35 @@ void float_precision_flags_its_doubts() {
   }
 }
 
+// The octree's leaves whose triangles lie more than 65,535 slots apart list
+// whole slots (sim/octree.h): a row of 140,000 small triangles along x and a
+// long sliver over it, listed with the row's triangles by every leaf; the
+// sliver's slot lies 2/3 of the way along, so the leaves near the row's ends
+// are wide and those between are not.
+void octree_wide_leaves() {
+  const double s = 5e-4;  // a triangle's size: the row 70 long keeps float's distances to 1e-5
+  const TriangleMesh row = triangle_row_under_a_sliver(140000, s);
+  const Particles p = scene_near(row, 1500, 2 * s, 4 * s, 11);
+  DetectConfig cfg;
+  cfg.backend = backend_under_test();
+  cfg.r_max = max_radius(p);
+  DetectConfig rc = cfg;
+  rc.method = Method::kReference;
+  rc.backend = Backend::kCpu;
+  const DetectResult ref = run(row, p, rc);
+  ASSERT_GT(ref.contact_count, 1500u);
+  cfg.method = Method::kOctree;
+  auto det = Detector::create(row, cfg, p.size());
+  ASSERT_TRUE(det) << det.status().message();
+  EXPECT_GT((*det)->info().octree_wide_entries, 1000u);
+  EXPECT_LT((*det)->info().octree_wide_entries, (*det)->info().octree_entries / 2);
+  for (uint32_t runs_below : {0u, UINT32_MAX}) {
+    cfg.octree_runs_below = runs_below;
+    expect_same_contacts(row, p, ref, run(row, p, cfg), cfg.r_max,
+                         runs_below ? "wide leaves in runs" : "wide leaves in chunks");
+  }
+}
+
 // A frame whose candidate pairs pass the most a frame may hold fails with a
 // clear error instead of a wrong count; counting alone (bin, bvh) holds no pairs, the
 // octree's only those in float's error band.
@@ -424,6 +454,9 @@ TEST(Detect, FloatErrorStaysInsideTheBand) {
 
 TEST(Detect, ThirdPartyMeshesNearTouchingMatchTheReference) { third_party_meshes_near_touching(); }
 TEST(Detect, FloatPrecisionFlagsItsDoubts) { float_precision_flags_its_doubts(); }
+TEST(Detect, OctreeLeavesListingWholeSlotsMatchTheReference) {
+  octree_wide_leaves();
+}
 TEST(Detect, AFrameWithMorePairsThanItMayHoldIsRefused) { more_pairs_than_a_frame_may_hold(); }
 TEST(Detect, TwentyRandomScenesMatchTheReference) { twenty_random_scenes(); }
 TEST(Detect, AdversarialPlacementsMatchTheReference) { adversarial_placements(); }
@@ -445,6 +478,9 @@ TEST_F(DetectCuda, OtherGridLengthsStayExact) { other_grid_lengths(); }
 TEST_F(DetectCuda, ParticlesOutsideTheGridAndEmptyFrames) { outside_and_empty(); }
 TEST_F(DetectCuda, ThirdPartyMeshesNearTouchingMatchTheReference) { third_party_meshes_near_touching(); }
 TEST_F(DetectCuda, FloatPrecisionFlagsItsDoubts) { float_precision_flags_its_doubts(); }
+TEST_F(DetectCuda, OctreeLeavesListingWholeSlotsMatchTheReference) {
+  octree_wide_leaves();
+}
 TEST_F(DetectCuda, AFrameWithMorePairsThanItMayHoldIsRefused) { more_pairs_than_a_frame_may_hold(); }
 
 TEST_F(DetectCuda, GpuAndCpuCountsAgreeOnALargeScene) {

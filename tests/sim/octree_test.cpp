@@ -77,10 +77,11 @@ TEST(Octree, APointsLeafListsEveryTriangleWithinReach) {
       const Vec3f local = cast3<float>(p - index.origin);
       std::set<uint32_t> listed;
       const int32_t leaf = view.leaf_of(local);
-      if (leaf >= 0)
-        listed.insert(view.leaf_tri + view.leaf_start[leaf],
-                      view.leaf_tri + view.leaf_start[leaf + 1]);
-      for (uint32_t t = 0; t < m; ++t) {
+      if (leaf >= 0) {
+        const OctreeView::List list = view.list(uint32_t(leaf));
+        for (uint32_t k = 0; k < list.count; ++k) listed.insert(view.slot(list, k));
+      }
+      for (uint32_t t = 0; t < m; ++t) {  // the triangles' slots (tris_d is in their order)
         const PlanarTriangleD& td = index.tris_d.data()[t];
         if (!(exact_d2(p - index.origin, td) < r * r)) continue;
         ++touching;
@@ -126,6 +127,38 @@ TEST(Octree, CrowdedCellsAreSplitUntilTheirListsAreShort) {
   EXPECT_EQ(b.inner, split.inner);
   EXPECT_EQ(b.cell_node, split.cell_node);
   EXPECT_EQ(b.cell_key, split.cell_key);
+}
+
+// The device's lists: a base slot and 16-bit steps, or whole slots for a
+// leaf whose triangles lie farther apart along the Morton curve. A row of
+// 70,000 small triangles along x (their slots follow x) and a long sliver
+// beside it: a leaf listing both ends of the row spans more than 65,535 slots.
+TEST(Octree, ListsPackedBySlotGiveBackEveryTriangle) {
+  const uint32_t n = 70000;
+  const TriangleMesh row = triangle_row_under_a_sliver(n, 0.1);
+  OctreeBuild built;  // three leaves, by hand
+  built.leaf_tri = {0, 1, 2, n - 1, 30000, 30001, 69998, 69999, n};
+  built.leaf_start = {0, 4, 6, 9};
+  const OctreeLists lists = pack_octree_lists(row, built);
+  ASSERT_EQ(lists.order.size(), size_t(n) + 1);
+  std::vector<uint32_t> slot(n + 1);
+  for (uint32_t k = 0; k <= n; ++k) slot[lists.order[k]] = k;
+  for (uint32_t k = 1; k < n; ++k) ASSERT_LT(slot[k - 1], slot[k]) << "the row's slots follow x";
+  EXPECT_EQ(lists.leaf_base[0], kOctreeWide);
+  EXPECT_NE(lists.leaf_base[1], kOctreeWide);
+  EXPECT_EQ(lists.wide_entries, 4u);
+  OctreeView view;
+  view.leaf_start = lists.leaf_start.data();
+  view.leaf_base = lists.leaf_base.data();
+  view.leaf_entry = lists.leaf_entry.data();
+  for (uint32_t leaf = 0; leaf < 3; ++leaf) {
+    const OctreeView::List list = view.list(leaf);
+    std::multiset<uint32_t> got, want;
+    for (uint32_t k = 0; k < list.count; ++k) got.insert(lists.order[view.slot(list, k)]);
+    want.insert(built.leaf_tri.begin() + built.leaf_start[leaf],
+                built.leaf_tri.begin() + built.leaf_start[leaf + 1]);
+    EXPECT_EQ(got, want) << "leaf " << leaf;
+  }
 }
 
 }  // namespace

@@ -15,4 +15,23 @@ inline TriangleMesh shape(const std::string& spec) {
   return m ? std::move(*m) : TriangleMesh{};
 }
 
+// A row of n right triangles of legs `size` along x (in the plane z = 0),
+// their source ids in order, then a sliver as long as the row above it at
+// z = 3 size: the octree's leaves list triangles far apart along the row.
+inline TriangleMesh triangle_row_under_a_sliver(uint32_t n, double size) {
+  TriangleMesh row;
+  auto add = [&row](Vec3d a, Vec3d b, Vec3d c) {
+    const uint32_t v = uint32_t(row.vertices.size());
+    row.vertices.insert(row.vertices.end(), {a, b, c});
+    row.triangles.push_back({v, v + 1, v + 2});
+  };
+  for (uint32_t k = 0; k < n; ++k)
+    add({size * k, 0, 0}, {size * k + size, 0, 0}, {size * k, size, 0});
+  add({0, 0.5 * size, 3 * size}, {size * n, 0.5 * size, 3 * size},
+      {size * n, 0.501 * size, 3 * size});
+  row.source_ids.resize(row.triangles.size());
+  for (size_t t = 0; t < row.triangles.size(); ++t) row.source_ids[t] = uint32_t(t);
+  return row;
+}
+
 }  // namespace collido::sim
