@@ -41,6 +41,15 @@ class CpuBackend {
     b.resize(n);
   }
   uint64_t bytes_held() const { return static_cast<uint64_t>(std::max<int64_t>(bytes_, 0)); }
+  // Memory both sides read: all of it here.
+  template <class T>
+  void resize_host_visible(std::vector<T>& b, size_t n) {
+    resize(b, n);
+  }
+  template <class T>
+  T* host_pointer(std::vector<T>& b) const {
+    return b.data();
+  }
 
   template <class F>
   void parallel_for(size_t n, F f) {

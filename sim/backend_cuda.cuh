@@ -188,16 +188,19 @@ class CudaBackend {
     Buffer() = default;
     Buffer(const Buffer&) = delete;
     Buffer& operator=(const Buffer&) = delete;
-    ~Buffer() {
-      if (ptr_) cudaFree(ptr_);
-    }
+    ~Buffer() { release(); }
     T* data() const { return ptr_; }
     size_t size() const { return size_; }
 
    private:
     friend class CudaBackend;
+    void release() {
+      if (ptr_) host_ ? cudaFreeHost(ptr_) : cudaFree(ptr_);
+      ptr_ = nullptr;
+    }
     T* ptr_ = nullptr;
     size_t size_ = 0, capacity_ = 0;
+    bool host_ = false;  // pinned host memory the device reads (resize_host_visible)
   };
 
   static constexpr bool kHostThreads = false;
@@ -217,12 +220,10 @@ class CudaBackend {
       b.size_ = n;
       return;
     }
-    if (b.ptr_) {
-      cudaFree(b.ptr_);
-      bytes_ -= b.capacity_ * sizeof(T);
-    }
-    b.ptr_ = nullptr;
+    if (b.ptr_ && !b.host_) bytes_ -= b.capacity_ * sizeof(T);
+    b.release();
     b.size_ = b.capacity_ = 0;
+    b.host_ = false;
     if (n == 0) return;
     if (check(cudaMalloc(&b.ptr_, n * sizeof(T)), "cudaMalloc")) {
       b.size_ = b.capacity_ = n;
@@ -230,6 +231,34 @@ class CudaBackend {
     } else {
       b.ptr_ = nullptr;
     }
+  }
+  // A buffer in pinned host memory that kernels read across the bus (mapped,
+  // one address for both under unified addressing): for data the device
+  // reads rarely, such as the double copy of the particles whose pairs fall
+  // in float's band (a few in 10^3), which would otherwise hold 32 bytes of
+  // device memory a particle. Not counted in bytes_held(); the host writes it
+  // directly (host_pointer) between frames.
+  template <class T>
+  void resize_host_visible(Buffer<T>& b, size_t n) {
+    if (n <= b.capacity_ && b.host_) {
+      b.size_ = n;
+      return;
+    }
+    if (b.ptr_ && !b.host_) bytes_ -= b.capacity_ * sizeof(T);
+    b.release();
+    b.size_ = b.capacity_ = 0;
+    b.host_ = true;
+    if (n == 0) return;
+    void* p = nullptr;
+    if (check(cudaHostAlloc(&p, n * sizeof(T), cudaHostAllocMapped), "cudaHostAlloc")) {
+      b.ptr_ = static_cast<T*>(p);
+      b.size_ = b.capacity_ = n;
+    }
+  }
+  // Where the host may write b directly: host-visible buffers only.
+  template <class T>
+  T* host_pointer(Buffer<T>& b) const {
+    return b.host_ ? b.ptr_ : nullptr;
   }
   uint64_t bytes_held() const { return bytes_ + temp_bytes_; }
 

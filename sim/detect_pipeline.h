@@ -60,10 +60,12 @@ class GridDetector final : public Detector {
     n_ = n;
     if (n) backend_.to_device(particles_.data(), host.data(), n * sizeof(PackedParticle));
     if (created_precision_ == Precision::kExact && n) {
+      ParticleD* direct = backend_.host_pointer(particles_d_);
       std::vector<ParticleD>& hd = staging_d_;
-      hd.resize(n);
-      for (size_t i = 0; i < n; ++i) hd[i] = {p.x[i], p.y[i], p.z[i], p.r[i]};
-      backend_.to_device(particles_d_.data(), hd.data(), n * sizeof(ParticleD));
+      if (!direct) hd.resize(n);
+      ParticleD* to = direct ? direct : hd.data();
+      for (size_t i = 0; i < n; ++i) to[i] = {p.x[i], p.y[i], p.z[i], p.r[i]};
+      if (!direct) backend_.to_device(particles_d_.data(), hd.data(), n * sizeof(ParticleD));
     }
     return Status::ok();
   }
@@ -250,7 +252,15 @@ class GridDetector final : public Detector {
     for (size_t t = 0; t < mesh.triangles.size(); ++t)
       for (int k = 0; k < 3; ++k) corners[3 * t + k] = mesh.triangles[t][k];
     WallIndex<B>::upload(backend_, corners_exact_, corners);
-    backend_.resize(particles_d_, std::max<size_t>(capacity_, 1));
+    // The octree reads the particles' double copy only in its pass over the
+    // pairs in doubt (a few in 10^3), so it lies in host memory the device
+    // reads (32 bytes a particle of device memory saved); the other methods
+    // decide their band's pairs inside the traversal, whose warps would wait
+    // on the bus.
+    if (cfg_.method == Method::kOctree)
+      backend_.resize_host_visible(particles_d_, std::max<size_t>(capacity_, 1));
+    else
+      backend_.resize(particles_d_, std::max<size_t>(capacity_, 1));
   }
   bool exact() const { return cfg_.precision == Precision::kExact; }
 
