@@ -830,8 +830,8 @@ class GridDetector final : public Detector {
 
   Buf<PackedParticle> particles_, sorted_particles_;
   Buf<uint32_t> p_key_, p_idx_, p_key_sorted_, p_idx_sorted_, p_cell_start_, p_cell_end_, counts_;
-  Buf<uint32_t>
-      octree_chunk_;  // octree: each particle's leaf, then each chunk's first sorted place
+  // octree: each particle's leaf, then each chunk's first sorted place
+  Buf<uint32_t> octree_chunk_;
   // octree: the leaves' particle counts, then their starts (leaves + 1); the chunks' count
   Buf<uint32_t> leaf_pos_;
 

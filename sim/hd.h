@@ -64,7 +64,11 @@ COLLIDO_HD COLLIDO_FORCEINLINE uint32_t hd_popcount(uint32_t bits) {
 #if defined(__CUDA_ARCH__)
   return uint32_t(__popc(bits));
 #else
-  return uint32_t(__builtin_popcount(bits));
+  // Bit arithmetic: without -mpopcnt, __builtin_popcount is a call into
+  // libgcc, made for each particle's top cell in the octree.
+  bits = bits - ((bits >> 1) & 0x55555555u);
+  bits = (bits & 0x33333333u) + ((bits >> 2) & 0x33333333u);
+  return (((bits + (bits >> 4)) & 0x0F0F0F0Fu) * 0x01010101u) >> 24;
 #endif
 }
 

@@ -106,25 +106,28 @@ OctreeLists pack_octree_lists(const TriangleMesh& mesh, const OctreeBuild& built
   out.leaf_base.resize(leaves);
   out.leaf_start.reserve(leaves + 1);
   out.leaf_entry.reserve(built.leaf_tri.size());
+  std::vector<uint32_t> mine;
   for (size_t l = 0; l < leaves; ++l) {
-    uint32_t lo = UINT32_MAX, hi = 0;
+    // A leaf's slots ascending, so neighbouring lanes read neighbouring
+    // triangles (no difference measured on the H200 or here, 2026-11-30).
+    mine.clear();
     for (uint32_t k = built.leaf_start[l]; k < built.leaf_start[l + 1]; ++k)
-      lo = std::min(lo, slot[built.leaf_tri[k]]), hi = std::max(hi, slot[built.leaf_tri[k]]);
-    if (hi >= lo && hi - lo > kOctreeSpan) {
+      mine.push_back(slot[built.leaf_tri[k]]);
+    std::sort(mine.begin(), mine.end());
+    if (!mine.empty() && mine.back() - mine.front() > kOctreeSpan) {
       out.leaf_base[l] = kOctreeWide;
       if (out.leaf_entry.size() % 2) out.leaf_entry.push_back(0);  // slots from an even word
-      for (uint32_t k = built.leaf_start[l]; k < built.leaf_start[l + 1]; ++k) {
-        const uint32_t s = slot[built.leaf_tri[k]];
+      for (const uint32_t s : mine) {
         uint16_t words[2];
         std::memcpy(words, &s, sizeof s);  // as the device reads it back
         out.leaf_entry.push_back(words[0]);
         out.leaf_entry.push_back(words[1]);
-        ++out.wide_entries;
       }
+      out.wide_entries += mine.size();
     } else {
-      out.leaf_base[l] = hi >= lo ? lo : 0;
-      for (uint32_t k = built.leaf_start[l]; k < built.leaf_start[l + 1]; ++k)
-        out.leaf_entry.push_back(uint16_t(slot[built.leaf_tri[k]] - lo));
+      const uint32_t lo = mine.empty() ? 0 : mine.front();
+      out.leaf_base[l] = lo;
+      for (const uint32_t s : mine) out.leaf_entry.push_back(uint16_t(s - lo));
     }
     out.leaf_start.push_back(uint32_t(out.leaf_entry.size()));
   }

@@ -86,8 +86,8 @@ struct OctreeView {
     return {start, (leaf_start[leaf + 1] - start) >> (base == kOctreeWide), base};
   }
   COLLIDO_HD COLLIDO_FORCEINLINE uint32_t slot(const List& l, uint32_t k) const {
-    if (l.base ==
-        kOctreeWide)  // from the first even word (the run's length is 2 count or one more)
+    // A wide run starts at its first even word (its length is 2 count, or one more).
+    if (l.base == kOctreeWide)
       return reinterpret_cast<const uint32_t*>(leaf_entry)[(l.start + 1) / 2 + k];
     return l.base + leaf_entry[l.start + k];
   }
@@ -149,7 +149,11 @@ struct OctreeBuild {
 // The device's form of the leaves' lists: the triangles in slots along a
 // Morton curve (neighbouring triangles in neighbouring slots), so a leaf's
 // list is a base slot and 16-bit steps above it, half the bytes of mesh
-// indices (the counter mesh: 44 -> 22 MB).
+// indices (the counter mesh: 44 -> 22 MB). The curve, not the file's order:
+// a file's order may be anything (shuffled, every list would be wide); on
+// the H200 the two draw level on the counter and its tiling, while on the
+// CPU the counter's own order is faster (165 against 185 ms a frame), which
+// says more about that file than about the curve (docs/benchmarks.md).
 struct OctreeLists {
   std::vector<uint32_t> order;  // slot -> mesh triangle index
   std::vector<uint32_t> leaf_start{0};

@@ -436,6 +436,7 @@ class WallIndex {
     const size_t m = mesh.triangles.size();
     const BinLayout layout = lay_bin_grid(box, cell, m, info);
     const OctreeBuild built = build_octree(mesh, origin, grid, layout.grow);
+    // The device's list words are numbered in 32 bits, and a wide leaf takes two a slot.
     if (built.leaf_tri.size() >= (1ull << 30))
       return invalid_argument("the octree method would store " +
                               std::to_string(built.leaf_tri.size()) +
