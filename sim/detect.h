@@ -90,6 +90,15 @@ struct DetectConfig {
   // 0.70 / 0.62; wall1, 16, 0.14 / 0.18 (docs/benchmarks.md). 0 keeps chunks,
   // UINT32_MAX runs (the tests take both ways).
   uint32_t octree_runs_below = 3;
+  // octree, runs: a batch of 32 particles whose leaves hold one or two each
+  // tests leaf by leaf (a lane a triangle, or a pair of a short list) or its
+  // pairs flattened (a lane a pair, whichever leaf), whichever takes fewer of
+  // the warp's rounds, a flattened round counted as this many of the others
+  // (its lanes each load their own triangle and shuffle in their particle).
+  // H200, 10^6 half near, always flattened against never: the large icosphere
+  // 0.29 against 0.40 ms, the small one 0.33 against 0.31 (docs/benchmarks.md).
+  // 0 always flattens, infinity never (the tests take both ways).
+  float octree_flat_cost = 1.8f;
 };
 
 // One contact: particle index, the triangle's id in the input file, centre distance.

@@ -584,6 +584,7 @@ class GridDetector final : public Detector {
     const uint32_t stride = backend_.strided_items(n_, kOctreeChunk);
     const uint32_t* located = pos + wall_.octree_leaves();
     const uint64_t runs_below = cfg_.octree_runs_below;
+    const float flat_cost = cfg_.octree_flat_cost;
     auto body = [=] COLLIDO_HD(uint32_t u, LaneGroup g) {
       uint32_t band = 0;
       // Chunks hold one leaf's particles each; where they hold few (the leaves are
@@ -606,50 +607,102 @@ class GridDetector final : public Detector {
                                   g.from(k, mine.r)};
           };
           uint32_t mine_hits = 0;
-          // The batch's particles by leaf: lanes k0 .. k1 - 1 hold one leaf's.
-          for (uint32_t k0 = 0; k0 < m;) {
-            const uint32_t leaf = sleaf[jb + k0];
-            const uint32_t k1 = hd_min(m, pos[leaf + 1] - jb);
-            const OctreeView::List list = ov.list(leaf);
-            const uint32_t nt = list.count;
-            if (2 * nt > g.size || nt == 0) {
-              for (uint32_t tb = 0; tb < nt; tb += g.size) {
-                const uint32_t ti = tb + g.lane;
-                const bool have = ti < nt;
-                const uint32_t t = have ? ov.slot(list, ti) : 0u;
-                const PlanarTriangle tri = T[t];
-                for (uint32_t k = k0; k < k1; ++k) {
-                  const PackedParticle p = particle(k);
-                  const uint32_t i = g.from(k, mine_i);
-                  float d = 0;
-                  const auto v = have ? nw.judge(p, tri, &d, &band) : Narrow::kOut;
-                  if (v == Narrow::kIn && collect) out.push(i, orig[t], d);
-                  if (v == Narrow::kDoubt) doubts.push(i, t);
-                  const uint32_t hits = g.count(v == Narrow::kIn);
-                  if (g.lane == k) mine_hits += hits;
-                }
-              }
-            } else {
-              const uint32_t per = g.size / nt, group = g.lane / nt, ti = g.lane - group * nt;
-              const bool have = group < per;
-              const uint32_t t = have ? ov.slot(list, ti) : 0u;
+          // A run's leaves hold a particle or two: their pairs may be flattened,
+          // each lane a pair in turn (pair q's particle is the first lane whose
+          // lists end past q), so that no lane idles on a short leaf. Lane k
+          // holds its particle's list, and where its pairs begin and end.
+          const uint32_t mine_leaf = runs && holds ? sleaf[jb + g.lane] : ~0u;
+          const OctreeView::List mine_list =
+              runs && holds ? ov.list(mine_leaf) : OctreeView::List{0, 0, 0};
+          uint32_t ends = 0, begins = 0, pairs = 0;
+          bool flat = false;
+          if (runs) {  // and the rounds leaf by leaf, counted by each leaf's first lane
+            ends = g.scan(mine_list.count), begins = ends - mine_list.count;
+            pairs = g.from(g.size - 1, ends);
+            const uint32_t before_leaf = g.from(g.lane ? g.lane - 1 : 0u, mine_leaf);
+            const bool first = holds && (g.lane == 0 || before_leaf != mine_leaf);
+            const uint32_t firsts = g.bits(first), nt = mine_list.count;
+            const uint32_t after = firsts & ~((2u << g.lane) - 1u);
+            const uint32_t k = (after ? LaneGroup::lowest(after) : m) - g.lane;
+            const uint32_t rounds = !first || nt == 0 ? 0u
+                                    : 2 * nt > g.size
+                                        ? (nt + g.size - 1) / g.size * k
+                                        : (k + g.size / nt - 1) / (g.size / nt);
+            flat = flat_cost * float((pairs + g.size - 1) / g.size) < float(g.sum(rounds));
+          }
+          if (flat) {
+            for (uint32_t qb = 0; qb < pairs; qb += g.size) {
+              const uint32_t q = qb + g.lane;
+              uint32_t k = 0;
+              for (uint32_t step = g.size >> 1; step > 0; step >>= 1)
+                if (g.from(k + step - 1, ends) <= q) k += step;
+              const bool pair = q < pairs;
+              k = hd_min(k, g.size - 1);
+              // Every lane shuffles (a shuffle in a branch some lanes skip hangs the warp).
+              const OctreeView::List list{g.from(k, mine_list.start), 0u, g.from(k, mine_list.base)};
+              const uint32_t first = g.from(k, begins);
+              const uint32_t t = pair ? ov.slot(list, q - first) : 0u;
+              const PackedParticle p = particle(k);
+              const uint32_t i = g.from(k, mine_i);
               const PlanarTriangle tri = T[t];
-              for (uint32_t kb = k0; kb < k1; kb += per) {
-                const uint32_t k = kb + group;
-                const bool pair = have && k < k1;
-                const PackedParticle p = particle(pair ? k : 0u);
-                const uint32_t i = g.from(pair ? k : 0u, mine_i);
-                float d = 0;
-                const auto v = pair ? nw.judge(p, tri, &d, &band) : Narrow::kOut;
-                if (v == Narrow::kIn && collect) out.push(i, orig[t], d);
-                if (v == Narrow::kDoubt) doubts.push(i, t);
-                // The lane that holds particle kb + q counts group q's hits.
-                const uint32_t bits = g.bits(v == Narrow::kIn);
-                if (g.lane >= kb && g.lane < kb + per)
-                  mine_hits += hd_popcount((bits >> ((g.lane - kb) * nt)) & ((1u << nt) - 1u));
+              float d = 0;
+              const auto v = pair ? nw.judge(p, tri, &d, &band) : Narrow::kOut;
+              if (v == Narrow::kIn && collect) out.push(i, orig[t], d);
+              if (v == Narrow::kDoubt) doubts.push(i, t);
+              // This lane's particle's pairs in the round: lanes [lo, hi).
+              const uint32_t bits = g.bits(v == Narrow::kIn);
+              if (ends > qb && begins < qb + g.size) {
+                const uint32_t lo = hd_max(begins, qb) - qb, hi = hd_min(ends, qb + g.size) - qb;
+                const uint32_t below_hi = hi >= 32 ? ~0u : (1u << hi) - 1u;
+                mine_hits += hd_popcount(bits & below_hi & ~((1u << lo) - 1u));
               }
             }
-            k0 = k1;
+          } else {
+            // The batch's particles by leaf: lanes k0 .. k1 - 1 hold one leaf's.
+            for (uint32_t k0 = 0; k0 < m;) {
+              const uint32_t leaf = sleaf[jb + k0];
+              const uint32_t k1 = hd_min(m, pos[leaf + 1] - jb);
+              const OctreeView::List list = ov.list(leaf);
+              const uint32_t nt = list.count;
+              if (2 * nt > g.size || nt == 0) {
+                for (uint32_t tb = 0; tb < nt; tb += g.size) {
+                  const uint32_t ti = tb + g.lane;
+                  const bool have = ti < nt;
+                  const uint32_t t = have ? ov.slot(list, ti) : 0u;
+                  const PlanarTriangle tri = T[t];
+                  for (uint32_t k = k0; k < k1; ++k) {
+                    const PackedParticle p = particle(k);
+                    const uint32_t i = g.from(k, mine_i);
+                    float d = 0;
+                    const auto v = have ? nw.judge(p, tri, &d, &band) : Narrow::kOut;
+                    if (v == Narrow::kIn && collect) out.push(i, orig[t], d);
+                    if (v == Narrow::kDoubt) doubts.push(i, t);
+                    const uint32_t hits = g.count(v == Narrow::kIn);
+                    if (g.lane == k) mine_hits += hits;
+                  }
+                }
+              } else {
+                const uint32_t per = g.size / nt, group = g.lane / nt, ti = g.lane - group * nt;
+                const bool have = group < per;
+                const uint32_t t = have ? ov.slot(list, ti) : 0u;
+                const PlanarTriangle tri = T[t];
+                for (uint32_t kb = k0; kb < k1; kb += per) {
+                  const uint32_t k = kb + group;
+                  const bool pair = have && k < k1;
+                  const PackedParticle p = particle(pair ? k : 0u);
+                  const uint32_t i = g.from(pair ? k : 0u, mine_i);
+                  float d = 0;
+                  const auto v = pair ? nw.judge(p, tri, &d, &band) : Narrow::kOut;
+                  if (v == Narrow::kIn && collect) out.push(i, orig[t], d);
+                  if (v == Narrow::kDoubt) doubts.push(i, t);
+                  // The lane that holds particle kb + q counts group q's hits.
+                  const uint32_t bits = g.bits(v == Narrow::kIn);
+                  if (g.lane >= kb && g.lane < kb + per)
+                    mine_hits += hd_popcount((bits >> ((g.lane - kb) * nt)) & ((1u << nt) - 1u));
+                }
+              }
+              k0 = k1;
+            }
           }
           if (holds && mine_hits) counts[mine_i] = mine_hits;
         }

@@ -132,6 +132,16 @@ struct LaneGroup {
   COLLIDO_HD COLLIDO_FORCEINLINE Vec3d from(uint32_t lane, Vec3d v) const {
     return {from(lane, v.x), from(lane, v.y), from(lane, v.z)};
   }
+  // The sum of v over the lanes up to and including this one.
+  COLLIDO_HD COLLIDO_FORCEINLINE uint32_t scan(uint32_t v) const {
+#if defined(__CUDA_ARCH__)
+    for (uint32_t o = 1; o < size; o <<= 1) {
+      const uint32_t u = __shfl_up_sync(mask, v, o, size);
+      if (lane >= o) v += u;
+    }
+#endif
+    return v;
+  }
   // How many lanes before this one have b set, and how many in all.
   COLLIDO_HD COLLIDO_FORCEINLINE uint32_t count_before(bool b) const {
 #if defined(__CUDA_ARCH__)

@@ -4,7 +4,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <iterator>
 #include <map>
+#include <string>
 
 #include "sim/accuracy.h"
 #include "sim/exact_distance.h"
@@ -30,6 +32,17 @@ const Combo kCombos[] = {
     {Method::kCircumcircle, Traversal::kParticle}, {Method::kCircumcircle, Traversal::kWall},
     {Method::kMidpoint4, Traversal::kParticle},    {Method::kMidpoint4, Traversal::kWall},
     {Method::kBvh, Traversal::kParticle},          {Method::kOctree, Traversal::kParticle}};
+
+// The octree's ways of dealing out a frame's particles (sim/detect.h).
+struct OctreeWay {
+  const char* name;
+  uint32_t runs_below;
+  float flat_cost;
+  void apply(DetectConfig& c) const { c.octree_runs_below = runs_below, c.octree_flat_cost = flat_cost; }
+};
+const OctreeWay kOctreeWays[] = {{" in chunks", 0u, 1.8f},
+                                 {" in runs, leaf by leaf", UINT32_MAX, INFINITY},
+                                 {" in runs, flattened", UINT32_MAX, 0.f}};
 
 DetectResult run(const TriangleMesh& mesh, const Particles& p, DetectConfig cfg) {
   auto det = Detector::create(mesh, cfg, p.size());
@@ -133,17 +146,16 @@ void check_all_methods(const TriangleMesh& mesh, const Particles& p, const std::
   const DetectResult ref = run(mesh, p, rc);
   ASSERT_EQ(ref.contact_count, ref.contacts.size());
   for (const Combo& c : kCombos) {
-    // The octree deals its particles out in chunks of a leaf or in runs: both ways.
+    // The octree deals its particles out in chunks of a leaf or in runs, a
+    // run leaf by leaf or its pairs flattened: every way.
     const bool octree = c.method == Method::kOctree;
-    const uint32_t ways[] = {0u, UINT32_MAX};
-    for (size_t way = 0; way < (octree ? 2u : 1u); ++way) {
-      const uint32_t runs_below = ways[way];
+    for (size_t way = 0; way < (octree ? std::size(kOctreeWays) : 1u); ++way) {
       DetectConfig mc = cfg;
       mc.method = c.method;
       mc.traversal = c.traversal;
-      mc.octree_runs_below = runs_below;
+      if (octree) kOctreeWays[way].apply(mc);
       const std::string label = what + " " + to_string(c.method) + "/" + to_string(c.traversal) +
-                                (octree ? (runs_below ? " in runs" : " in chunks") : "") + " on " +
+                                (octree ? kOctreeWays[way].name : "") + " on " +
                                 to_string(cfg.backend);
       const DetectResult got = run(mesh, p, mc);
       expect_same_contacts(mesh, p, ref, got, cfg.r_max, label);
@@ -365,10 +377,10 @@ void octree_wide_leaves() {
   ASSERT_TRUE(det) << det.status().message();
   EXPECT_GT((*det)->info().octree_wide_entries, 1000u);
   EXPECT_LT((*det)->info().octree_wide_entries, (*det)->info().octree_entries / 2);
-  for (uint32_t runs_below : {0u, UINT32_MAX}) {
-    cfg.octree_runs_below = runs_below;
+  for (const OctreeWay& way : kOctreeWays) {
+    way.apply(cfg);
     expect_same_contacts(row, p, ref, run(row, p, cfg), cfg.r_max,
-                         runs_below ? "wide leaves in runs" : "wide leaves in chunks");
+                         std::string("wide leaves") + way.name);
   }
 }
 
