@@ -638,10 +638,11 @@ class GridDetector final : public Detector {
                 if (g.from(k + step - 1, ends) <= q) k += step;
               const bool pair = q < pairs;
               k = hd_min(k, g.size - 1);
-              // Every lane shuffles (a shuffle in a branch some lanes skip hangs the warp).
+              // Every lane shuffles: a shuffle in a branch that some lanes skip
+              // is undefined (it failed every such frame on the H200).
               const OctreeView::List list{g.from(k, mine_list.start), 0u, g.from(k, mine_list.base)};
-              const uint32_t first = g.from(k, begins);
-              const uint32_t t = pair ? ov.slot(list, q - first) : 0u;
+              const uint32_t its_begin = g.from(k, begins);
+              const uint32_t t = pair ? ov.slot(list, q - its_begin) : 0u;
               const PackedParticle p = particle(k);
               const uint32_t i = g.from(k, mine_i);
               const PlanarTriangle tri = T[t];
