@@ -216,21 +216,7 @@ class CudaBackend {
 
   template <class T>
   void resize(Buffer<T>& b, size_t n) {
-    if (n <= b.capacity_) {
-      b.size_ = n;
-      return;
-    }
-    if (b.ptr_ && !b.host_) bytes_ -= b.capacity_ * sizeof(T);
-    b.release();
-    b.size_ = b.capacity_ = 0;
-    b.host_ = false;
-    if (n == 0) return;
-    if (check(cudaMalloc(&b.ptr_, n * sizeof(T)), "cudaMalloc")) {
-      b.size_ = b.capacity_ = n;
-      bytes_ += n * sizeof(T);
-    } else {
-      b.ptr_ = nullptr;
-    }
+    allocate(b, n, false);
   }
   // A buffer in pinned host memory that kernels read across the bus (mapped,
   // one address for both under unified addressing): for data the device
@@ -240,20 +226,7 @@ class CudaBackend {
   // directly (host_pointer) between frames.
   template <class T>
   void resize_host_visible(Buffer<T>& b, size_t n) {
-    if (n <= b.capacity_ && b.host_) {
-      b.size_ = n;
-      return;
-    }
-    if (b.ptr_ && !b.host_) bytes_ -= b.capacity_ * sizeof(T);
-    b.release();
-    b.size_ = b.capacity_ = 0;
-    b.host_ = true;
-    if (n == 0) return;
-    void* p = nullptr;
-    if (check(cudaHostAlloc(&p, n * sizeof(T), cudaHostAllocMapped), "cudaHostAlloc")) {
-      b.ptr_ = static_cast<T*>(p);
-      b.size_ = b.capacity_ = n;
-    }
+    allocate(b, n, true);
   }
   // Where the host may write b directly: host-visible buffers only.
   template <class T>
@@ -591,6 +564,28 @@ class CudaBackend {
       sms_ = count > 0 ? uint32_t(count) : 1u;
     }
     return sms_;
+  }
+
+  // b holding n elements, in device memory or (host) pinned host memory; it
+  // grows but never shrinks, so frames reuse it.
+  template <class T>
+  void allocate(Buffer<T>& b, size_t n, bool host) {
+    if (n <= b.capacity_ && b.host_ == host) {
+      b.size_ = n;
+      return;
+    }
+    if (b.ptr_ && !b.host_) bytes_ -= b.capacity_ * sizeof(T);
+    b.release();
+    b.size_ = b.capacity_ = 0;
+    b.host_ = host;
+    if (n == 0) return;
+    void* p = nullptr;
+    const bool ok = host ? check(cudaHostAlloc(&p, n * sizeof(T), cudaHostAllocMapped), "cudaHostAlloc")
+                         : check(cudaMalloc(&p, n * sizeof(T)), "cudaMalloc");
+    if (!ok) return;
+    b.ptr_ = static_cast<T*>(p);
+    b.size_ = b.capacity_ = n;
+    if (!host) bytes_ += n * sizeof(T);
   }
 
   // One CUB call the CUB way: a size query (call with null scratch), the

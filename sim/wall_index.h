@@ -398,12 +398,7 @@ class WallIndex {
     BvhBuild built = build_bvh(mesh, origin, r_max_, margin);
     info->bvh_nodes = built.wide.size();
     info->bvh_depth = built.wide_depth;
-    std::vector<PlanarTriangle> host_tris(m);
-    std::vector<PlanarTriangleD> host_tris_d(double_ ? m : 0);
-    for (size_t k = 0; k < m; ++k) set_planar(mesh, built.order[k], k, host_tris, host_tris_d);
-    upload(backend, tris, host_tris);
-    if (double_) upload(backend, tris_d, host_tris_d);
-    upload(backend, tri_original, built.order);
+    upload_in_order(backend, mesh, built.order);
     upload(backend, bvh_nodes, built.wide);
     // Particles farther than the reach from the wall's box touch nothing.
     const double pad = bvh_reach + margin;
@@ -430,7 +425,7 @@ class WallIndex {
 
   // octree: bin's grid (the same cells and pad for float rounding), its cells
   // split where triangles crowd (sim/octree.h), built on the host; the
-  // triangles in mesh order, as bin keeps them.
+  // triangles in the lists' slots (sim/octree.h, pack_octree_lists).
   Status prepare_octree(B& backend, const TriangleMesh& mesh, const Bounds3d& box, double cell,
                         PrepareInfo* info) {
     const size_t m = mesh.triangles.size();
@@ -444,12 +439,7 @@ class WallIndex {
     // The triangles in the lists' slots (along a Morton curve), each slot's
     // mesh index beside them, as the tree keeps its own order.
     const OctreeLists lists = pack_octree_lists(mesh, built);
-    std::vector<PlanarTriangle> host_tris(m);
-    std::vector<PlanarTriangleD> host_tris_d(double_ ? m : 0);
-    for (size_t k = 0; k < m; ++k) set_planar(mesh, lists.order[k], k, host_tris, host_tris_d);
-    upload(backend, tris, host_tris);
-    if (double_) upload(backend, tris_d, host_tris_d);
-    upload(backend, tri_original, lists.order);
+    upload_in_order(backend, mesh, lists.order);
     info->octree_leaves = built.leaves();
     info->octree_entries = built.leaf_tri.size();
     info->octree_splits = built.splits;
@@ -542,6 +532,18 @@ class WallIndex {
     const Vec3d a = mesh.corner(t, 0), b = mesh.corner(t, 1), c = mesh.corner(t, 2);
     f[slot] = make_planar(a, b, c, origin);
     if (double_) d[slot] = make_planar<double>(a, b, c, origin);
+  }
+
+  // The triangles in slots of the method's own order (slot -> mesh index),
+  // and each slot's mesh index: the tree's and the octree's.
+  void upload_in_order(B& backend, const TriangleMesh& mesh, const std::vector<uint32_t>& order) {
+    const size_t m = order.size();
+    std::vector<PlanarTriangle> host_tris(m);
+    std::vector<PlanarTriangleD> host_tris_d(double_ ? m : 0);
+    for (size_t k = 0; k < m; ++k) set_planar(mesh, order[k], k, host_tris, host_tris_d);
+    upload(backend, tris, host_tris);
+    if (double_) upload(backend, tris_d, host_tris_d);
+    upload(backend, tri_original, order);
   }
 
   template <class T>
