@@ -37,6 +37,8 @@ const std::vector<FlagSpec> kFlags = {
     {"near-surface", true, "fraction of particles within 1.5 r_max of the wall (default 0: uniform in the box)"},
     {"sweep", true, "grid: time against grid length (paper Fig. 14); triangles: against triangle count (Fig. 13)"},
     {"grid-lengths", true, "grid lengths for --sweep grid, in units of r_max (default 2,3,4,5,6,7)"},
+    {"octree-flat-cost", true,
+     "octree, for tuning: a flattened round of runs against a leaf's (default 1.3; 0 always flattens)"},
     {"help", false, "show this help"},
 };
 
@@ -119,7 +121,11 @@ int bench_detect(const Args& args) {
   const int64_t nmin = parsed->get_int("min", 100, &err), nmax = parsed->get_int("max", 1000000, &err),
                 repeats = parsed->get_int("repeats", 5, &err), check_max = parsed->get_int("check-max", 100000, &err),
                 seed = parsed->get_int("seed", 1, &err);
+  base.config.octree_flat_cost =
+      float(parsed->get_double("octree-flat-cost", base.config.octree_flat_cost, &err));
   if (!err.empty()) return usage_error("bench detect", err);
+  if (!(base.config.octree_flat_cost >= 0))
+    return usage_error("bench detect", "--octree-flat-cost must be >= 0 (0: always flattened)");
   if (nmin < 1 || nmax < nmin || repeats < 1) return usage_error("bench detect", "need 1 <= min <= max, repeats >= 1");
   double r_lo = 0.5, r_hi = 1.0;
   if (parsed->has("radius-range") &&

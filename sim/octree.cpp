@@ -4,7 +4,6 @@
 #include <array>
 #include <cmath>
 #include <cstring>
-#include <mutex>
 #include <utility>
 
 #include "sim/narrow_phase.h"
@@ -70,6 +69,33 @@ struct Part {
   }
 };
 
+// Sorts v on the pool: pieces sorted side by side, then merged two by two,
+// round after round. v's elements must be unique (or equal ones alike), so
+// the result does not depend on the pool's size.
+template <class T>
+void parallel_sort(std::vector<T>& v, ThreadPool& threads) {
+  const size_t pieces =
+      std::min<size_t>(2 * size_t(threads.size()), std::max<size_t>(v.size() / 4096, 1));
+  std::vector<size_t> at(pieces + 1);
+  for (size_t i = 0; i <= pieces; ++i) at[i] = v.size() * i / pieces;
+  threads.run_chunks(pieces, 1, [&](size_t begin, size_t end) {
+    for (size_t i = begin; i < end; ++i) std::sort(v.begin() + at[i], v.begin() + at[i + 1]);
+  });
+  if (pieces == 1) return;
+  std::vector<T> merged(v.size());
+  for (size_t width = 1; width < pieces; width *= 2) {
+    threads.run_chunks((pieces + 2 * width - 1) / (2 * width), 1, [&](size_t begin, size_t end) {
+      for (size_t g = begin; g < end; ++g) {
+        const size_t lo = at[g * 2 * width], mid = at[std::min(pieces, g * 2 * width + width)],
+                     hi = at[std::min(pieces, g * 2 * width + 2 * width)];
+        std::merge(v.begin() + lo, v.begin() + mid, v.begin() + mid, v.begin() + hi,
+                   merged.begin() + lo);
+      }
+    });
+    v.swap(merged);
+  }
+}
+
 // 21 bits of v spread to every third bit.
 uint64_t spread3(uint64_t v) {
   v &= 0x1fffff;
@@ -83,8 +109,10 @@ uint64_t spread3(uint64_t v) {
 
 }  // namespace
 
-OctreeLists pack_octree_lists(const TriangleMesh& mesh, const OctreeBuild& built) {
+OctreeLists pack_octree_lists(const TriangleMesh& mesh, const OctreeBuild& built,
+                              ThreadPool* pool) {
   OctreeLists out;
+  ThreadPool& threads = pool ? *pool : default_pool();
   const size_t m = mesh.triangles.size();
   // The triangles' centres along a Morton curve over the mesh's box.
   const Bounds3d box = mesh_bounds(mesh);
@@ -97,40 +125,55 @@ OctreeLists pack_octree_lists(const TriangleMesh& mesh, const OctreeBuild& built
     auto bits = [&](double v) { return spread3(uint64_t(std::clamp(v * scale, 0.0, 2097151.0))); };
     keyed[t] = {bits(c.x) | bits(c.y) << 1 | bits(c.z) << 2, uint32_t(t)};
   }
-  std::sort(keyed.begin(), keyed.end());
+  parallel_sort(keyed, threads);
   std::vector<uint32_t> slot(m);
   out.order.resize(m);
   for (size_t k = 0; k < m; ++k)
     out.order[k] = keyed[k].second, slot[keyed[k].second] = uint32_t(k);
+  // Each leaf's lowest slot, or kOctreeWide where its slots lie farther
+  // apart than 16 bits reach; then where its words begin (a wide leaf's
+  // slots from an even word); then the words, the leaves shared among threads.
   const size_t leaves = built.leaves();
   out.leaf_base.resize(leaves);
-  out.leaf_start.reserve(leaves + 1);
-  out.leaf_entry.reserve(built.leaf_tri.size());
-  std::vector<uint32_t> mine;
-  for (size_t l = 0; l < leaves; ++l) {
-    // A leaf's slots ascending, so neighbouring lanes read neighbouring
-    // triangles (no difference measured on the H200 or here, 2026-11-30).
-    mine.clear();
-    for (uint32_t k = built.leaf_start[l]; k < built.leaf_start[l + 1]; ++k)
-      mine.push_back(slot[built.leaf_tri[k]]);
-    std::sort(mine.begin(), mine.end());
-    if (!mine.empty() && mine.back() - mine.front() > kOctreeSpan) {
-      out.leaf_base[l] = kOctreeWide;
-      if (out.leaf_entry.size() % 2) out.leaf_entry.push_back(0);  // slots from an even word
-      for (const uint32_t s : mine) {
-        uint16_t words[2];
-        std::memcpy(words, &s, sizeof s);  // as the device reads it back
-        out.leaf_entry.push_back(words[0]);
-        out.leaf_entry.push_back(words[1]);
-      }
-      out.wide_entries += mine.size();
-    } else {
-      const uint32_t lo = mine.empty() ? 0 : mine.front();
-      out.leaf_base[l] = lo;
-      for (const uint32_t s : mine) out.leaf_entry.push_back(uint16_t(s - lo));
+  threads.run_chunks(leaves, 4096, [&](size_t begin, size_t end) {
+    for (size_t l = begin; l < end; ++l) {
+      uint32_t lo = ~0u, hi = 0;
+      for (uint32_t k = built.leaf_start[l]; k < built.leaf_start[l + 1]; ++k)
+        lo = std::min(lo, slot[built.leaf_tri[k]]), hi = std::max(hi, slot[built.leaf_tri[k]]);
+      out.leaf_base[l] = lo > hi ? 0u : (hi - lo > kOctreeSpan ? kOctreeWide : lo);
     }
-    out.leaf_start.push_back(uint32_t(out.leaf_entry.size()));
+  });
+  out.leaf_start.resize(leaves + 1);
+  uint64_t words = 0;
+  for (size_t l = 0; l < leaves; ++l) {
+    const uint32_t n = built.leaf_start[l + 1] - built.leaf_start[l];
+    const bool wide = out.leaf_base[l] == kOctreeWide;
+    out.leaf_start[l] = uint32_t(words);
+    words += wide ? (words % 2) + 2 * uint64_t(n) : n;
+    if (wide) out.wide_entries += n;
   }
+  out.leaf_start[leaves] = uint32_t(words);
+  out.leaf_entry.assign(words, 0);
+  threads.run_chunks(leaves, 4096, [&](size_t begin, size_t end) {
+    std::vector<uint32_t> mine;
+    for (size_t l = begin; l < end; ++l) {
+      // A leaf's slots ascending, so neighbouring lanes read neighbouring
+      // triangles (no difference measured on the H200 or here, 2026-11-30).
+      mine.clear();
+      for (uint32_t k = built.leaf_start[l]; k < built.leaf_start[l + 1]; ++k)
+        mine.push_back(slot[built.leaf_tri[k]]);
+      std::sort(mine.begin(), mine.end());
+      const uint32_t base = out.leaf_base[l];
+      if (base == kOctreeWide) {
+        // As the device reads them back: a 32-bit slot from an even word.
+        std::memcpy(&out.leaf_entry[(out.leaf_start[l] + 1) / 2 * 2], mine.data(),
+                    mine.size() * sizeof(uint32_t));
+      } else {
+        uint16_t* to = &out.leaf_entry[out.leaf_start[l]];
+        for (const uint32_t s : mine) *to++ = uint16_t(s - base);
+      }
+    }
+  });
   return out;
 }
 
@@ -150,11 +193,13 @@ OctreeBuild build_octree(const TriangleMesh& mesh, Vec3d origin, const GridSpec&
 
   // (top cell, triangle) for every cell a triangle's box grown by `grow`
   // reaches and the triangle may come within `grow` of; then in cell order.
-  std::vector<std::pair<uint64_t, uint32_t>> pairs;
-  std::mutex joined;
-  threads.run_chunks(m, 256, [&](size_t begin, size_t end) {
-    std::vector<std::pair<uint64_t, uint32_t>> mine;
-    for (size_t t = begin; t < end; ++t) {
+  // Made in blocks of 256 triangles side by side, a block a claim (slivers
+  // reach many cells), then copied into one array at each block's place.
+  constexpr size_t kTrianglesABlock = 256;
+  std::vector<std::vector<std::pair<uint64_t, uint32_t>>> blocks((m + kTrianglesABlock - 1) /
+                                                                 kTrianglesABlock);
+  threads.run_items(blocks.size(), [&](size_t b) {
+    for (size_t t = b * kTrianglesABlock; t < std::min(m, (b + 1) * kTrianglesABlock); ++t) {
       int lo[3], hi[3];
       for (int a = 0; a < 3; ++a) {
         auto axis = [a](Vec3d v) { return a == 0 ? v.x : (a == 1 ? v.y : v.z); };
@@ -170,12 +215,19 @@ OctreeBuild build_octree(const TriangleMesh& mesh, Vec3d origin, const GridSpec&
           for (int x = lo[0]; x <= hi[0]; ++x)
             if (near_cube(tri[t], Vec3d{o.x + x * cell, o.y + y * cell, o.z + z * cell}, cell,
                           grow))
-              mine.push_back({grid.linear(x, y, z), uint32_t(t)});
+              blocks[b].push_back({grid.linear(x, y, z), uint32_t(t)});
     }
-    std::lock_guard lock(joined);
-    pairs.insert(pairs.end(), mine.begin(), mine.end());
   });
-  std::sort(pairs.begin(), pairs.end());
+  std::vector<size_t> block_at(blocks.size() + 1, 0);
+  for (size_t b = 0; b < blocks.size(); ++b) block_at[b + 1] = block_at[b] + blocks[b].size();
+  std::vector<std::pair<uint64_t, uint32_t>> pairs(block_at.back());
+  threads.run_chunks(blocks.size(), 64, [&](size_t first, size_t last) {
+    for (size_t b = first; b < last; ++b) {
+      std::copy(blocks[b].begin(), blocks[b].end(), pairs.begin() + block_at[b]);
+      std::vector<std::pair<uint64_t, uint32_t>>().swap(blocks[b]);
+    }
+  });
+  parallel_sort(pairs, threads);
 
   // The listed top cells: where each one's run of pairs begins.
   std::vector<size_t> runs;
@@ -183,44 +235,60 @@ OctreeBuild build_octree(const TriangleMesh& mesh, Vec3d origin, const GridSpec&
     if (i == 0 || pairs[i].first != pairs[i - 1].first) runs.push_back(i);
   runs.push_back(pairs.size());
   const size_t cells = runs.size() - 1;
-  // Each top cell's node, built in parts of consecutive cells on the pool.
-  constexpr size_t kCellsAPart = 64;
+  // Each top cell's node, built in parts of consecutive cells on the pool, a
+  // part a claim (the crowded cells lie side by side).
+  constexpr size_t kCellsAPart = 16;
   std::vector<Part> parts((cells + kCellsAPart - 1) / kCellsAPart);
-  threads.run_chunks(parts.size(), 1, [&](size_t begin, size_t end) {
+  threads.run_items(parts.size(), [&](size_t p) {
     std::vector<uint32_t> list;
-    for (size_t p = begin; p < end; ++p) {
-      Part& part = parts[p];
-      for (size_t c = p * kCellsAPart; c < std::min(cells, (p + 1) * kCellsAPart); ++c) {
-        list.clear();
-        for (size_t i = runs[c]; i < runs[c + 1]; ++i) list.push_back(pairs[i].second);
-        int x = 0, y = 0, z = 0;
-        grid.unlinear(pairs[runs[c]].first, x, y, z);
-        const Vec3d lo{o.x + x * cell, o.y + y * cell, o.z + z * cell};
-        part.top.push_back(part.make(tri, list, lo, cell, 0, grow, split_above, max_depth));
-      }
+    Part& part = parts[p];
+    for (size_t c = p * kCellsAPart; c < std::min(cells, (p + 1) * kCellsAPart); ++c) {
+      list.clear();
+      for (size_t i = runs[c]; i < runs[c + 1]; ++i) list.push_back(pairs[i].second);
+      int x = 0, y = 0, z = 0;
+      grid.unlinear(pairs[runs[c]].first, x, y, z);
+      const Vec3d lo{o.x + x * cell, o.y + y * cell, o.z + z * cell};
+      part.top.push_back(part.make(tri, list, lo, cell, 0, grow, split_above, max_depth));
     }
   });
-  // The parts in order, their nodes renumbered into the whole.
-  std::vector<std::pair<uint64_t, int32_t>> tops;  // (cell, node)
-  tops.reserve(cells);
-  size_t c = 0;
-  for (const Part& part : parts) {
-    const uint32_t inner_at = uint32_t(out.inner.size());
-    const int32_t leaf_at = int32_t(out.leaves());
-    auto renumber = [&](int32_t node) {
-      return node >= 0               ? node + leaf_at
-             : octree_is_inner(node) ? octree_inner_node(octree_children(node) + inner_at)
-                                     : node;
-    };
-    for (int32_t node : part.inner) out.inner.push_back(renumber(node));
-    const uint32_t tri_at = uint32_t(out.leaf_tri.size());
-    out.leaf_tri.insert(out.leaf_tri.end(), part.leaf_tri.begin(), part.leaf_tri.end());
-    for (size_t l = 1; l < part.leaf_start.size(); ++l)
-      out.leaf_start.push_back(part.leaf_start[l] + tri_at);
-    for (int32_t node : part.top) tops.push_back({pairs[runs[c++]].first, renumber(node)});
+  // The parts in order, their nodes renumbered into the whole: where each
+  // part's nodes, entries and top cells begin, then each part copied to its
+  // place on the pool.
+  struct Offsets {
+    size_t inner = 0, leaf = 0, entry = 0, top = 0;
+  };
+  std::vector<Offsets> at(parts.size() + 1);
+  for (size_t p = 0; p < parts.size(); ++p) {
+    const Part& part = parts[p];
+    at[p + 1] = {at[p].inner + part.inner.size(), at[p].leaf + part.leaf_start.size() - 1,
+                 at[p].entry + part.leaf_tri.size(), at[p].top + part.top.size()};
     out.splits += part.splits;
     out.longest = std::max(out.longest, part.longest);
   }
+  out.inner.resize(at.back().inner);
+  out.leaf_start.resize(at.back().leaf + 1);  // [0] stays 0
+  out.leaf_tri.resize(at.back().entry);
+  std::vector<std::pair<uint64_t, int32_t>> tops(cells);  // (cell, node)
+  threads.run_chunks(parts.size(), 1, [&](size_t first, size_t last) {
+    for (size_t p = first; p < last; ++p) {
+      Part& part = parts[p];
+      const Offsets& a = at[p];
+      auto renumber = [&](int32_t node) {
+        return node >= 0 ? node + int32_t(a.leaf)
+               : octree_is_inner(node)
+                   ? octree_inner_node(octree_children(node) + uint32_t(a.inner))
+                   : node;
+      };
+      for (size_t k = 0; k < part.inner.size(); ++k)
+        out.inner[a.inner + k] = renumber(part.inner[k]);
+      std::copy(part.leaf_tri.begin(), part.leaf_tri.end(), out.leaf_tri.begin() + a.entry);
+      for (size_t l = 1; l < part.leaf_start.size(); ++l)
+        out.leaf_start[a.leaf + l] = part.leaf_start[l] + uint32_t(a.entry);
+      for (size_t k = 0; k < part.top.size(); ++k)
+        tops[a.top + k] = {pairs[runs[a.top + k]].first, renumber(part.top[k])};
+      part = Part{};  // copied: the tiling's parts hold 0.5 GB
+    }
+  });
   // The tops are in cell order (the pairs were sorted by cell, the parts
   // merged in order). A dense grid marks its listed cells in words of 32.
   if (!grid.hashed) {

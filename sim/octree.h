@@ -161,7 +161,10 @@ struct OctreeLists {
   std::vector<uint16_t> leaf_entry;
   uint64_t wide_entries = 0;  // listed by wide leaves
 };
-OctreeLists pack_octree_lists(const TriangleMesh& mesh, const OctreeBuild& built);
+// The leaves are shared among `pool`'s threads (nullptr: default_pool()); the
+// result does not depend on them.
+OctreeLists pack_octree_lists(const TriangleMesh& mesh, const OctreeBuild& built,
+                              ThreadPool* pool = nullptr);
 
 // Builds the lists for `grid` (the wall's local frame, origin at `origin`):
 // a leaf lists each triangle of `mesh` that comes within `grow` of its box

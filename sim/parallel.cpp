@@ -57,10 +57,13 @@ struct ThreadPool::Impl {
     for (auto& w : workers) w.join();
   }
 
-  void run(size_t n, size_t grain_in, const std::function<void(size_t, size_t)>& fn) {
+  // exact: chunks of exactly grain_in (run_items); else at least grain_in,
+  // and at most n / (8 threads) so that a light loop's claims stay few.
+  void run(size_t n, size_t grain_in, const std::function<void(size_t, size_t)>& fn,
+           bool exact = false) {
     std::lock_guard<std::mutex> serial(run_mutex);
     const size_t chunks_wanted = static_cast<size_t>(size) * 8;
-    size_t g = std::max(grain_in, (n + chunks_wanted - 1) / chunks_wanted);
+    size_t g = exact ? grain_in : std::max(grain_in, (n + chunks_wanted - 1) / chunks_wanted);
     g = std::max<size_t>(g, 1);
     if (size == 1 || n <= g) {
       fn(0, n);
@@ -171,6 +174,15 @@ int ThreadPool::size() const { return impl_->size; }
 void ThreadPool::run_chunks(size_t n, size_t grain,
                             const std::function<void(size_t, size_t)>& body) {
   impl_->run(n, grain, body);
+}
+
+void ThreadPool::run_items(size_t n, const std::function<void(size_t)>& body) {
+  impl_->run(
+      n, 1,
+      [&body](size_t begin, size_t end) {
+        for (size_t i = begin; i < end; ++i) body(i);
+      },
+      true);
 }
 
 namespace {

@@ -27,6 +27,11 @@ class ThreadPool {
   // Runs body(begin, end) over chunks of [0, n) on the pool; returns when all
   // are done. Loops from several caller threads take turns.
   void run_chunks(size_t n, size_t grain, const std::function<void(size_t, size_t)>& body);
+  // Runs body(i) for each i in [0, n), one index a claim: for a few heavy
+  // items of uneven cost (run_chunks would hand out n / (8 threads) at a
+  // time, and the octree's costly top cells lie side by side: its counter
+  // mesh built in 1.1 s on 16 threads, no faster than on 2).
+  void run_items(size_t n, const std::function<void(size_t)>& body);
 
  private:
   struct Impl;

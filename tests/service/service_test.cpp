@@ -1478,7 +1478,11 @@ void stopped_server_resumes_its_job(bool ctrl_c) {
   ASSERT_FALSE(base.empty());
   Client c(base);
   c.sign_up("kill");
-  json job = c.call_json("POST", "/api/v1/jobs", tiny_job("wall1", 1500, 4), 202);
+  // Long enough that the first checkpoint (after a second of running, or
+  // at the last frame) leaves seconds to run: at 4 s of scene time the job
+  // once ran in under a second here, wrote its first checkpoint at its last
+  // frame, and finished its video while Ctrl-C reached the server.
+  json job = c.call_json("POST", "/api/v1/jobs", tiny_job("wall1", 1500, 16), 202);
   const std::string id = job["id"];
   // Killed once the job has written a checkpoint (about a second of running).
   const std::string checkpoint = dir + "/var/jobs/" + id + "/run/checkpoint.bin";

@@ -50,6 +50,28 @@ TEST(ThreadPool, BackToBackLoopsRunEveryIndexOnce) {
   }
 }
 
+// run_items hands out one index a claim, where run_chunks would give a loop
+// of 64 on two threads chunks of four: items 0 and 1 each wait (up to 5 s)
+// for the other to start, which they can only do on two threads at once.
+TEST(ThreadPool, RunItemsHandsOutOneItemAClaim) {
+  ThreadPool pool(2);
+  std::vector<std::atomic<int>> hits(64);
+  std::atomic<int> started{0};
+  std::atomic<bool> met{true};
+  pool.run_items(hits.size(), [&](size_t i) {
+    if (i < 2) {
+      ++started;
+      const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+      while (started.load() < 2 && std::chrono::steady_clock::now() < until)
+        std::this_thread::yield();
+      if (started.load() < 2) met = false;
+    }
+    hits[i]++;
+  });
+  EXPECT_TRUE(met.load()) << "items 0 and 1 ran one after the other";
+  for (const auto& h : hits) ASSERT_EQ(h.load(), 1);
+}
+
 // A pool made and dropped at once, its workers still starting or spinning.
 TEST(ThreadPool, StopsWhileItsWorkersWait) {
   for (int k = 0; k < 50; ++k) {
