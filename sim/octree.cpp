@@ -78,19 +78,15 @@ void parallel_sort(std::vector<T>& v, ThreadPool& threads) {
       std::min<size_t>(2 * size_t(threads.size()), std::max<size_t>(v.size() / 4096, 1));
   std::vector<size_t> at(pieces + 1);
   for (size_t i = 0; i <= pieces; ++i) at[i] = v.size() * i / pieces;
-  threads.run_chunks(pieces, 1, [&](size_t begin, size_t end) {
-    for (size_t i = begin; i < end; ++i) std::sort(v.begin() + at[i], v.begin() + at[i + 1]);
-  });
+  threads.run_items(pieces, [&](size_t i) { std::sort(v.begin() + at[i], v.begin() + at[i + 1]); });
   if (pieces == 1) return;
   std::vector<T> merged(v.size());
   for (size_t width = 1; width < pieces; width *= 2) {
-    threads.run_chunks((pieces + 2 * width - 1) / (2 * width), 1, [&](size_t begin, size_t end) {
-      for (size_t g = begin; g < end; ++g) {
-        const size_t lo = at[g * 2 * width], mid = at[std::min(pieces, g * 2 * width + width)],
-                     hi = at[std::min(pieces, g * 2 * width + 2 * width)];
-        std::merge(v.begin() + lo, v.begin() + mid, v.begin() + mid, v.begin() + hi,
-                   merged.begin() + lo);
-      }
+    threads.run_items((pieces + 2 * width - 1) / (2 * width), [&](size_t g) {
+      const size_t lo = at[g * 2 * width], mid = at[std::min(pieces, g * 2 * width + width)],
+                   hi = at[std::min(pieces, g * 2 * width + 2 * width)];
+      std::merge(v.begin() + lo, v.begin() + mid, v.begin() + mid, v.begin() + hi,
+                 merged.begin() + lo);
     });
     v.swap(merged);
   }

@@ -161,5 +161,47 @@ TEST(Octree, ListsPackedBySlotGiveBackEveryTriangle) {
   }
 }
 
+// Packed on one thread and on three: the same words, and every leaf gives
+// back its triangles. 20,000 leaves by hand (the packing shares them out
+// 4,096 at a time), narrow and wide ones mixed at random (a third listing
+// both ends of the row), so wide leaves
+// begin at odd and even words on both sides of the threads' shares.
+TEST(Octree, ListsPackedOnSeveralThreadsAreTheSame) {
+  const uint32_t n = 70000;
+  const TriangleMesh row = triangle_row_under_a_sliver(n, 0.1);
+  OctreeBuild built;
+  std::mt19937 rng(7);
+  for (uint32_t leaf = 0; leaf < 20000; ++leaf) {
+    const uint32_t count = 1 + rng() % 5, first = rng() % (n - 100);
+    const bool wide = rng() % 3 == 0;
+    std::set<uint32_t> mine;
+    if (wide) mine = {0u, n - 1};  // the row's two ends: 70,000 slots apart
+    while (mine.size() < count + 2 * wide) mine.insert(first + rng() % 100);
+    built.leaf_tri.insert(built.leaf_tri.end(), mine.begin(), mine.end());
+    built.leaf_start.push_back(uint32_t(built.leaf_tri.size()));
+  }
+  ThreadPool one(1), three(3);
+  const OctreeLists a = pack_octree_lists(row, built, &one);
+  const OctreeLists b = pack_octree_lists(row, built, &three);
+  EXPECT_EQ(a.order, b.order);
+  EXPECT_EQ(a.leaf_start, b.leaf_start);
+  EXPECT_EQ(a.leaf_base, b.leaf_base);
+  EXPECT_EQ(a.leaf_entry, b.leaf_entry);
+  EXPECT_EQ(a.wide_entries, b.wide_entries);
+  EXPECT_GT(b.wide_entries, 0u);
+  OctreeView view;
+  view.leaf_start = b.leaf_start.data();
+  view.leaf_base = b.leaf_base.data();
+  view.leaf_entry = b.leaf_entry.data();
+  for (uint32_t leaf = 0; leaf < built.leaves(); ++leaf) {
+    const OctreeView::List list = view.list(leaf);
+    std::multiset<uint32_t> got, want;
+    for (uint32_t k = 0; k < list.count; ++k) got.insert(b.order[view.slot(list, k)]);
+    want.insert(built.leaf_tri.begin() + built.leaf_start[leaf],
+                built.leaf_tri.begin() + built.leaf_start[leaf + 1]);
+    ASSERT_EQ(got, want) << "leaf " << leaf;
+  }
+}
+
 }  // namespace
 }  // namespace collido::sim
