@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "job/wall_source.h"
+#include "sim/octree.h"
 #include "sim/parallel.h"
 #include "sim/particles.h"
 
@@ -118,12 +119,12 @@ std::string detect_summary_json(const DetectSetup& s, const sim::PrepareInfo& in
     << ",\"tree_depth\":" << info.bvh_depth << ",\"octree_leaves\":" << info.octree_leaves
     << ",\"octree_entries\":" << info.octree_entries
     << ",\"octree_wide_entries\":" << info.octree_wide_entries
-    << ",\"contacts\":" << r.contact_count << ",\"colliding_particles\":" << r.colliding_particles
-    << ",\"band_pairs\":" << r.band_pairs << ",\"area_error\":" << info.area_error
-    << ",\"time_ms\":{\"prepare\":" << info.prepare_ms << ",\"hash\":" << t.hash_ms
-    << ",\"sort\":" << t.sort_ms << ",\"cells\":" << t.cells_ms << ",\"traverse\":" << t.traverse_ms
-    << ",\"finalize\":" << t.finalize_ms << ",\"frame\":" << t.frame_ms
-    << ",\"download\":" << t.download_ms << "}";
+    << ",\"octree_long_leaves\":" << info.octree_long_leaves << ",\"contacts\":" << r.contact_count
+    << ",\"colliding_particles\":" << r.colliding_particles << ",\"band_pairs\":" << r.band_pairs
+    << ",\"area_error\":" << info.area_error << ",\"time_ms\":{\"prepare\":" << info.prepare_ms
+    << ",\"hash\":" << t.hash_ms << ",\"sort\":" << t.sort_ms << ",\"cells\":" << t.cells_ms
+    << ",\"traverse\":" << t.traverse_ms << ",\"finalize\":" << t.finalize_ms
+    << ",\"frame\":" << t.frame_ms << ",\"download\":" << t.download_ms << "}";
   if (!s.backend_note.empty()) o << ",\"note\":\"" << json_escape(s.backend_note) << "\"";
   o << "}";
   return o.str();
@@ -148,12 +149,13 @@ std::string detect_summary_text(const DetectSetup& s, const sim::PrepareInfo& in
   else if (info.octree_leaves)  // the octree: its cells, and the leaves they split into
     std::snprintf(line, sizeof line,
                   "particles   %zu, r_max %g; grid length %g, %llu cells%s, %llu split: %llu "
-                  "leaves listing %llu\n",
+                  "leaves listing %llu (%llu of them over %u)\n",
                   s.particles.size(), s.config.r_max, info.grid_length,
                   static_cast<unsigned long long>(info.cells), info.hashed ? " (hashed)" : "",
                   static_cast<unsigned long long>(info.octree_splits),
                   static_cast<unsigned long long>(info.octree_leaves),
-                  static_cast<unsigned long long>(info.octree_entries));
+                  static_cast<unsigned long long>(info.octree_entries),
+                  static_cast<unsigned long long>(info.octree_long_leaves), sim::kOctreeLongList);
   else
     std::snprintf(line, sizeof line, "particles   %zu, r_max %g; grid length %g, %llu cells%s\n", s.particles.size(),
                   s.config.r_max, info.grid_length, static_cast<unsigned long long>(info.cells),

@@ -146,6 +146,7 @@ struct PrepareInfo {
   uint64_t octree_entries = 0;  // octree: (leaf, triangle) pairs stored
   uint64_t octree_splits = 0;   // octree: cells split in eight
   uint64_t octree_wide_entries = 0;  // octree: entries of leaves listing whole slots (sim/octree.h)
+  uint64_t octree_long_leaves = 0;   // octree: leaves listing over kOctreeLongList triangles
   double prepare_ms = 0;
   uint64_t device_bytes = 0;  // scratch and prepared data held by the backend
 };

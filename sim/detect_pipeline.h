@@ -222,7 +222,9 @@ class GridDetector final : public Detector {
       }
     }
     if (cfg_.method == Method::kOctree) {
-      backend_.resize(leaf_pos_, size_t(wall_.octree_leaves()) + 2);
+      // The leaves' starts, then the particles located, the chunks, the test
+      // stage's next item and the chunks of long lists (octree_traversal).
+      backend_.resize(leaf_pos_, size_t(wall_.octree_leaves()) + 4);
       backend_.resize(octree_chunk_, capacity_);
       // The pairs in float's band (about 3 in 10^3 contacts on the counter
       // mesh): room for a few at first; a frame that finds more grows it.
@@ -517,7 +519,8 @@ class GridDetector final : public Detector {
     uint32_t* rank = counts_.data();
     uint32_t* pos = leaf_pos_.data();
     const size_t leaves = wall_.octree_leaves();
-    backend_.fill(pos, leaves + 1, 0u);
+    const uint32_t long_leaves = ov.long_leaves;
+    backend_.fill(pos, leaves + 4, 0u);
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
       const int32_t leaf = ov.leaf_of(position(P[i]));
       leaf_of[i] = uint32_t(leaf);
@@ -531,6 +534,7 @@ class GridDetector final : public Detector {
     PackedParticle* SP = sorted_particles_.data();
     uint32_t* sid = p_idx_sorted_.data();
     uint32_t* sleaf = p_key_sorted_.data();
+    uint32_t* long_chunks = pos + leaves + 3;
     backend_.parallel_for(n_, [=] COLLIDO_HD(uint32_t i) {
       const uint32_t leaf = leaf_of[i];
       if (leaf == uint32_t(kOctreeEmpty)) return;
@@ -538,6 +542,7 @@ class GridDetector final : public Detector {
       if (copy) SP[at] = P[i];
       sid[at] = i;
       sleaf[at] = leaf;
+      if (leaf < long_leaves && rank[i] % kOctreeChunk == 0) atomic_add_u32(long_chunks, 1u);
     });
     // The chunks in leaf order (neighbouring warps then read neighbouring
     // leaves, which share triangles: the counter mesh's frame 0.32 -> 0.28 ms
@@ -553,8 +558,12 @@ class GridDetector final : public Detector {
   }
   static constexpr uint32_t kOctreeChunk = 32;  // a warp's lanes
 
-  // octree, second half: a warp an item (one thread on the CPU), the warps
-  // striding over the items, whose number stays on the device. An item is a
+  // octree, second half: a warp an item (one thread on the CPU), whose number
+  // stays on the device. On the GPU each warp claims its next item from a
+  // counter when it is done with one, and the long lists' items come first:
+  // striding over them in a fixed order (warp w took items w, w + W, ...)
+  // left the tiling's test stage at 20 % occupancy, its warps waiting on the
+  // few that drew runs in long lists (465 -> 132 µs, docs/benchmarks.md). An item is a
   // chunk of one leaf's particles, or, where the chunks are small, a run of 32
   // grouped particles whose leaves it takes in turn. Its particles are read
   // one a lane in one coalesced read and handed round by shuffles. A leaf's
@@ -581,20 +590,35 @@ class GridDetector final : public Detector {
     uint32_t* band_total = band_counter();
     backend_.fill(counts, n_, 0u);
     constexpr bool copied = B::kWalksReadReorderedCopy;
+    constexpr bool claims = !B::kHostThreads;  // the CPU's threads share items by chunks
     const uint32_t stride = backend_.strided_items(n_, kOctreeChunk);
     const uint32_t* located = pos + wall_.octree_leaves();
+    uint32_t* next_item = leaf_pos_.data() + wall_.octree_leaves() + 2;
+    const uint32_t* long_chunks = pos + wall_.octree_leaves() + 3;
+    const uint32_t long_leaves = ov.long_leaves;
+    if (claims) backend_.fill(next_item, 1, 0u);
     const uint64_t runs_below = cfg_.octree_runs_below;
     const float flat_cost = cfg_.octree_flat_cost;
     auto body = [=] COLLIDO_HD(uint32_t u, LaneGroup g) {
       uint32_t band = 0;
       // Chunks hold one leaf's particles each; where they hold few (the leaves are
-      // many and small), runs of 32 in leaf order instead, a run's leaves in turn.
+      // many and small), runs of 32 in leaf order instead, a run's leaves in
+      // turn. Not the long lists' leaves, which come first (sim/octree.h): their
+      // chunks stay items of their own, the first ones, so a run of 32
+      // particles in 32 long lists does not keep one warp busy while the others
+      // have finished (the tiling's test stage at 20 % occupancy).
       const bool runs = *located < runs_below * *chunks;
-      const uint32_t items = runs ? (*located + kOctreeChunk - 1) / kOctreeChunk : *chunks;
-      for (uint32_t c = u; c < items; c += stride) {
-        const uint32_t j0 = runs ? c * kOctreeChunk : chunk[c];
-        const uint32_t jend = runs ? hd_min(*located, j0 + kOctreeChunk)
-                                   : hd_min(pos[sleaf[j0] + 1], j0 + kOctreeChunk);
+      const uint32_t first_chunks = runs ? *long_chunks : *chunks;
+      const uint32_t runs_from = runs ? pos[long_leaves] : 0u;  // the short lists' particles
+      const uint32_t items =
+          first_chunks + (runs ? (*located - runs_from + kOctreeChunk - 1) / kOctreeChunk : 0u);
+      // Every lane shuffles (lane 0 claims for the warp).
+      auto claim = [&] { return g.from(0, g.lane == 0 ? atomic_add_u32(next_item, 1u) : 0u); };
+      for (uint32_t c = claims ? claim() : u; c < items; c = claims ? claim() : c + stride) {
+        const bool run = c >= first_chunks;
+        const uint32_t j0 = run ? runs_from + (c - first_chunks) * kOctreeChunk : chunk[c];
+        const uint32_t jend = run ? hd_min(*located, j0 + kOctreeChunk)
+                                  : hd_min(pos[sleaf[j0] + 1], j0 + kOctreeChunk);
         for (uint32_t jb = j0; jb < jend; jb += g.size) {  // once on the GPU
           const uint32_t m = hd_min(g.size, jend - jb);
           // This lane's particle, then particle k's from lane k (one lane: k == 0).
@@ -611,12 +635,12 @@ class GridDetector final : public Detector {
           // each lane a pair in turn (pair q's particle is the first lane whose
           // lists end past q), so that no lane idles on a short leaf. Lane k
           // holds its particle's list, and where its pairs begin and end.
-          const uint32_t mine_leaf = runs && holds ? sleaf[jb + g.lane] : ~0u;
+          const uint32_t mine_leaf = run && holds ? sleaf[jb + g.lane] : ~0u;
           const OctreeView::List mine_list =
-              runs && holds ? ov.list(mine_leaf) : OctreeView::List{0, 0, 0};
+              run && holds ? ov.list(mine_leaf) : OctreeView::List{0, 0, 0};
           uint32_t ends = 0, begins = 0, pairs = 0;
           bool flat = false;
-          if (runs) {  // and the rounds leaf by leaf, counted by each leaf's first lane
+          if (run) {  // and the rounds leaf by leaf, counted by each leaf's first lane
             ends = g.scan(mine_list.count), begins = ends - mine_list.count;
             pairs = g.from(g.size - 1, ends);
             const uint32_t before_leaf = g.from(g.lane ? g.lane - 1 : 0u, mine_leaf);

@@ -285,6 +285,33 @@ OctreeBuild build_octree(const TriangleMesh& mesh, Vec3d origin, const GridSpec&
       part = Part{};  // copied: the tiling's parts hold 0.5 GB
     }
   });
+  // The leaves with long lists first, each kind in its order (neighbouring
+  // leaves share triangles), their lists moved on the pool.
+  {
+    const size_t leaves = out.leaves();
+    std::vector<uint32_t> old_of(leaves), new_of(leaves);
+    size_t k = 0;
+    for (const bool longer : {true, false})
+      for (size_t l = 0; l < leaves; ++l)
+        if ((out.leaf_start[l + 1] - out.leaf_start[l] > kOctreeLongList) == longer)
+          new_of[l] = uint32_t(k), old_of[k++] = uint32_t(l), out.long_leaves += longer;
+    std::vector<uint32_t> start(leaves + 1, 0);
+    for (size_t l = 0; l < leaves; ++l)
+      start[l + 1] = start[l] + (out.leaf_start[old_of[l] + 1] - out.leaf_start[old_of[l]]);
+    std::vector<uint32_t> tri(out.leaf_tri.size());
+    threads.run_chunks(leaves, 1024, [&](size_t begin, size_t end) {
+      for (size_t l = begin; l < end; ++l)
+        std::copy(out.leaf_tri.begin() + out.leaf_start[old_of[l]],
+                  out.leaf_tri.begin() + out.leaf_start[old_of[l] + 1], tri.begin() + start[l]);
+    });
+    out.leaf_start.swap(start);
+    out.leaf_tri.swap(tri);
+    auto renumber = [&](int32_t& node) {
+      if (node >= 0) node = int32_t(new_of[size_t(node)]);
+    };
+    for (int32_t& node : out.inner) renumber(node);
+    for (auto& top : tops) renumber(top.second);
+  }
   // The tops are in cell order (the pairs were sorted by cell, the parts
   // merged in order). A dense grid marks its listed cells in words of 32.
   if (!grid.hashed) {

@@ -36,6 +36,10 @@ inline constexpr int32_t kOctreeEmpty = -1;
 inline constexpr uint32_t kOctreeSplitAbove = 16;
 inline constexpr int kOctreeMaxDepth = 2;
 inline constexpr int kOctreeDeepest = 4;  // the most levels any build may have
+// Leaves listing more than this many triangles are numbered first (their
+// particles then sort first, and a frame deals them out in chunks of their
+// own: sim/detect_pipeline.h's octree_traversal).
+inline constexpr uint32_t kOctreeLongList = 32;
 // The pairs in float's error band a detector's first frame has room for
 // (precision exact decides them in double after the float pass).
 inline constexpr uint32_t kOctreeFirstDoubts = 1024;
@@ -76,6 +80,7 @@ struct OctreeView {
   const uint32_t* leaf_start = nullptr;   // leaves + 1: each leaf's run of leaf_entry
   const uint32_t* leaf_base = nullptr;    // each leaf's first triangle slot, or kOctreeWide
   const uint16_t* leaf_entry = nullptr;   // slots above the leaf's base (wide: slots, 2 words each)
+  uint32_t long_leaves = 0;               // leaves [0, long_leaves) list over kOctreeLongList
 
   // Leaf `leaf`'s list, and its k-th triangle slot.
   struct List {
@@ -141,8 +146,9 @@ struct OctreeBuild {
   std::vector<int32_t> inner;
   std::vector<uint32_t> leaf_start{0};  // leaves + 1
   std::vector<uint32_t> leaf_tri;
-  uint64_t splits = 0;   // inner nodes
-  uint32_t longest = 0;  // the longest leaf list
+  uint64_t splits = 0;       // inner nodes
+  uint32_t longest = 0;      // the longest leaf list
+  uint32_t long_leaves = 0;  // the leaves listing over kOctreeLongList, numbered first
   size_t leaves() const { return leaf_start.size() - 1; }
 };
 

@@ -444,6 +444,8 @@ class WallIndex {
     info->octree_entries = built.leaf_tri.size();
     info->octree_splits = built.splits;
     info->octree_wide_entries = lists.wide_entries;
+    info->octree_long_leaves = built.long_leaves;
+    oct_long_leaves = built.long_leaves;
     if (grid.hashed) {
       grid.buckets = built.buckets;  // the octree's own table (the grid serves no other method)
       info->buckets = grid.buckets;
@@ -468,6 +470,7 @@ class WallIndex {
     o.cell_node = oct_cell_node.data(), o.inner = oct_inner.data();
     o.leaf_start = oct_leaf_start.data(), o.leaf_base = oct_leaf_base.data();
     o.leaf_entry = oct_leaf_entry.data();
+    o.long_leaves = oct_long_leaves;
     return o;
   }
 
@@ -574,6 +577,7 @@ class WallIndex {
   Buf<uint64_t> oct_cell_key;     // hashed grids only
   Buf<uint32_t> oct_leaf_start, oct_leaf_base;
   Buf<uint16_t> oct_leaf_entry;
+  uint32_t oct_long_leaves = 0;
   Buf<int32_t> oct_cell_node, oct_inner;
   uint32_t octree_leaves() const {
     return oct_leaf_start.size() ? static_cast<uint32_t>(oct_leaf_start.size() - 1) : 0u;

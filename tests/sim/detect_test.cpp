@@ -355,6 +355,30 @@ void float_precision_flags_its_doubts() {
   }
 }
 
+// The octree's contacts on `mesh` in every way of dealing out the particles
+// (kOctreeWays), against the reference, which must find more than
+// `min_contacts`; returns the octree's preparation, as said.
+PrepareInfo octree_ways_match_the_reference(const TriangleMesh& mesh, const Particles& p,
+                                            size_t min_contacts, const std::string& what) {
+  DetectConfig cfg;
+  cfg.backend = backend_under_test();
+  cfg.r_max = max_radius(p);
+  DetectConfig rc = cfg;
+  rc.method = Method::kReference;
+  rc.backend = Backend::kCpu;
+  const DetectResult ref = run(mesh, p, rc);
+  EXPECT_GT(ref.contact_count, min_contacts) << what;
+  cfg.method = Method::kOctree;
+  auto det = Detector::create(mesh, cfg, p.size());
+  EXPECT_TRUE(det) << det.status().message();
+  if (!det) return {};
+  for (const OctreeWay& way : kOctreeWays) {
+    way.apply(cfg);
+    expect_same_contacts(mesh, p, ref, run(mesh, p, cfg), cfg.r_max, what + way.name);
+  }
+  return (*det)->info();
+}
+
 // The octree's leaves whose triangles lie more than 65,535 slots apart list
 // whole slots (sim/octree.h): a row of 140,000 small triangles along x and a
 // long sliver over it, listed with the row's triangles by every leaf; the
@@ -364,24 +388,20 @@ void octree_wide_leaves() {
   const double s = 5e-4;  // a triangle's size: the row 70 long keeps float's distances to 1e-5
   const TriangleMesh row = triangle_row_under_a_sliver(140000, s);
   const Particles p = scene_near(row, 1500, 2 * s, 4 * s, 11);
-  DetectConfig cfg;
-  cfg.backend = backend_under_test();
-  cfg.r_max = max_radius(p);
-  DetectConfig rc = cfg;
-  rc.method = Method::kReference;
-  rc.backend = Backend::kCpu;
-  const DetectResult ref = run(row, p, rc);
-  ASSERT_GT(ref.contact_count, 1500u);
-  cfg.method = Method::kOctree;
-  auto det = Detector::create(row, cfg, p.size());
-  ASSERT_TRUE(det) << det.status().message();
-  EXPECT_GT((*det)->info().octree_wide_entries, 1000u);
-  EXPECT_LT((*det)->info().octree_wide_entries, (*det)->info().octree_entries / 2);
-  for (const OctreeWay& way : kOctreeWays) {
-    way.apply(cfg);
-    expect_same_contacts(row, p, ref, run(row, p, cfg), cfg.r_max,
-                         std::string("wide leaves") + way.name);
-  }
+  const PrepareInfo info = octree_ways_match_the_reference(row, p, 1500, "wide leaves");
+  EXPECT_GT(info.octree_wide_entries, 1000u);
+  EXPECT_LT(info.octree_wide_entries, info.octree_entries / 2);
+}
+
+// The octree's long lists (the fine ball's leaves) and short ones (the
+// box's) in one frame, the particles a few a leaf: in runs, the long lists'
+// chunks are items of their own ahead of the runs (sim/detect_pipeline.h).
+void octree_long_and_short_lists() {
+  const Particles p = scene_near(crowded_wall(), 4000, 0.15, 0.3, 13);
+  const PrepareInfo info =
+      octree_ways_match_the_reference(crowded_wall(), p, 2000, "long and short lists");
+  EXPECT_GT(info.octree_long_leaves, 100u);
+  EXPECT_GT(info.octree_leaves - info.octree_long_leaves, 100u);
 }
 
 // A frame whose candidate pairs pass the most a frame may hold fails with a
@@ -469,6 +489,9 @@ TEST(Detect, FloatPrecisionFlagsItsDoubts) { float_precision_flags_its_doubts();
 TEST(Detect, OctreeLeavesListingWholeSlotsMatchTheReference) {
   octree_wide_leaves();
 }
+TEST(Detect, OctreeLongAndShortListsMatchTheReference) {
+  octree_long_and_short_lists();
+}
 TEST(Detect, AFrameWithMorePairsThanItMayHoldIsRefused) { more_pairs_than_a_frame_may_hold(); }
 TEST(Detect, TwentyRandomScenesMatchTheReference) { twenty_random_scenes(); }
 TEST(Detect, AdversarialPlacementsMatchTheReference) { adversarial_placements(); }
@@ -492,6 +515,9 @@ TEST_F(DetectCuda, ThirdPartyMeshesNearTouchingMatchTheReference) { third_party_
 TEST_F(DetectCuda, FloatPrecisionFlagsItsDoubts) { float_precision_flags_its_doubts(); }
 TEST_F(DetectCuda, OctreeLeavesListingWholeSlotsMatchTheReference) {
   octree_wide_leaves();
+}
+TEST_F(DetectCuda, OctreeLongAndShortListsMatchTheReference) {
+  octree_long_and_short_lists();
 }
 TEST_F(DetectCuda, AFrameWithMorePairsThanItMayHoldIsRefused) { more_pairs_than_a_frame_may_hold(); }
 

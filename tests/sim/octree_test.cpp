@@ -26,25 +26,6 @@ double exact_d2(Vec3d p, const PlanarTriangleD& t) {
   return closest_point_planar(p, t, INFINITY, &q, &h, &aside);
 }
 
-// A crowded wall: a fine ball (20,480 triangles of about a tenth of the
-// radius below) inside a box, with a long sliver through both.
-TriangleMesh crowded_wall() {
-  TriangleMesh m = shape("sphere:r=1,subdivisions=5");
-  const TriangleMesh box = shape("box:x=6,y=4,z=4");
-  const uint32_t base = uint32_t(m.vertices.size());
-  m.vertices.insert(m.vertices.end(), box.vertices.begin(), box.vertices.end());
-  for (const auto& t : box.triangles)
-    m.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
-  const uint32_t s = uint32_t(m.vertices.size());
-  m.vertices.push_back({-2.9, -1.9, -0.5});
-  m.vertices.push_back({2.9, 1.9, 0.5});
-  m.vertices.push_back({2.9, 1.9002, 0.5});
-  m.triangles.push_back({s, s + 1, s + 2});
-  m.source_ids.resize(m.triangles.size());
-  for (size_t t = 0; t < m.triangles.size(); ++t) m.source_ids[t] = uint32_t(t);
-  return m;
-}
-
 // A point at up to `reach` from a random point of a random triangle.
 Vec3d point_near_wall(const TriangleMesh& m, double reach, std::mt19937_64& rng) {
   std::uniform_real_distribution<double> u01(0, 1);
@@ -111,6 +92,13 @@ TEST(Octree, CrowdedCellsAreSplitUntilTheirListsAreShort) {
   EXPECT_GT(flat.longest, 200u);
   EXPECT_LT(split.longest, flat.longest / 2);
   EXPECT_GT(split.leaves(), 4 * flat.leaves());
+  // The leaves listing over kOctreeLongList triangles come first.
+  EXPECT_GT(split.long_leaves, 100u);
+  EXPECT_GT(split.leaves() - split.long_leaves, 100u);
+  for (size_t l = 0; l < split.leaves(); ++l)
+    ASSERT_EQ(split.leaf_start[l + 1] - split.leaf_start[l] > kOctreeLongList,
+              l < split.long_leaves)
+        << "leaf " << l;
   // Each leaf's list is sorted (by triangle) and without repeats.
   for (size_t l = 0; l < split.leaves(); ++l)
     for (uint32_t k = split.leaf_start[l] + 1; k < split.leaf_start[l + 1]; ++k)

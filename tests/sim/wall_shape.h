@@ -34,4 +34,23 @@ inline TriangleMesh triangle_row_under_a_sliver(uint32_t n, double size) {
   return row;
 }
 
+// A crowded wall: a fine ball (20,480 triangles about 0.03 across) inside a
+// 6 x 4 x 4 box, with a long sliver through both.
+inline TriangleMesh crowded_wall() {
+  TriangleMesh m = shape("sphere:r=1,subdivisions=5");
+  const TriangleMesh box = shape("box:x=6,y=4,z=4");
+  const uint32_t base = uint32_t(m.vertices.size());
+  m.vertices.insert(m.vertices.end(), box.vertices.begin(), box.vertices.end());
+  for (const auto& t : box.triangles)
+    m.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+  const uint32_t s = uint32_t(m.vertices.size());
+  m.vertices.push_back({-2.9, -1.9, -0.5});
+  m.vertices.push_back({2.9, 1.9, 0.5});
+  m.vertices.push_back({2.9, 1.9002, 0.5});
+  m.triangles.push_back({s, s + 1, s + 2});
+  m.source_ids.resize(m.triangles.size());
+  for (size_t t = 0; t < m.triangles.size(); ++t) m.source_ids[t] = uint32_t(t);
+  return m;
+}
+
 }  // namespace collido::sim
