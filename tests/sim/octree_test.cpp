@@ -117,6 +117,23 @@ TEST(Octree, CrowdedCellsAreSplitUntilTheirListsAreShort) {
   EXPECT_EQ(b.cell_key, split.cell_key);
 }
 
+// Every leaf of `built` gives back its own triangles through the device's
+// view of `lists` (the first leaf that does not is reported).
+void expect_lists_give_back_every_triangle(const OctreeBuild& built, const OctreeLists& lists) {
+  OctreeView view;
+  view.leaf_start = lists.leaf_start.data();
+  view.leaf_base = lists.leaf_base.data();
+  view.leaf_entry = lists.leaf_entry.data();
+  for (uint32_t leaf = 0; leaf < built.leaves(); ++leaf) {
+    const OctreeView::List list = view.list(leaf);
+    std::multiset<uint32_t> got, want;
+    for (uint32_t k = 0; k < list.count; ++k) got.insert(lists.order[view.slot(list, k)]);
+    want.insert(built.leaf_tri.begin() + built.leaf_start[leaf],
+                built.leaf_tri.begin() + built.leaf_start[leaf + 1]);
+    ASSERT_EQ(got, want) << "leaf " << leaf;
+  }
+}
+
 // The device's lists: a base slot and 16-bit steps, or whole slots for a
 // leaf whose triangles lie farther apart along the Morton curve. A row of
 // 70,000 small triangles along x (their slots follow x) and a long sliver
@@ -135,25 +152,14 @@ TEST(Octree, ListsPackedBySlotGiveBackEveryTriangle) {
   EXPECT_EQ(lists.leaf_base[0], kOctreeWide);
   EXPECT_NE(lists.leaf_base[1], kOctreeWide);
   EXPECT_EQ(lists.wide_entries, 4u);
-  OctreeView view;
-  view.leaf_start = lists.leaf_start.data();
-  view.leaf_base = lists.leaf_base.data();
-  view.leaf_entry = lists.leaf_entry.data();
-  for (uint32_t leaf = 0; leaf < 3; ++leaf) {
-    const OctreeView::List list = view.list(leaf);
-    std::multiset<uint32_t> got, want;
-    for (uint32_t k = 0; k < list.count; ++k) got.insert(lists.order[view.slot(list, k)]);
-    want.insert(built.leaf_tri.begin() + built.leaf_start[leaf],
-                built.leaf_tri.begin() + built.leaf_start[leaf + 1]);
-    EXPECT_EQ(got, want) << "leaf " << leaf;
-  }
+  expect_lists_give_back_every_triangle(built, lists);
 }
 
 // Packed on one thread and on three: the same words, and every leaf gives
 // back its triangles. 20,000 leaves by hand (the packing shares them out
 // 4,096 at a time), narrow and wide ones mixed at random (a third listing
-// both ends of the row), so wide leaves
-// begin at odd and even words on both sides of the threads' shares.
+// both ends of the row), so wide leaves begin at odd and even words on both
+// sides of the threads' shares.
 TEST(Octree, ListsPackedOnSeveralThreadsAreTheSame) {
   const uint32_t n = 70000;
   const TriangleMesh row = triangle_row_under_a_sliver(n, 0.1);
@@ -177,18 +183,7 @@ TEST(Octree, ListsPackedOnSeveralThreadsAreTheSame) {
   EXPECT_EQ(a.leaf_entry, b.leaf_entry);
   EXPECT_EQ(a.wide_entries, b.wide_entries);
   EXPECT_GT(b.wide_entries, 0u);
-  OctreeView view;
-  view.leaf_start = b.leaf_start.data();
-  view.leaf_base = b.leaf_base.data();
-  view.leaf_entry = b.leaf_entry.data();
-  for (uint32_t leaf = 0; leaf < built.leaves(); ++leaf) {
-    const OctreeView::List list = view.list(leaf);
-    std::multiset<uint32_t> got, want;
-    for (uint32_t k = 0; k < list.count; ++k) got.insert(b.order[view.slot(list, k)]);
-    want.insert(built.leaf_tri.begin() + built.leaf_start[leaf],
-                built.leaf_tri.begin() + built.leaf_start[leaf + 1]);
-    ASSERT_EQ(got, want) << "leaf " << leaf;
-  }
+  expect_lists_give_back_every_triangle(built, b);
 }
 
 }  // namespace
