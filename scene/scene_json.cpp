@@ -356,11 +356,8 @@ Expected<Scene> parse_scene(const std::string& text) {
               integrator = sim::to_string(s.dynamics.integrator);
   COLLIDO_TRY(r.string("method", &method));
   s.method_auto = method == "auto";
-  // octree is a detection method (`collidoscope detect`, `bench detect`): the
-  // dynamics' wall lists do not read it yet.
   if (!s.method_auto &&
-      (!sim::parse_method(method, &s.dynamics.method) ||
-       s.dynamics.method == sim::Method::kReference || s.dynamics.method == sim::Method::kOctree))
+      (!sim::parse_method(method, &s.dynamics.method) || !sim::dynamics_can_use(s.dynamics.method)))
     return invalid_argument("method: \"" + method +
                             "\" is not auto, bin, bvh, gravity, circumcircle or midpoint4");
   // The wall grid's cell edge: a length (in the scene's unit), or "auto"; absent = 2 r_max.

@@ -277,6 +277,11 @@ Status JobService::seed() {
       {"bvh", "method",
        "No division: a bounding volume hierarchy over the wall's own triangles, walked from "
        "each particle. Exact; made for large CAD meshes that mix slivers with tiny facets."},
+      {"octree", "method",
+       "No division: bin's grid with each crowded cell split in eight, twice at most; the "
+       "particles grouped by leaf, so neighbours test one list together. Exact; on the GPU "
+       "the fastest on large CAD meshes (a third to under half of a GPU BVH library's time); "
+       "for detection frames (collidoscope detect, bench detect)."},
       {"gravity", "method",
        "The paper's division by longest-edge bisection; each piece is stood in for by a "
        "sphere at its centroid (approximate)."},
@@ -566,9 +571,15 @@ Reply JobService::algorithms() {
   if (!list) return status_reply(list.status());
   Reply r;
   r.body = {{"methods", json::array()}, {"traversals", json::array()}};
-  for (const Algorithm& a : *list)
-    r.body[a.kind == "method" ? "methods" : "traversals"].push_back(
-        {{"name", a.name}, {"description", a.description}});
+  for (const Algorithm& a : *list) {
+    json entry = {{"name", a.name}, {"description", a.description}};
+    if (a.kind == "method") {
+      // Whether a job may choose it (the dynamics step with it): the form offers these.
+      sim::Method m;
+      entry["jobs"] = sim::parse_method(a.name, &m) && sim::dynamics_can_use(m);
+    }
+    r.body[a.kind == "method" ? "methods" : "traversals"].push_back(std::move(entry));
+  }
   return r;
 }
 

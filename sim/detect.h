@@ -31,6 +31,12 @@ enum class Method {
 inline bool uses_grid(Method m) {
   return m != Method::kBvh && m != Method::kOctree && m != Method::kReference;
 }
+// Whether the dynamics (and so a job) may step with a method: all but the
+// reference, the test oracle, and the octree, whose lists the dynamics' wall
+// stage does not read yet (a detection method: `collidoscope detect`, `bench detect`).
+inline bool dynamics_can_use(Method m) {
+  return m != Method::kReference && m != Method::kOctree;
+}
 // Whether a method divides the wall into pieces (gravity, circumcircle, midpoint4).
 inline bool divides(Method m) {
   return m == Method::kGravity || m == Method::kCircumcircle || m == Method::kMidpoint4;

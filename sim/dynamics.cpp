@@ -259,7 +259,7 @@ namespace {
 
 Status validate(const TriangleMesh& wall, const DynamicsConfig& c, const ParticleSet& p) {
   if (wall.triangles.empty()) return invalid_argument("wall: the wall has no triangles");
-  if (c.method == Method::kReference || c.method == Method::kOctree)
+  if (!dynamics_can_use(c.method))
     return invalid_argument(std::string("method: the dynamics prepares the wall as bin, bvh or a "
                                         "division method, not ") +
                             to_string(c.method));

@@ -15,6 +15,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <regex>
 #include <set>
@@ -292,6 +293,28 @@ TEST_F(ServiceTest, WarnsOfAPourThatEndsBeforeItsParticlesLand) {
   json fill = tiny_job("wall1", 40, 2.0);
   fill["scene"]["placement"]["kind"] = "fill";
   EXPECT_FALSE(c.call_json("POST", "/api/v1/predict", fill).contains("first_contact_s"));
+}
+
+// The algorithms list says which methods a job may choose (the new-job form
+// offers those): every method the engine has is listed, and a job naming one
+// the dynamics cannot step with is refused with the list of those it can.
+TEST_F(ServiceTest, AlgorithmsSayWhichMethodsAJobMayChoose) {
+  Client c = client();
+  const json a = c.call_json("GET", "/api/v1/algorithms");  // public: no sign-in
+  std::map<std::string, bool> jobs;
+  for (const json& m : a["methods"]) jobs[m["name"].get<std::string>()] = m["jobs"].get<bool>();
+  const std::map<std::string, bool> expected = {
+      {"bin", true},       {"bvh", true},        {"gravity", true}, {"circumcircle", true},
+      {"midpoint4", true}, {"reference", false}, {"octree", false}};
+  EXPECT_EQ(jobs, expected) << a.dump();
+  for (const json& t : a["traversals"]) EXPECT_FALSE(t.contains("jobs")) << t.dump();
+  c.sign_up("ada");
+  for (const auto& [name, allowed] : expected) {
+    json job = tiny_job("wall1", 40, 1.0);
+    job["scene"]["method"] = name;
+    auto r = c.call("POST", "/api/v1/predict", job.dump());
+    EXPECT_EQ(r.status, allowed ? 200 : 400) << name << ": " << r.body;
+  }
 }
 
 TEST_F(ServiceTest, AModelFileThatIsNotAJobCostModelStopsTheStart) {

@@ -393,6 +393,9 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
       await page.waitForTimeout(100);
     }
     await page.locator('#prediction').getByText('Up to date.').waitFor();
+    // The method list: the ones a job may step with (the algorithms' "jobs"), auto first.
+    const offered = await page.getByLabel('Detection method').locator('option').allTextContents();
+    assert.deepEqual(offered, ['auto', 'bin', 'bvh', 'gravity', 'circumcircle', 'midpoint4'], `offered: ${offered}`);
     assert.equal(await page.locator('#prediction').getByText(/nothing would touch the wall/).count(), 0,
       'a fitted duration lets the pour land');
     await shot(page, '04-new-job-fitted-duration');
@@ -722,6 +725,8 @@ test('web UI', { timeout: TOTAL_LIMIT_MS - 20_000 }, async (t) => {
     await page.click('nav >> text=Methods');
     await page.getByRole('heading', { name: 'Methods', level: 1 }).waitFor();
     await page.getByRole('row', { name: /midpoint4/ }).waitFor();
+    // The octree is described, and said to be for detection frames, not jobs.
+    assert.match(await page.getByRole('row', { name: /^octree / }).innerText(), /Jobs cannot choose it yet/);
     // The study's charts (installed from docs/img/study/): a Pareto chart that loads, and the paper's Table 4.
     await page.getByRole('heading', { name: 'Full study, NVIDIA H200' }).waitFor();
     const pareto = page.locator('img[src*="/ui/study/gpu/pareto_"]').first();

@@ -15,7 +15,8 @@ export function algorithmsTable(a) {
       h('td', {}, m.description, note && note(m) ? h('span', { class: 'hint' }, ` ${note(m)}`) : null))))));
   return h('div', { class: 'stack' },
     table('Detection methods', a.methods,
-      (m) => (m.name === 'reference' ? '(Used to check the others; jobs cannot choose it.)' : '')),
+      (m) => (m.name === 'reference' ? '(Used to check the others; jobs cannot choose it.)'
+        : m.jobs === false ? '(Jobs cannot choose it yet.)' : '')),
     table('Traversals (how the GPU walks the grid)', a.traversals));
 }
 

@@ -138,11 +138,12 @@ export async function render(main, ctx, modelParam) {
   let durationTyped = false;
   duration.addEventListener('input', () => { durationTyped = true; });
   const fps = num({ min: '0.001', step: 'any', value: '24' });
-  // "reference" is the engine's test oracle: scenes may not name it.
+  // The methods a job may step with ("jobs": not the reference, the engine's
+  // test oracle, nor the octree, a detection method only).
   // "auto" times the candidates on the job's particles and keeps the fastest (all are exact).
   const methods = [{ name: 'auto', description: 'Measured on your particles when the job starts: the fastest exact '
     + 'method and grid length for this wall (the result page says what was picked and why).' },
-  ...(algorithms.methods || []).filter((m) => m.name !== 'reference')];
+  ...(algorithms.methods || []).filter((m) => m.jobs !== false)];
   const method = select(methods.map((m) => [m.name, m.name]), 'bin');
   const methodHint = h('p', { class: 'hint', id: 'method-hint', 'aria-live': 'polite' });
   method.setAttribute('aria-describedby', 'method-hint');
