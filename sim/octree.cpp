@@ -247,71 +247,68 @@ OctreeBuild build_octree(const TriangleMesh& mesh, Vec3d origin, const GridSpec&
       part.top.push_back(part.make(tri, list, lo, cell, 0, grow, split_above, max_depth));
     }
   });
-  // The parts in order, their nodes renumbered into the whole: where each
-  // part's nodes, entries and top cells begin, then each part copied to its
-  // place on the pool.
+  // The parts in order, their nodes renumbered into the whole, the leaves
+  // listing over kOctreeLongList numbered first, each kind in the parts'
+  // order (neighbouring leaves share triangles): where each part's nodes, top
+  // cells and leaves of each kind begin, then each part copied to its place
+  // on the pool.
   struct Offsets {
-    size_t inner = 0, leaf = 0, entry = 0, top = 0;
+    size_t inner = 0, top = 0;
+    size_t leaf[2] = {0, 0}, entry[2] = {0, 0};  // [1]: the long lists', [0]: the others'
+  };
+  auto is_long = [](const Part& part, size_t l) {
+    return part.leaf_start[l + 1] - part.leaf_start[l] > kOctreeLongList;
   };
   std::vector<Offsets> at(parts.size() + 1);
   for (size_t p = 0; p < parts.size(); ++p) {
     const Part& part = parts[p];
-    at[p + 1] = {at[p].inner + part.inner.size(), at[p].leaf + part.leaf_start.size() - 1,
-                 at[p].entry + part.leaf_tri.size(), at[p].top + part.top.size()};
+    Offsets& next = at[p + 1];
+    next = at[p];
+    next.inner += part.inner.size(), next.top += part.top.size();
+    for (size_t l = 0; l + 1 < part.leaf_start.size(); ++l) {
+      const bool longer = is_long(part, l);
+      next.leaf[longer] += 1, next.entry[longer] += part.leaf_start[l + 1] - part.leaf_start[l];
+    }
     out.splits += part.splits;
     out.longest = std::max(out.longest, part.longest);
   }
-  out.inner.resize(at.back().inner);
-  out.leaf_start.resize(at.back().leaf + 1);  // [0] stays 0
-  out.leaf_tri.resize(at.back().entry);
+  const Offsets total = at.back();
+  out.long_leaves = uint32_t(total.leaf[1]);
+  for (Offsets& a : at)  // the other leaves after every long one
+    a.leaf[0] += total.leaf[1], a.entry[0] += total.entry[1];
+  out.inner.resize(total.inner);
+  out.leaf_start.resize(total.leaf[0] + total.leaf[1] + 1);
+  out.leaf_start.back() = uint32_t(total.entry[0] + total.entry[1]);
+  out.leaf_tri.resize(out.leaf_start.back());
   std::vector<std::pair<uint64_t, int32_t>> tops(cells);  // (cell, node)
   threads.run_chunks(parts.size(), 1, [&](size_t first, size_t last) {
+    std::vector<int32_t> leaf_of;  // a part's leaves' numbers in the whole
     for (size_t p = first; p < last; ++p) {
       Part& part = parts[p];
-      const Offsets& a = at[p];
+      Offsets a = at[p];
+      leaf_of.resize(part.leaf_start.size() - 1);
+      for (size_t l = 0; l < leaf_of.size(); ++l) {
+        const bool longer = is_long(part, l);
+        size_t &leaf = a.leaf[longer], &entry = a.entry[longer];
+        leaf_of[l] = int32_t(leaf);
+        out.leaf_start[leaf] = uint32_t(entry);
+        std::copy(part.leaf_tri.begin() + part.leaf_start[l],
+                  part.leaf_tri.begin() + part.leaf_start[l + 1], out.leaf_tri.begin() + entry);
+        leaf += 1, entry += part.leaf_start[l + 1] - part.leaf_start[l];
+      }
       auto renumber = [&](int32_t node) {
-        return node >= 0 ? node + int32_t(a.leaf)
+        return node >= 0 ? leaf_of[size_t(node)]
                : octree_is_inner(node)
                    ? octree_inner_node(octree_children(node) + uint32_t(a.inner))
                    : node;
       };
       for (size_t k = 0; k < part.inner.size(); ++k)
         out.inner[a.inner + k] = renumber(part.inner[k]);
-      std::copy(part.leaf_tri.begin(), part.leaf_tri.end(), out.leaf_tri.begin() + a.entry);
-      for (size_t l = 1; l < part.leaf_start.size(); ++l)
-        out.leaf_start[a.leaf + l] = part.leaf_start[l] + uint32_t(a.entry);
       for (size_t k = 0; k < part.top.size(); ++k)
         tops[a.top + k] = {pairs[runs[a.top + k]].first, renumber(part.top[k])};
       part = Part{};  // copied: the tiling's parts hold 0.5 GB
     }
   });
-  // The leaves with long lists first, each kind in its order (neighbouring
-  // leaves share triangles), their lists moved on the pool.
-  {
-    const size_t leaves = out.leaves();
-    std::vector<uint32_t> old_of(leaves), new_of(leaves);
-    size_t k = 0;
-    for (const bool longer : {true, false})
-      for (size_t l = 0; l < leaves; ++l)
-        if ((out.leaf_start[l + 1] - out.leaf_start[l] > kOctreeLongList) == longer)
-          new_of[l] = uint32_t(k), old_of[k++] = uint32_t(l), out.long_leaves += longer;
-    std::vector<uint32_t> start(leaves + 1, 0);
-    for (size_t l = 0; l < leaves; ++l)
-      start[l + 1] = start[l] + (out.leaf_start[old_of[l] + 1] - out.leaf_start[old_of[l]]);
-    std::vector<uint32_t> tri(out.leaf_tri.size());
-    threads.run_chunks(leaves, 1024, [&](size_t begin, size_t end) {
-      for (size_t l = begin; l < end; ++l)
-        std::copy(out.leaf_tri.begin() + out.leaf_start[old_of[l]],
-                  out.leaf_tri.begin() + out.leaf_start[old_of[l] + 1], tri.begin() + start[l]);
-    });
-    out.leaf_start.swap(start);
-    out.leaf_tri.swap(tri);
-    auto renumber = [&](int32_t& node) {
-      if (node >= 0) node = int32_t(new_of[size_t(node)]);
-    };
-    for (int32_t& node : out.inner) renumber(node);
-    for (auto& top : tops) renumber(top.second);
-  }
   // The tops are in cell order (the pairs were sorted by cell, the parts
   // merged in order). A dense grid marks its listed cells in words of 32.
   if (!grid.hashed) {
